@@ -1,0 +1,46 @@
+"""Errors raised for bad user input.
+
+Every error names the offending field (a dotted/indexed path such as
+``frames[3].detections[0].keypoints[5]``), what was expected and what was found.
+They subclass ``ValueError`` so that callers who already catch ``ValueError``
+keep working; the CLI turns any :class:`InputError` into a one-line message and
+exit code 2.
+"""
+
+from __future__ import annotations
+
+__all__ = ["InputError", "SceneError", "CalibrationError", "ScenarioError"]
+
+
+class InputError(ValueError):
+    """Bad input: ``field`` names where, the message says what is wrong.
+
+    Attributes:
+        field: path of the offending field, e.g. ``cameras[1].K``; empty when the
+            whole input is at fault.
+        problem: what is wrong, without the field name.
+    """
+
+    def __init__(self, field: str, problem: str):
+        self.field = field
+        self.problem = problem
+        super().__init__(f"{field}: {problem}" if field else problem)
+
+    def within(self, prefix: str) -> "InputError":
+        """Returns the same error with ``prefix`` put in front of its field path."""
+        if not prefix:
+            return self
+        field = f"{prefix}.{self.field}" if self.field and not self.field.startswith("[") else f"{prefix}{self.field}"
+        return type(self)(field, self.problem)
+
+
+class SceneError(InputError):
+    """A scene (input) or result file is malformed."""
+
+
+class CalibrationError(InputError):
+    """A camera calibration (intrinsics, distortion or extrinsic) is invalid."""
+
+
+class ScenarioError(InputError):
+    """A simulation scenario file (``graphs/*.json``) is malformed."""

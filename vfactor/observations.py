@@ -1,0 +1,91 @@
+"""What the cameras saw: detections of vehicles' keypoints, frames and scenes.
+
+These are plain containers; :mod:`vfactor.scene` loads and validates them from
+scene files, :mod:`vfactor.sim` makes them, the solvers read them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from vfactor.camera import Camera
+
+__all__ = ["DEFAULT_VEHICLE_ID", "Detection", "Frame", "Scene"]
+
+#: Track id given to the vehicle of a detection that names none (allowed when
+#: its frame holds a single vehicle).
+DEFAULT_VEHICLE_ID = "vehicle"
+
+
+@dataclass
+class Detection:
+    """The 12 keypoints of one vehicle seen by one camera.
+
+    Attributes:
+        camera: name of the camera.
+        vehicle: track id of the vehicle.
+        keypoints: (12, 2) pixels ``(u, v)`` in the fixed keypoint order; NaN where unseen.
+        confidence: (12,) in [0, 1]; 0 means not seen.
+        covariance: optional (12, 2, 2) pixel covariances (px^2), e.g. from a
+            heatmap's spread; NaN blocks where unknown. When given, it replaces the
+            confidence-derived noise of the projection factor.
+        heatmaps: optional path of a (12, H, W) ``.npy`` heatmap stack covering ``roi``.
+        roi: optional box ``(x0, y0, x1, y1)`` in pixels.
+    """
+
+    camera: str
+    vehicle: str
+    keypoints: np.ndarray
+    confidence: np.ndarray
+    covariance: np.ndarray | None = None
+    heatmaps: str | None = None
+    roi: tuple[float, float, float, float] | None = None
+
+    @property
+    def seen(self) -> np.ndarray:
+        """(12,) boolean mask of keypoints with confidence > 0."""
+        return self.confidence > 0
+
+    def box_diagonal(self) -> float:
+        """Diagonal of the box around the seen keypoints (or of the ROI), pixels."""
+        if self.roi is not None:
+            x0, y0, x1, y1 = self.roi
+            return float(np.hypot(x1 - x0, y1 - y0))
+        uv = self.keypoints[self.seen]
+        if len(uv) < 2:
+            return 0.0
+        return float(np.linalg.norm(uv.max(0) - uv.min(0)))
+
+
+@dataclass
+class Frame:
+    """One time step: every detection of every camera at time ``t`` (seconds)."""
+
+    t: float
+    detections: list[Detection] = field(default_factory=list)
+    images: dict[str, str] | None = None
+
+    def vehicle_ids(self) -> list[str]:
+        """Track ids in the order they first appear in this frame."""
+        return list(dict.fromkeys(d.vehicle for d in self.detections))
+
+    def detections_of(self, vehicle: str) -> list[Detection]:
+        return [d for d in self.detections if d.vehicle == vehicle]
+
+
+@dataclass
+class Scene:
+    """Cameras and frames of a scene file.
+
+    Attributes:
+        cameras: camera name -> :class:`Camera`, in file order.
+        frames: frames in file order.
+        base_dir: folder that relative paths in the scene (heatmaps, images) start from.
+    """
+
+    cameras: dict[str, Camera]
+    frames: list[Frame]
+    base_dir: Path | None = None

@@ -1,0 +1,78 @@
+"""Results of a solve: one :class:`VehicleResult` per vehicle per frame."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+
+from vfactor.wireframe import Wireframe
+
+__all__ = ["Status", "VehicleResult", "FrameResult"]
+
+
+class Status(str, enum.Enum):
+    """How a solve ended (the ``status`` field of the result file)."""
+
+    CONVERGED = "converged"
+    MAX_ITERATIONS = "max_iterations"
+    DEGENERATE = "degenerate"
+    FAILED = "failed"
+
+
+@dataclass
+class VehicleResult:
+    """Estimate of one vehicle in one frame.
+
+    Attributes:
+        id: track id.
+        status: see :class:`Status`; when DEGENERATE or FAILED, the pose and the
+            wireframe are ``None`` and ``message`` says why.
+        world_T_vehicle: pose of the body frame in the world.
+        wireframe: the estimated shape, body frame, metres.
+        pose_covariance: (6, 6) covariance of ``world_T_vehicle`` in GTSAM's
+            tangent convention: rotation (rad) then translation (m), both in the
+            body frame (right perturbation ``T exp(xi)``).
+        keypoint_covariances_world: (12, 3, 3) covariances of the world keypoints, m^2.
+        iterations: optimiser iterations.
+        final_error: final value of the graph's cost (0.5 * sum of squared whitened residuals, robust).
+        message: human-readable detail (always set for DEGENERATE and FAILED).
+        inlier_mask: optional (n_cameras, 12) mask of observations the robust loss kept.
+    """
+
+    id: str
+    status: Status
+    world_T_vehicle: gtsam.Pose3 | None = None
+    wireframe: Wireframe | None = None
+    pose_covariance: np.ndarray | None = None
+    keypoint_covariances_world: np.ndarray | None = None
+    iterations: int = 0
+    final_error: float = float("nan")
+    message: str = ""
+    extras: dict = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status in (Status.CONVERGED, Status.MAX_ITERATIONS)
+
+    @property
+    def keypoints_world(self) -> np.ndarray | None:
+        """(12, 3) keypoints in the world frame, metres."""
+        if self.world_T_vehicle is None or self.wireframe is None:
+            return None
+        return self.wireframe.in_world(self.world_T_vehicle)
+
+    @property
+    def keypoints_vehicle(self) -> np.ndarray | None:
+        """(12, 3) keypoints in the body frame, metres."""
+        return None if self.wireframe is None else self.wireframe.vehicle_p_keypoints
+
+
+@dataclass
+class FrameResult:
+    """All vehicles of one frame, in the order of their first detection."""
+
+    t: float
+    vehicles: list[VehicleResult]

@@ -17,6 +17,7 @@ __all__ = [
     "LAYERS",
     "LEFT_RIGHT_PAIRS",
     "MIRROR_PERMUTATION",
+    "WIREFRAME_EDGES",
     "layer_of",
 ]
 
@@ -55,6 +56,17 @@ LEFT_RIGHT_PAIRS: tuple[tuple[int, int], ...] = ((0, 1), (2, 3), (4, 5), (6, 7),
 #: ``points[MIRROR_PERMUTATION]`` swaps every left keypoint with its right partner.
 MIRROR_PERMUTATION: np.ndarray = np.array([1, 0, 3, 2, 5, 4, 7, 6, 9, 8, 11, 10])
 MIRROR_PERMUTATION.setflags(write=False)
+
+
+#: Edges drawn between keypoints: each layer's quadrilateral, then the struts
+#: from the wheels to the lights and from the lights to the roof corners.
+WIREFRAME_EDGES: tuple[tuple[int, int], ...] = (
+    (0, 1), (2, 3), (0, 2), (1, 3),
+    (4, 5), (6, 7), (4, 6), (5, 7),
+    (8, 9), (10, 11), (8, 10), (9, 11),
+    (0, 4), (1, 5), (2, 6), (3, 7),
+    (4, 8), (5, 9), (6, 10), (7, 11),
+)
 
 
 def layer_of(index: int) -> str:

@@ -1,0 +1,37 @@
+"""Layer plane factor: each layer planar and perpendicular to the medial plane.
+
+For a layer ``(lf, rf, lb, rb)``: the diagonals ``d1 = rb - lf`` and
+``d2 = lb - rf`` span the layer's plane; with ``n = d1 x d2 / |d1 x d2|``
+
+* planarity: ``n . (rf - lf)``, the distance between the two diagonal lines
+  (zero iff the four points are coplanar), metres, over ``sigma_m``;
+* perpendicularity: ``n_y``, the sine of the angle between the layer's plane
+  and the direction normal to the medial (x-z) plane, over ``sigma_rad``.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+
+from vfactor.factors.shape_terms import ShapeTerm, cnorm
+from vfactor.keypoints import LAYER_NAMES, LAYERS
+
+__all__ = ["layer_plane_term"]
+
+
+def _residual(layers, sigma_m, sigma_rad, points):
+    out = []
+    for name in layers:
+        lf, rf, lb, rb = (points[..., i, :] for i in LAYERS[name])
+        n = np.cross(rb - lf, lb - rf)
+        n = n / cnorm(n)[..., None]
+        out.append(np.sum(n * (rf - lf), axis=-1) / sigma_m)
+        out.append(n[..., 1] / sigma_rad)
+    return np.stack(out, axis=-1)
+
+
+def layer_plane_term(layers=LAYER_NAMES, sigma_m: float = 0.02, sigma_rad: float = 0.05) -> ShapeTerm:
+    """Planarity and perpendicularity of ``layers`` (two rows each)."""
+    return ShapeTerm("layer_plane", partial(_residual, tuple(layers), sigma_m, sigma_rad), 2 * len(layers))

@@ -1,0 +1,164 @@
+"""Keypoint projection factor: pose and shape against pixels of several cameras.
+
+One factor holds any number of observations ``(camera, keypoint, uv, noise)``
+of one vehicle; the graph builder puts all observations of a vehicle in a
+frame into one factor, so that a frame costs one Python call per
+linearisation instead of one per keypoint (see docs/performance.md). A single
+observation is simply a factor with one row.
+
+For observation i of keypoint k from camera c (docs/factors.md)::
+
+    world_p   = world_T_vehicle * vehicle_p_k          (vehicle_p_k from its layer key)
+    camera_p  = camera_T_world * world_p
+    e_i       = L_i (pi_c(camera_p) - uv_i)            (L_i: 2x2 square-root information)
+    r_i       = s(|e_i|) e_i                           (robust loss per observation)
+
+Keys: ``[pose, wheel, light, roof]``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+
+import gtsam
+import numpy as np
+
+from vfactor.camera import Camera
+from vfactor.factors.robust import RobustLoss
+
+__all__ = ["KeypointObservations", "projection_factor", "project_keypoints", "whitened_residuals"]
+
+_MIN_DEPTH = 0.05  # metres; points closer to (or behind) a camera are clamped to this depth
+
+
+@dataclass(frozen=True)
+class KeypointObservations:
+    """Pixel observations of one vehicle's keypoints.
+
+    Attributes:
+        cameras: the cameras, indexed by ``camera_index``.
+        camera_index: (n,) index of the observing camera.
+        keypoint_index: (n,) keypoint index 0..11.
+        uv: (n, 2) measured pixels.
+        sqrt_information: (n, 2, 2) ``L`` with ``L^T L`` the inverse pixel
+            covariance (1/px).
+    """
+
+    cameras: tuple[Camera, ...]
+    camera_index: np.ndarray
+    keypoint_index: np.ndarray
+    uv: np.ndarray
+    sqrt_information: np.ndarray
+
+    def __post_init__(self):
+        n = len(self.camera_index)
+        if not (len(self.keypoint_index) == len(self.uv) == len(self.sqrt_information) == n):
+            raise ValueError("KeypointObservations: camera_index, keypoint_index, uv and sqrt_information differ in length")
+
+    def __len__(self):
+        return len(self.camera_index)
+
+    def subset(self, mask: np.ndarray) -> "KeypointObservations":
+        return KeypointObservations(
+            self.cameras, self.camera_index[mask], self.keypoint_index[mask], self.uv[mask], self.sqrt_information[mask]
+        )
+
+
+def project_keypoints(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehicle_p: np.ndarray, jacobians: bool):
+    """Predicted pixels of every observation, and their Jacobians.
+
+    Args:
+        obs: the observations.
+        world_T_vehicle: vehicle pose.
+        vehicle_p: (12, 3) body-frame keypoints, metres.
+        jacobians: whether to return Jacobians.
+
+    Returns:
+        uv: (n, 2) predicted pixels.
+        depth: (n,) depth in the observing camera, metres (before clamping).
+        J_pose: (n, 2, 6) d uv / d xi (GTSAM's right perturbation, rotation first), or None.
+        J_point: (n, 2, 3) d uv / d vehicle_p_k, or None.
+    """
+    T = world_T_vehicle.matrix()
+    R, t = T[:3, :3], T[:3, 3]
+    body = vehicle_p[obs.keypoint_index]
+    world = body @ R.T + t
+    n = len(obs)
+    uv = np.empty((n, 2))
+    depth = np.empty(n)
+    J_cam = np.empty((n, 2, 3)) if jacobians else None
+    R_cw_all = np.empty((n, 3, 3)) if jacobians else None
+    for c, camera in enumerate(obs.cameras):
+        rows = obs.camera_index == c
+        if not rows.any():
+            continue
+        cam_p = camera.to_camera(world[rows])
+        depth[rows] = cam_p[:, 2]
+        cam_p[:, 2] = np.maximum(cam_p[:, 2], _MIN_DEPTH)
+        uv_c, J_c = camera.project_camera_points(cam_p, jacobian=jacobians)
+        uv[rows] = uv_c
+        if jacobians:
+            J_cam[rows] = J_c
+            R_cw_all[rows] = camera.camera_T_world[:3, :3]
+    if not jacobians:
+        return uv, depth, None, None
+    J_point = J_cam @ R_cw_all @ R  # (n, 2, 3)
+    J_pose = np.empty((n, 2, 6))
+    # d(R p + t)/d xi = [-R [p]x, R]  =>  rows a^T (-R[p]x) = (p x (R^T a))^T with a^T R = J_point rows
+    J_pose[:, :, :3] = np.cross(body[:, None, :], J_point)
+    J_pose[:, :, 3:] = J_point
+    return uv, depth, J_pose, J_point
+
+
+def whitened_residuals(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehicle_p: np.ndarray) -> np.ndarray:
+    """(n, 2) whitened residuals ``L (pi(x) - uv)`` before the robust loss."""
+    uv, _, _, _ = project_keypoints(obs, world_T_vehicle, vehicle_p, jacobians=False)
+    return np.einsum("nij,nj->ni", obs.sqrt_information, uv - obs.uv)
+
+
+def _layers_to_points(values: gtsam.Values, layer_keys) -> np.ndarray:
+    return np.concatenate([values.atVector(k) for k in layer_keys]).reshape(12, 3)
+
+
+def _error(obs: KeypointObservations, loss: RobustLoss, this: gtsam.CustomFactor, values: gtsam.Values, H):
+    keys = this.keys()
+    world_T_vehicle = values.atPose3(keys[0])
+    vehicle_p = _layers_to_points(values, keys[1:])
+    want = H is not None
+    uv, _, J_pose, J_point = project_keypoints(obs, world_T_vehicle, vehicle_p, jacobians=want)
+    L = obs.sqrt_information
+    e = np.einsum("nij,nj->ni", L, uv - obs.uv)
+    norm = np.sqrt(np.einsum("ni,ni->n", e, e))
+    s, ds_over_n = loss.scale(norm)
+    r = e * s[:, None]
+    if want:
+        n = len(obs)
+        # dr/de = s I + (s'/n) e e^T
+        D = s[:, None, None] * np.eye(2) + ds_over_n[:, None, None] * e[:, :, None] * e[:, None, :]
+        DL = D @ L
+        H[0] = (DL @ J_pose).reshape(2 * n, 6)
+        Jp = DL @ J_point  # (n, 2, 3)
+        blocks = np.zeros((n, 2, 12, 3))
+        blocks[np.arange(n), :, obs.keypoint_index, :] = Jp
+        blocks = blocks.reshape(n, 2, 36)
+        for j in range(3):
+            H[j + 1] = blocks[:, :, 12 * j : 12 * j + 12].reshape(2 * n, 12)
+    return r.ravel()
+
+
+def projection_factor(
+    pose_key: int, layer_keys, obs: KeypointObservations, loss: RobustLoss = RobustLoss()
+) -> gtsam.CustomFactor:
+    """A factor on ``[pose_key, *layer_keys]`` for all observations in ``obs``.
+
+    Args:
+        pose_key: key of ``world_T_vehicle`` (``gtsam.Pose3``).
+        layer_keys: keys of the (wheel, light, roof) layer 12-vectors.
+        obs: the pixel observations with their square-root information.
+        loss: robust loss applied to each observation's whitened 2-vector.
+    """
+    if len(obs) == 0:
+        raise ValueError("projection_factor: no observations")
+    noise = gtsam.noiseModel.Unit.Create(2 * len(obs))
+    return gtsam.CustomFactor(noise, [pose_key, *layer_keys], partial(_error, obs, loss))

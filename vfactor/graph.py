@@ -1,0 +1,213 @@
+"""Builds vfactor's factor graph and initial values from observations.
+
+The functions here are also the API for adding vehicles to a graph of your own
+(a SLAM or mapping graph): :func:`add_shape_factors` once per vehicle,
+:func:`add_observation_factor` once per vehicle per frame, and
+:func:`insert_vehicle_values` for the initial estimates, all under a
+:class:`vfactor.keys.KeyScheme` you choose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+
+from vfactor.camera import Camera
+from vfactor.errors import InputError
+from vfactor.factors.body_frame import body_frame_factor
+from vfactor.factors.distance_bounds import distance_bounds_term
+from vfactor.factors.layer_offset import layer_offset_term
+from vfactor.factors.planarity import layer_plane_term
+from vfactor.factors.projection import KeypointObservations, projection_factor
+from vfactor.factors.rectangle import rectangle_term
+from vfactor.factors.robust import RobustLoss
+from vfactor.factors.shape_prior import shape_prior_factor
+from vfactor.factors.shape_terms import shape_terms_factor
+from vfactor.factors.symmetry import symmetry_factor
+from vfactor.factors.trapezoid import trapezoid_term
+from vfactor.keypoints import LAYER_NAMES
+from vfactor.keys import KeyScheme
+from vfactor.observations import Detection
+from vfactor.shape_model import HwcBounds, ShapePrior, default_hwc_bounds, default_shape_prior
+from vfactor.wireframe import Wireframe
+
+__all__ = [
+    "GraphConfig",
+    "observations_from_detections",
+    "add_shape_factors",
+    "add_observation_factor",
+    "insert_vehicle_values",
+    "build_vehicle_graph",
+    "hwc_terms",
+]
+
+
+@dataclass(frozen=True)
+class GraphConfig:
+    """Noise and constraint settings of the vehicle graph.
+
+    Attributes:
+        relative_pixel_sigma: keypoint pixel sigma at confidence 1, as a fraction
+            of the detection's box diagonal (the sigma is divided by the confidence).
+        min_pixel_sigma: lower bound of that sigma, pixels.
+        loss: robust loss per keypoint observation.
+        symmetry_sigma: left/right asymmetry allowed per coordinate, metres.
+        body_frame_sigma: gauge tightness (hub centroid at the origin, hubs level), metres.
+        shape_prior_weight: scales the information of the mean-shape prior.
+        hwc: whether to add the nonlinear HWC factors (planes, rectangle,
+            trapezoids, distance and layer-offset bounds).
+        plane_sigma_m, plane_sigma_rad: layer planarity (m) and perpendicularity (rad).
+        rectangle_sigma: wheel-layer rectangle, metres.
+        trapezoid_sigma_rad, width_ratio_sigma: trapezoid parallel sides and width-ratio hinge.
+        hinge_sigma: distance and layer-offset hinges beyond their bounds, metres.
+    """
+
+    relative_pixel_sigma: float = 0.03
+    min_pixel_sigma: float = 1.0
+    loss: RobustLoss = field(default_factory=RobustLoss)
+    symmetry_sigma: float = 0.01
+    body_frame_sigma: float = 1e-3
+    shape_prior_weight: float = 1.0
+    hwc: bool = True
+    plane_sigma_m: float = 0.02
+    plane_sigma_rad: float = 0.05
+    rectangle_sigma: float = 0.02
+    trapezoid_sigma_rad: float = 0.05
+    width_ratio_sigma: float = 0.02
+    hinge_sigma: float = 0.01
+
+    def __post_init__(self):
+        for name in (
+            "relative_pixel_sigma", "min_pixel_sigma", "symmetry_sigma", "body_frame_sigma", "shape_prior_weight",
+            "plane_sigma_m", "plane_sigma_rad", "rectangle_sigma", "trapezoid_sigma_rad", "width_ratio_sigma",
+            "hinge_sigma",
+        ):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
+                raise ValueError(f"GraphConfig.{name}: expected a positive number, got {value!r}")
+
+
+def observations_from_detections(
+    detections: list[Detection], cameras: dict[str, Camera], config: GraphConfig = GraphConfig()
+) -> KeypointObservations:
+    """Stacks the seen keypoints of one vehicle's detections, with their noise.
+
+    The pixel noise of keypoint k is the detection's 2x2 covariance where one is
+    given, else isotropic with sigma ``max(min_pixel_sigma, relative_pixel_sigma *
+    box_diagonal) / confidence``.
+
+    Raises:
+        InputError: a detection names a camera that is not in ``cameras``.
+    """
+    names = list(cameras)
+    cam_idx, kp_idx, uv, sqrt_info = [], [], [], []
+    for d in detections:
+        if d.camera not in cameras:
+            raise InputError("camera", f"unknown camera {d.camera!r}; known: {', '.join(names)}")
+        seen = np.flatnonzero(d.confidence > 0)
+        if len(seen) == 0:
+            continue
+        base_sigma = max(config.min_pixel_sigma, config.relative_pixel_sigma * d.box_diagonal())
+        for k in seen:
+            cov = None if d.covariance is None else d.covariance[k]
+            if cov is not None and np.all(np.isfinite(cov)):
+                L = np.linalg.cholesky(np.linalg.inv(cov)).T
+            else:
+                L = np.eye(2) * (d.confidence[k] / base_sigma)
+            cam_idx.append(names.index(d.camera))
+            kp_idx.append(k)
+            uv.append(d.keypoints[k])
+            sqrt_info.append(L)
+    return KeypointObservations(
+        cameras=tuple(cameras.values()),
+        camera_index=np.array(cam_idx, dtype=int),
+        keypoint_index=np.array(kp_idx, dtype=int),
+        uv=np.array(uv, dtype=float).reshape(-1, 2),
+        sqrt_information=np.array(sqrt_info, dtype=float).reshape(-1, 2, 2),
+    )
+
+
+def hwc_terms(config: GraphConfig = GraphConfig(), bounds: HwcBounds | None = None):
+    """The nonlinear HWC residual terms (fused into one factor by :func:`add_shape_factors`)."""
+    bounds = bounds or default_hwc_bounds()
+    return [
+        layer_plane_term(LAYER_NAMES, config.plane_sigma_m, config.plane_sigma_rad),
+        rectangle_term("wheel", config.rectangle_sigma),
+        trapezoid_term(bounds.width_ratio, config.trapezoid_sigma_rad, config.width_ratio_sigma),
+        distance_bounds_term(bounds.distance, sigma=config.hinge_sigma),
+        layer_offset_term(bounds.layer_offset, sigma=config.hinge_sigma),
+    ]
+
+
+def add_shape_factors(
+    graph: gtsam.NonlinearFactorGraph,
+    keys: KeyScheme,
+    vehicle: int = 0,
+    config: GraphConfig = GraphConfig(),
+    prior: ShapePrior | None = None,
+    bounds: HwcBounds | None = None,
+) -> None:
+    """Adds one vehicle's shape factors: body frame, symmetry, mean-shape prior, HWC.
+
+    Add these once per vehicle (the shape is shared by all its frames).
+    """
+    layer_keys = keys.layer_keys(vehicle)
+    graph.add(body_frame_factor(layer_keys[0], config.body_frame_sigma))
+    for key in layer_keys:
+        graph.add(symmetry_factor(key, config.symmetry_sigma))
+    graph.add(shape_prior_factor(layer_keys, prior or default_shape_prior(), config.shape_prior_weight))
+    if config.hwc:
+        graph.add(shape_terms_factor(layer_keys, hwc_terms(config, bounds)))
+
+
+def add_observation_factor(
+    graph: gtsam.NonlinearFactorGraph,
+    keys: KeyScheme,
+    observations: KeypointObservations,
+    vehicle: int = 0,
+    frame: int = 0,
+    config: GraphConfig = GraphConfig(),
+) -> None:
+    """Adds the keypoint projection factor of one vehicle in one frame (no-op without observations)."""
+    if len(observations):
+        graph.add(projection_factor(keys.pose_key(vehicle, frame), keys.layer_keys(vehicle), observations, config.loss))
+
+
+def insert_vehicle_values(
+    values: gtsam.Values,
+    keys: KeyScheme,
+    world_T_vehicle: gtsam.Pose3 | None,
+    wireframe: Wireframe | None,
+    vehicle: int = 0,
+    frame: int = 0,
+) -> None:
+    """Inserts (or updates) a vehicle's pose in ``frame`` and/or its shape layers."""
+    def put(key, value):
+        if values.exists(key):
+            values.update(key, value)
+        else:
+            values.insert(key, value)
+
+    if world_T_vehicle is not None:
+        put(keys.pose_key(vehicle, frame), world_T_vehicle)
+    if wireframe is not None:
+        for key, vec in zip(keys.layer_keys(vehicle), wireframe.layer_vectors().values()):
+            put(key, vec)
+
+
+def build_vehicle_graph(
+    observations: KeypointObservations,
+    keys: KeyScheme = KeyScheme(),
+    vehicle: int = 0,
+    frame: int = 0,
+    config: GraphConfig = GraphConfig(),
+    prior: ShapePrior | None = None,
+    bounds: HwcBounds | None = None,
+) -> gtsam.NonlinearFactorGraph:
+    """The one-frame graph of one vehicle: projection factor plus shape factors."""
+    graph = gtsam.NonlinearFactorGraph()
+    add_observation_factor(graph, keys, observations, vehicle, frame, config)
+    add_shape_factors(graph, keys, vehicle, config, prior, bounds)
+    return graph

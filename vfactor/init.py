@@ -1,0 +1,178 @@
+"""Initial pose (and scale) of a vehicle with no pose guess.
+
+Candidates, all scored by the robust cross-projection cost over every camera:
+
+* per camera, PnP of the mean wireframe (OpenCV RANSAC and SQPnP), with the
+  labels as given and with left/right swapped, each also turned by 180 degrees
+  about the body z axis;
+* multi-view: keypoints seen by two or more cameras are triangulated and the
+  mean wireframe is aligned to them (Umeyama, with scale).
+
+The best few distinct candidates start the Levenberg-Marquardt solves.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import gtsam
+import numpy as np
+
+from vfactor.factors.projection import KeypointObservations, whitened_residuals
+from vfactor.factors.robust import RobustLoss
+from vfactor.keypoints import MIRROR_PERMUTATION
+from vfactor.wireframe import Wireframe
+
+__all__ = ["Candidate", "umeyama", "triangulate_keypoints", "pose_candidates", "best_candidates", "cross_projection_cost"]
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A starting point: pose, wireframe, its robust cost and where it came from."""
+
+    world_T_vehicle: gtsam.Pose3
+    wireframe: Wireframe
+    cost: float
+    source: str
+
+
+def umeyama(src: np.ndarray, dst: np.ndarray, weights=None, with_scale: bool = True):
+    """Similarity ``dst ~ s R src + t`` minimising weighted squared distances (Umeyama 1991).
+
+    Args:
+        src, dst: (n, 3) corresponding points, n >= 3.
+        weights: optional (n,) non-negative weights.
+        with_scale: estimate ``s`` (else ``s = 1``).
+
+    Returns:
+        (R (3, 3), t (3,), s).
+    """
+    w = np.ones(len(src)) if weights is None else np.asarray(weights, float)
+    w = w / w.sum()
+    mu_s, mu_d = w @ src, w @ dst
+    xs, xd = src - mu_s, dst - mu_d
+    cov = (xd * w[:, None]).T @ xs
+    U, S, Vt = np.linalg.svd(cov)
+    D = np.eye(3)
+    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
+        D[2, 2] = -1
+    R = U @ D @ Vt
+    var_s = np.sum(w * np.sum(xs * xs, axis=1))
+    s = float(np.trace(np.diag(S) @ D) / var_s) if with_scale and var_s > 0 else 1.0
+    t = mu_d - s * R @ mu_s
+    return R, t, s
+
+
+def triangulate_keypoints(obs: KeypointObservations, min_views: int = 2):
+    """Linear (DLT) triangulation of keypoints seen by ``min_views`` or more cameras.
+
+    Returns:
+        (indices (m,), world points (m, 3)) of the keypoints that triangulate in
+        front of all their cameras.
+    """
+    indices, points = [], []
+    for k in np.unique(obs.keypoint_index):
+        rows = np.flatnonzero(obs.keypoint_index == k)
+        if len(set(obs.camera_index[rows])) < min_views:
+            continue
+        A = []
+        for i in rows:
+            camera = obs.cameras[obs.camera_index[i]]
+            x, y = camera.undistort_pixels(obs.uv[i : i + 1])[0]
+            P = camera.camera_T_world[:3]
+            w = obs.sqrt_information[i, 0, 0]
+            A.append(w * (x * P[2] - P[0]))
+            A.append(w * (y * P[2] - P[1]))
+        _, _, Vt = np.linalg.svd(np.array(A))
+        X = Vt[-1]
+        if abs(X[3]) < 1e-12:
+            continue
+        X = X[:3] / X[3]
+        if all(obs.cameras[obs.camera_index[i]].to_camera(X[None])[0, 2] > 0 for i in rows):
+            indices.append(k)
+            points.append(X)
+    return np.array(indices, dtype=int), np.array(points).reshape(-1, 3)
+
+
+def cross_projection_cost(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, loss: RobustLoss) -> float:
+    """Robust cost of the projections of ``wireframe`` at a pose in every camera."""
+    e = whitened_residuals(obs, world_T_vehicle, wireframe.vehicle_p_keypoints)
+    return float(np.sum(loss.rho(np.linalg.norm(e, axis=1))))
+
+
+def _pnp(camera, object_p, image_uv, threshold_px):
+    found = []
+    K, dist = camera.K, camera.dist
+    obj, img = object_p.astype(np.float64), image_uv.astype(np.float64)
+    if len(obj) >= 6:
+        ok, rvec, tvec, _ = cv2.solvePnPRansac(
+            obj, img, K, dist, iterationsCount=200, reprojectionError=threshold_px, confidence=0.999,
+            flags=cv2.SOLVEPNP_EPNP,
+        )
+        if ok:
+            found.append((rvec, tvec))
+    try:
+        ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_SQPNP)
+        if ok:
+            found.append((rvec, tvec))
+    except cv2.error:
+        pass
+    poses = []
+    for rvec, tvec in found:
+        camera_T_vehicle = np.eye(4)
+        camera_T_vehicle[:3, :3] = cv2.Rodrigues(rvec)[0]
+        camera_T_vehicle[:3, 3] = np.ravel(tvec)
+        if not np.all(np.isfinite(camera_T_vehicle)) or camera_T_vehicle[2, 3] <= 0:
+            continue
+        poses.append(camera.pose.compose(gtsam.Pose3(camera_T_vehicle)))
+    return poses
+
+
+def pose_candidates(obs: KeypointObservations, wireframe: Wireframe) -> list[tuple[gtsam.Pose3, Wireframe, str]]:
+    """All candidate (pose, wireframe, source) starts for one vehicle (unscored)."""
+    out = []
+    points = wireframe.vehicle_p_keypoints
+    sigma = 1.0 / np.abs(obs.sqrt_information[:, 0, 0])
+    flip = gtsam.Pose3(gtsam.Rot3.Yaw(np.pi), np.zeros(3))
+    for c, camera in enumerate(obs.cameras):
+        rows = np.flatnonzero(obs.camera_index == c)
+        if len(rows) < 4:
+            continue
+        threshold = float(3.0 * np.median(sigma[rows]))
+        for labels, tag in ((obs.keypoint_index[rows], "pnp"), (MIRROR_PERMUTATION[obs.keypoint_index[rows]], "pnp-mirrored")):
+            for pose in _pnp(camera, points[labels], obs.uv[rows], threshold):
+                out.append((pose, wireframe, f"{tag}:{camera.name}"))
+                out.append((pose.compose(flip), wireframe, f"{tag}-turned:{camera.name}"))
+    idx, world = triangulate_keypoints(obs)
+    if len(idx) >= 4:
+        R, t, s = umeyama(points[idx], world, with_scale=True)
+        if 0.6 < s < 1.6:
+            out.append((gtsam.Pose3(gtsam.Rot3(R), t), wireframe.scaled(s), "triangulation"))
+    return out
+
+
+def best_candidates(
+    obs: KeypointObservations, wireframe: Wireframe, loss: RobustLoss, count: int = 2,
+    min_angle_rad: float = 0.35, min_distance_m: float = 1.0,
+) -> list[Candidate]:
+    """The ``count`` lowest-cost candidates that differ by at least the given angle or distance."""
+    scored = sorted(
+        (Candidate(pose, w, cross_projection_cost(obs, pose, w, loss), source) for pose, w, source in pose_candidates(obs, wireframe)),
+        key=lambda c: c.cost,
+    )
+    chosen: list[Candidate] = []
+    for cand in scored:
+        if not np.isfinite(cand.cost):
+            continue
+        distinct = all(
+            np.linalg.norm(gtsam.Rot3.Logmap(c.world_T_vehicle.rotation().between(cand.world_T_vehicle.rotation())))
+            > min_angle_rad
+            or np.linalg.norm(c.world_T_vehicle.translation() - cand.world_T_vehicle.translation()) > min_distance_m
+            for c in chosen
+        )
+        if distinct:
+            chosen.append(cand)
+        if len(chosen) == count:
+            break
+    return chosen

@@ -1,0 +1,67 @@
+"""Keys of vfactor's variables in a GTSAM graph, under a configurable scheme.
+
+Every variable is a ``gtsam.Symbol``: a character and an index. The default
+scheme uses ``x`` for vehicle poses (``world_T_vehicle``, one per vehicle per
+frame) and ``w``, ``l``, ``r`` for the wheel, light and roof shape layers (one
+12-vector each per vehicle, shared by all frames of its track). Choose other
+characters when those collide with a graph of your own.
+
+Index layout: a pose of vehicle ``v`` in frame ``f`` has index
+``v * frame_stride + f``; a layer of vehicle ``v`` has index ``v``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gtsam
+
+from vfactor.keypoints import LAYER_NAMES
+
+__all__ = ["KeyScheme"]
+
+
+@dataclass(frozen=True)
+class KeyScheme:
+    """Which ``gtsam.Symbol`` characters vfactor's variables use.
+
+    Attributes:
+        pose: character of ``world_T_vehicle`` (``gtsam.Pose3``) keys.
+        wheel: character of the wheel layer (12-vector, body frame, metres).
+        light: character of the light layer.
+        roof: character of the roof layer.
+        frame_stride: pose index = vehicle * frame_stride + frame.
+    """
+
+    pose: str = "x"
+    wheel: str = "w"
+    light: str = "l"
+    roof: str = "r"
+    frame_stride: int = 1_000_000
+
+    def __post_init__(self):
+        chars = (self.pose, self.wheel, self.light, self.roof)
+        for name, c in zip(("pose", "wheel", "light", "roof"), chars):
+            if not isinstance(c, str) or len(c) != 1:
+                raise ValueError(f"KeyScheme.{name}: expected a single character, got {c!r}")
+        if len(set(chars)) != 4:
+            raise ValueError(f"KeyScheme: the four characters must differ, got {chars}")
+        if not isinstance(self.frame_stride, int) or self.frame_stride < 1:
+            raise ValueError(f"KeyScheme.frame_stride: expected a positive integer, got {self.frame_stride!r}")
+
+    def pose_key(self, vehicle: int = 0, frame: int = 0) -> int:
+        """Key of ``world_T_vehicle`` of vehicle ``vehicle`` in frame ``frame``."""
+        if not 0 <= frame < self.frame_stride:
+            raise ValueError(f"frame: expected 0 <= frame < {self.frame_stride}, got {frame}")
+        return gtsam.symbol(self.pose, vehicle * self.frame_stride + frame)
+
+    def layer_key(self, layer: str, vehicle: int = 0) -> int:
+        """Key of one shape layer ("wheel", "light" or "roof") of a vehicle."""
+        char = {"wheel": self.wheel, "light": self.light, "roof": self.roof}.get(layer)
+        if char is None:
+            raise ValueError(f"layer: expected one of {LAYER_NAMES}, got {layer!r}")
+        return gtsam.symbol(char, vehicle)
+
+    def layer_keys(self, vehicle: int = 0) -> tuple[int, int, int]:
+        """Keys of the (wheel, light, roof) layers of a vehicle."""
+        return tuple(self.layer_key(name, vehicle) for name in LAYER_NAMES)

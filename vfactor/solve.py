@@ -1,0 +1,237 @@
+"""One-frame solve: Levenberg-Marquardt on one vehicle's graph, with covariances.
+
+:func:`solve_vehicle` estimates one vehicle from its detections in one frame;
+:func:`solve_frame` solves every vehicle of a frame, each on its own, so that
+one that cannot be solved is reported with its status while the others are
+still solved; :func:`solve_scene` does every frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import gtsam
+import numpy as np
+
+from vfactor.camera import Camera
+from vfactor.errors import InputError
+from vfactor.factors.projection import KeypointObservations, whitened_residuals
+from vfactor.graph import GraphConfig, build_vehicle_graph, insert_vehicle_values, observations_from_detections
+from vfactor.init import best_candidates
+from vfactor.keys import KeyScheme
+from vfactor.observations import Detection, Frame, Scene
+from vfactor.result import FrameResult, Status, VehicleResult
+from vfactor.shape_model import HwcBounds, ShapePrior, default_hwc_bounds, default_shape_prior
+from vfactor.wireframe import Wireframe
+
+__all__ = ["SolveOptions", "solve_vehicle", "solve_observations", "solve_frame", "solve_scene", "keypoint_covariances"]
+
+
+@dataclass(frozen=True)
+class SolveOptions:
+    """Settings of the one-frame solve.
+
+    Attributes:
+        graph: noise and constraint settings of the graph.
+        max_iterations: Levenberg-Marquardt iteration limit per start.
+        relative_error_tol: stop when the cost decreases by less than this fraction.
+        absolute_error_tol: stop when the cost decreases by less than this.
+        num_starts: how many distinct initial poses to optimise from (the lowest
+            final cost wins).
+        covariance: compute the pose and keypoint covariances (``gtsam.Marginals``).
+        min_observations: fewer seen keypoints (over all cameras) make the
+            vehicle ``degenerate``.
+        min_keypoints_in_one_view: at least one camera must see this many
+            keypoints (or enough must triangulate) to start without a pose guess.
+    """
+
+    graph: GraphConfig = field(default_factory=GraphConfig)
+    max_iterations: int = 100
+    relative_error_tol: float = 1e-6
+    absolute_error_tol: float = 1e-9
+    num_starts: int = 2
+    covariance: bool = True
+    min_observations: int = 6
+    min_keypoints_in_one_view: int = 4
+
+    def lm_params(self) -> gtsam.LevenbergMarquardtParams:
+        params = gtsam.LevenbergMarquardtParams()
+        params.setMaxIterations(self.max_iterations)
+        params.setRelativeErrorTol(self.relative_error_tol)
+        params.setAbsoluteErrorTol(self.absolute_error_tol)
+        return params
+
+
+def keypoint_covariances(
+    marginals: gtsam.Marginals, keys: KeyScheme, world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, vehicle: int = 0, frame: int = 0
+) -> np.ndarray:
+    """(12, 3, 3) covariances of the world keypoints from the joint marginal of pose and shape.
+
+    ``world_p_k = R vehicle_p_k + t``; with GTSAM's right perturbation,
+    ``d world_p_k / d xi = [-R [p_k]x, R]`` and ``d world_p_k / d vehicle_p_k = R``.
+    """
+    pose_key = keys.pose_key(vehicle, frame)
+    layer_keys = keys.layer_keys(vehicle)
+    key_vector = gtsam.KeyVector([pose_key, *layer_keys])
+    joint = marginals.jointMarginalCovariance(key_vector)
+    blocks = [[joint.at(a, b) for b in key_vector] for a in key_vector]
+    full = np.block(blocks)  # (42, 42): pose (6), wheel (12), light (12), roof (12)
+    R = world_T_vehicle.rotation().matrix()
+    out = np.empty((12, 3, 3))
+    for k, p in enumerate(wireframe.vehicle_p_keypoints):
+        J = np.zeros((3, 42))
+        J[:, :3] = -R @ _skew(p)
+        J[:, 3:6] = R
+        J[:, 6 + 3 * k : 9 + 3 * k] = R
+        out[k] = J @ full @ J.T
+    return out
+
+
+def _skew(p):
+    return np.array([[0, -p[2], p[1]], [p[2], 0, -p[0]], [-p[1], p[0], 0]])
+
+
+def solve_observations(
+    obs: KeypointObservations,
+    options: SolveOptions = SolveOptions(),
+    vehicle_id: str = "vehicle",
+    prior: ShapePrior | None = None,
+    bounds: HwcBounds | None = None,
+    initial: tuple[gtsam.Pose3, Wireframe] | None = None,
+) -> VehicleResult:
+    """Solves one vehicle from stacked observations (see :func:`solve_vehicle`)."""
+    prior = prior or default_shape_prior()
+    bounds = bounds or default_hwc_bounds()
+    keys = KeyScheme()
+    n_seen = len(obs)
+    if n_seen < options.min_observations:
+        return VehicleResult(
+            vehicle_id, Status.DEGENERATE,
+            message=f"only {n_seen} keypoints seen over all cameras; at least {options.min_observations} are needed",
+        )
+    mean = Wireframe(prior.mean)
+    if initial is not None:
+        starts = [initial]
+    else:
+        per_view = np.bincount(obs.camera_index, minlength=len(obs.cameras)).max()
+        candidates = best_candidates(obs, mean, options.graph.loss, options.num_starts)
+        if not candidates:
+            return VehicleResult(
+                vehicle_id, Status.DEGENERATE,
+                message=(
+                    f"no initial pose: the best camera sees {per_view} keypoints (PnP needs "
+                    f"{options.min_keypoints_in_one_view}) and too few keypoints triangulate"
+                ),
+            )
+        starts = [(c.world_T_vehicle, c.wireframe) for c in candidates]
+    graph = build_vehicle_graph(obs, keys, config=options.graph, prior=prior, bounds=bounds)
+    best = None
+    for world_T_vehicle, wireframe in starts:
+        values = gtsam.Values()
+        insert_vehicle_values(values, keys, world_T_vehicle, wireframe)
+        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.lm_params())
+        try:
+            estimate = optimizer.optimize()
+        except RuntimeError as exc:
+            if best is None:
+                best = (None, None, str(exc))
+            continue
+        error = graph.error(estimate)
+        if best is None or best[0] is None or error < best[1]:
+            best = (estimate, error, optimizer.iterations())
+    if best is None or best[0] is None:
+        return VehicleResult(vehicle_id, Status.FAILED, message=f"optimisation failed: {best[2] if best else 'no start'}")
+    estimate, error, iterations = best
+    pose_key = keys.pose_key()
+    world_T_vehicle = estimate.atPose3(pose_key)
+    wireframe = Wireframe.from_layer_vectors(
+        {name: estimate.atVector(k) for name, k in zip(("wheel", "light", "roof"), keys.layer_keys())}
+    )
+    status = Status.CONVERGED if iterations < options.max_iterations else Status.MAX_ITERATIONS
+    result = VehicleResult(
+        vehicle_id, status, world_T_vehicle=world_T_vehicle, wireframe=wireframe, iterations=int(iterations),
+        final_error=float(error),
+    )
+    behind = _cameras_behind(obs, world_T_vehicle, wireframe)
+    if behind:
+        return VehicleResult(
+            vehicle_id, Status.FAILED,
+            message=f"the vehicle would lie behind camera(s) {', '.join(behind)} that report seeing it; check their world_T_camera",
+        )
+    e = whitened_residuals(obs, world_T_vehicle, wireframe.vehicle_p_keypoints)
+    result.extras["inlier_weights"] = options.graph.loss.weight(np.linalg.norm(e, axis=1))
+    if options.covariance:
+        try:
+            marginals = gtsam.Marginals(graph, estimate)
+            result.pose_covariance = marginals.marginalCovariance(pose_key)
+            result.keypoint_covariances_world = keypoint_covariances(marginals, keys, world_T_vehicle, wireframe)
+        except RuntimeError as exc:
+            result.message = f"covariance unavailable: {exc}"
+    return result
+
+
+def _cameras_behind(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, wireframe: Wireframe) -> list[str]:
+    world = wireframe.in_world(world_T_vehicle)
+    names = []
+    for c, camera in enumerate(obs.cameras):
+        rows = obs.camera_index == c
+        if rows.any() and np.median(camera.to_camera(world[obs.keypoint_index[rows]])[:, 2]) <= 0:
+            names.append(camera.name)
+    return names
+
+
+def solve_vehicle(
+    detections: list[Detection],
+    cameras: dict[str, Camera],
+    options: SolveOptions = SolveOptions(),
+    vehicle_id: str | None = None,
+    prior: ShapePrior | None = None,
+    bounds: HwcBounds | None = None,
+) -> VehicleResult:
+    """Estimates one vehicle's pose, shape and covariances from its detections in one frame.
+
+    Args:
+        detections: the vehicle's detections, one per camera that saw it.
+        cameras: camera name -> camera (must hold every detection's camera).
+        options: solver settings.
+        vehicle_id: track id for the result (defaults to the detections' id).
+        prior: mean-shape prior (default: PASCAL3D+ cars).
+        bounds: HWC bounds (default: PASCAL3D+ cars and the presets).
+
+    Returns:
+        A :class:`VehicleResult`; ``degenerate`` when too little is seen.
+
+    Raises:
+        InputError: a detection names an unknown camera.
+    """
+    vehicle_id = vehicle_id or (detections[0].vehicle if detections else "vehicle")
+    obs = observations_from_detections(detections, cameras, options.graph)
+    return solve_observations(obs, options, vehicle_id, prior, bounds)
+
+
+def solve_frame(frame: Frame, cameras: dict[str, Camera], options: SolveOptions = SolveOptions(), **kwargs) -> FrameResult:
+    """Solves every vehicle of a frame, each on its own.
+
+    A vehicle whose solve raises (an unknown camera, a numerical failure) is
+    reported as ``failed`` with the message; the others are still solved.
+    """
+    vehicles = []
+    for vehicle_id in frame.vehicle_ids():
+        try:
+            vehicles.append(solve_vehicle(frame.detections_of(vehicle_id), cameras, options, vehicle_id, **kwargs))
+        except (InputError, RuntimeError, np.linalg.LinAlgError) as exc:
+            vehicles.append(VehicleResult(vehicle_id, Status.FAILED, message=str(exc)))
+    return FrameResult(frame.t, vehicles)
+
+
+def solve_scene(
+    scene: Scene, options: SolveOptions = SolveOptions(), progress: Callable[[int, int], None] | None = None, **kwargs
+) -> list[FrameResult]:
+    """Solves every frame of a scene on its own (``vfactor solve``)."""
+    out = []
+    for i, frame in enumerate(scene.frames):
+        out.append(solve_frame(frame, scene.cameras, options, **kwargs))
+        if progress is not None:
+            progress(i + 1, len(scene.frames))
+    return out

@@ -244,8 +244,9 @@ class Camera:
             raise CalibrationError(where, "file not found")
         try:
             fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-        except cv2.error as exc:
-            raise CalibrationError(where, f"not a readable OpenCV FileStorage file ({exc.err})") from None
+        except (cv2.error, SystemError) as exc:  # OpenCV 5 wraps parse errors in SystemError
+            detail = getattr(exc, "err", None) or getattr(exc.__cause__, "err", None) or "parse error"
+            raise CalibrationError(where, f"not a readable OpenCV FileStorage file ({detail})") from None
         if not fs.isOpened():
             raise CalibrationError(where, "not a readable OpenCV FileStorage file")
         try:

@@ -153,6 +153,7 @@ class VehiclePreset:
         t = template_shape()
         wb = self.wheelbase
         p = t * wb
+        p[:4, 0] = [0.5 * wb, 0.5 * wb, -0.5 * wb, -0.5 * wb]
         # x: wheels exactly at +-wb/2; lights over light_span * length with the template's overhang ratio.
         front_over = t[4, 0] - 0.5
         back_over = -0.5 - t[6, 0]
@@ -166,6 +167,7 @@ class VehiclePreset:
         # y: scale so that the track is track_over_width * width.
         track = self.track_over_width * self.width
         p[:, 1] = t[:, 1] * track / (2 * t[0, 1])
+        p[:4, 1] = [0.5 * track, -0.5 * track, 0.5 * track, -0.5 * track]  # the wheel layer is a rectangle
         # z: hubs at 0 (origin), roof keypoints roof_gap below the top, lights scaled alike.
         roof_z = self.height - self.wheel_radius - self.roof_gap
         scale_z = roof_z / t[8:, 2].mean()

@@ -1,0 +1,45 @@
+"""Shared fixtures: a two-camera rig with small overlap and a vehicle on the road."""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+import pytest
+
+from vfactor.camera import Camera
+from vfactor.wireframe import PRESETS
+
+
+def look_at(eye, target) -> np.ndarray:
+    """4x4 world_T_camera of an OpenCV camera at ``eye`` looking at ``target`` (world z up)."""
+    eye = np.asarray(eye, float)
+    z = np.asarray(target, float) - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    T[:3, 3] = eye
+    return T
+
+
+K = [[900.0, 0.0, 640.0], [0.0, 900.0, 360.0], [0.0, 0.0, 1.0]]
+
+
+@pytest.fixture
+def cameras() -> dict[str, Camera]:
+    """Two pole cameras (7-8 m) on opposite corners, each seeing its own side of the vehicle."""
+    return {
+        "cam0": Camera("cam0", K, look_at([18, 12, 7], [0, 0, 0]), image_size=(1280, 720)),
+        "cam1": Camera("cam1", K, look_at([-18, -12, 8], [0, 0, 0]), dist=[-0.05, 0.01, 0.001, -0.001, 0.0], image_size=(1280, 720)),
+    }
+
+
+@pytest.fixture
+def prius():
+    return PRESETS["toyota_prius"].wireframe()
+
+
+@pytest.fixture
+def world_T_vehicle():
+    return gtsam.Pose3(gtsam.Rot3.Yaw(0.7), np.array([1.0, -0.5, 0.32]))

@@ -1,0 +1,135 @@
+"""Keypoint projection factor: Jacobians with distortion and every robust loss, and its behaviour."""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+import pytest
+
+from vfactor.factors.projection import KeypointObservations, project_keypoints, projection_factor
+from vfactor.factors.robust import LOSSES, RobustLoss
+from vfactor.keys import KeyScheme
+from vfactor.wireframe import PRESETS
+
+from ..conftest import K, look_at
+from .contract import FactorContract
+from vfactor.camera import Camera
+
+KEYS = KeyScheme()
+CAMERAS = (
+    Camera("a", K, look_at([15, 10, 7], [0, 0, 0])),
+    Camera("b", K, look_at([-15, -8, 8], [0, 0, 0]), dist=[-0.08, 0.02, 0.002, -0.001, 0.003]),
+)
+TRUTH_POSE = gtsam.Pose3(gtsam.Rot3.Ypr(0.6, 0.02, -0.03), np.array([0.8, -0.4, 0.33]))
+TRUTH_SHAPE = PRESETS["hatchback"].wireframe()
+
+
+def observations(noise_px: float = 0.0, rng=None, anisotropic: bool = False) -> KeypointObservations:
+    cam_idx = np.repeat([0, 1], 12)
+    kp_idx = np.tile(np.arange(12), 2)
+    obs = KeypointObservations(CAMERAS, cam_idx, kp_idx, np.zeros((24, 2)), np.tile(np.eye(2) / 3.0, (24, 1, 1)))
+    uv, _, _, _ = project_keypoints(obs, TRUTH_POSE, TRUTH_SHAPE.vehicle_p_keypoints, jacobians=False)
+    if noise_px:
+        uv = uv + rng.normal(0, noise_px, uv.shape)
+    L = np.tile(np.array([[0.4, 0.1], [0.0, 0.25]]), (24, 1, 1)) if anisotropic else obs.sqrt_information
+    return KeypointObservations(CAMERAS, cam_idx, kp_idx, uv, L)
+
+
+def values_at(pose, wireframe):
+    values = gtsam.Values()
+    values.insert(KEYS.pose_key(), pose)
+    for key, vec in zip(KEYS.layer_keys(), wireframe.layer_vectors().values()):
+        values.insert(key, vec)
+    return values
+
+
+class ProjectionContract(FactorContract):
+    loss = RobustLoss("none")
+    anisotropic = False
+
+    def make_factor(self):
+        obs = observations(2.0, np.random.default_rng(11), self.anisotropic)
+        return projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss)
+
+    def make_values(self, rng):
+        pose = TRUTH_POSE.retract(rng.normal(0, [0.05, 0.05, 0.2, 0.3, 0.3, 0.1]))
+        shape = TRUTH_SHAPE.vehicle_p_keypoints + rng.normal(0, 0.1, (12, 3))
+        return values_at(pose, type(TRUTH_SHAPE)(shape))
+
+    def make_truth_values(self):
+        return values_at(TRUTH_POSE, TRUTH_SHAPE)
+
+    def test_zero_at_truth(self):
+        obs = observations()
+        factor = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss)
+        assert factor.error(self.make_truth_values()) < 1e-12
+
+
+class TestProjectionGaussian(ProjectionContract):
+    pass
+
+
+class TestProjectionAnisotropic(ProjectionContract):
+    anisotropic = True
+
+
+class TestProjectionHuber(ProjectionContract):
+    loss = RobustLoss("huber", 1.0)
+
+
+class TestProjectionCauchy(ProjectionContract):
+    loss = RobustLoss("cauchy", 1.0)
+
+
+class TestProjectionGemanMcClure(ProjectionContract):
+    loss = RobustLoss("geman_mcclure", 1.0)
+
+
+def test_matches_opencv_projection():
+    import cv2
+
+    obs = observations()
+    world = TRUTH_SHAPE.in_world(TRUTH_POSE)
+    for c, camera in enumerate(CAMERAS):
+        T = camera.camera_T_world
+        expected, _ = cv2.projectPoints(world, cv2.Rodrigues(T[:3, :3])[0], T[:3, 3], camera.K, camera.dist)
+        assert np.allclose(obs.uv[obs.camera_index == c], expected.reshape(-1, 2), atol=1e-6)
+
+
+def test_matches_gtsam_native_projection_factor():
+    """Same whitened error as GenericProjectionFactorCal3_S2 with the inverse pose as its variable."""
+    camera = CAMERAS[0]
+    obs = observations(2.0, np.random.default_rng(5)).subset(np.arange(24) < 12)
+    values = ProjectionContract().make_values(np.random.default_rng(4))
+    ours = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, RobustLoss("none"))
+    fx, s, cx = camera.K[0]
+    cal = gtsam.Cal3_S2(fx, camera.K[1, 1], s, cx, camera.K[1, 2])
+    native_graph = gtsam.NonlinearFactorGraph()
+    native_values = gtsam.Values()
+    native_values.insert(0, values.atPose3(KEYS.pose_key()).inverse())
+    points = np.concatenate([values.atVector(k) for k in KEYS.layer_keys()]).reshape(12, 3)
+    for i, k in enumerate(obs.keypoint_index):
+        native_graph.add(
+            gtsam.GenericProjectionFactorCal3_S2(obs.uv[i], gtsam.noiseModel.Isotropic.Sigma(2, 3.0), 0, 1 + k, cal, camera.pose)
+        )
+        native_values.insert(1 + k, points[k])
+    assert np.isclose(ours.error(values), native_graph.error(native_values), rtol=1e-9)
+
+
+@pytest.mark.parametrize("name", LOSSES)
+def test_robust_loss_is_exact_and_downweights_outliers(name):
+    loss = RobustLoss(name, 2.0)
+    n = np.array([0.0, 1.0, 3.0, 30.0])
+    s, _ = loss.scale(n)
+    assert np.allclose(0.5 * (s * n) ** 2, loss.rho(n))
+    w = loss.weight(n)
+    assert w[0] == pytest.approx(1.0)
+    if name != "none":
+        assert w[-1] < 0.1
+
+
+def test_robust_loss_rejects_bad_settings():
+    with pytest.raises(ValueError, match="robust loss name"):
+        RobustLoss("tukey-ish")
+    with pytest.raises(ValueError, match="threshold"):
+        RobustLoss("huber", -1.0)

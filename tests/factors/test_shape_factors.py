@@ -1,0 +1,139 @@
+"""Symmetry, body frame, shape prior and the nonlinear HWC factors."""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+import pytest
+
+from vfactor.factors.body_frame import body_frame_factor
+from vfactor.factors.distance_bounds import distance_bounds_term
+from vfactor.factors.layer_offset import layer_offset_term
+from vfactor.factors.planarity import layer_plane_term
+from vfactor.factors.rectangle import rectangle_term
+from vfactor.factors.shape_prior import shape_prior_factor
+from vfactor.factors.shape_terms import evaluate_terms, hinge, shape_terms_factor
+from vfactor.factors.symmetry import symmetry_factor
+from vfactor.factors.trapezoid import trapezoid_term
+from vfactor.graph import GraphConfig, hwc_terms
+from vfactor.keys import KeyScheme
+from vfactor.shape_model import default_hwc_bounds, default_shape_prior
+from vfactor.wireframe import PRESETS, Wireframe
+
+from .contract import FactorContract
+
+KEYS = KeyScheme().layer_keys(0)
+
+
+def layer_values(wireframe: Wireframe, noise: float = 0.0, rng=None) -> gtsam.Values:
+    values = gtsam.Values()
+    for key, vec in zip(KEYS, wireframe.layer_vectors().values()):
+        values.insert(key, vec + (rng.normal(0, noise, 12) if noise else 0.0))
+    return values
+
+
+class ShapeFactorContract(FactorContract):
+    truth = PRESETS["bmw_x5"].wireframe()
+
+    def make_values(self, rng):
+        return layer_values(self.truth, 0.15, rng)
+
+    def make_truth_values(self):
+        return layer_values(self.truth)
+
+
+class TestSymmetry(ShapeFactorContract):
+    def make_factor(self):
+        return symmetry_factor(KEYS[1], sigma=0.01)
+
+    def test_mirror_violation_is_measured_in_metres(self):
+        values = self.make_truth_values()
+        vec = values.atVector(KEYS[1]).copy()
+        vec[1] += 0.02  # left front light 2 cm further left
+        values.update(KEYS[1], vec)
+        assert np.isclose(self.make_factor().error(values), 0.5 * (0.02 / 0.01) ** 2)
+
+
+class TestBodyFrame(ShapeFactorContract):
+    def make_factor(self):
+        return body_frame_factor(KEYS[0])
+
+    def test_shifted_wheels_cost(self):
+        shifted = Wireframe(self.truth.vehicle_p_keypoints + [0.1, 0, 0])
+        assert self.make_factor().error(layer_values(shifted)) > 1e3
+
+
+class TestShapePrior(ShapeFactorContract):
+    truth = Wireframe(default_shape_prior().mean)
+
+    def make_factor(self):
+        return shape_prior_factor(KEYS, default_shape_prior())
+
+
+class TestLayerPlane(ShapeFactorContract):
+    def make_factor(self):
+        return shape_terms_factor(KEYS, [layer_plane_term()])
+
+    def test_lifting_one_corner_breaks_planarity(self):
+        p = self.truth.vehicle_p_keypoints.copy()
+        p[11, 2] += 0.1
+        assert self.make_factor().error(layer_values(Wireframe(p))) > 1.0
+
+
+class TestRectangle(ShapeFactorContract):
+    def make_factor(self):
+        return shape_terms_factor(KEYS, [rectangle_term()])
+
+    def test_skewed_wheels_cost(self):
+        p = self.truth.vehicle_p_keypoints.copy()
+        p[0, 0] += 0.1
+        assert self.make_factor().error(layer_values(Wireframe(p))) > 1.0
+
+
+class TestTrapezoid(ShapeFactorContract):
+    def make_factor(self):
+        return shape_terms_factor(KEYS, [trapezoid_term(default_hwc_bounds().width_ratio)])
+
+    def make_values(self, rng):
+        # also outside the width-ratio range, so that the hinge branch is exercised
+        p = self.truth.vehicle_p_keypoints.copy()
+        p[[4, 5], 1] *= 1.8
+        return layer_values(Wireframe(p), 0.1, rng)
+
+
+class TestDistanceBounds(ShapeFactorContract):
+    def make_factor(self):
+        return shape_terms_factor(KEYS, [distance_bounds_term(default_hwc_bounds().distance)])
+
+    def make_values(self, rng):
+        return layer_values(self.truth.scaled(1.6), 0.1, rng)
+
+
+class TestLayerOffset(ShapeFactorContract):
+    def make_factor(self):
+        return shape_terms_factor(KEYS, [layer_offset_term(default_hwc_bounds().layer_offset)])
+
+    def make_values(self, rng):
+        p = self.truth.vehicle_p_keypoints.copy()
+        p[8:, 2] += 1.5  # roof far too high
+        return layer_values(Wireframe(p), 0.1, rng)
+
+
+class TestFusedHwc(ShapeFactorContract):
+    def make_factor(self):
+        return shape_terms_factor(KEYS, hwc_terms(GraphConfig()))
+
+    def make_values(self, rng):
+        return layer_values(self.truth.scaled(1.5), 0.1, rng)
+
+
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_every_preset_satisfies_hwc(name):
+    points = PRESETS[name].wireframe().vehicle_p_keypoints
+    r = evaluate_terms(hwc_terms(GraphConfig()), points)
+    assert np.abs(r).max() < 1e-6
+
+
+def test_hinge_is_zero_inside_and_linear_outside():
+    q = np.array([0.5, 1.0, 1.5, 2.5])
+    assert np.allclose(hinge(q, 1.0, 2.0), [-0.5, 0.0, 0.0, 0.5])

@@ -31,7 +31,7 @@ def test_presets_match_their_published_dimensions(name):
     w = p.wireframe()
     assert w.wheelbase == pytest.approx(p.wheelbase, abs=1e-9)
     pts = w.vehicle_p_keypoints
-    assert pts[[4, 6], 0].ptp() == pytest.approx(p.light_span * p.length, rel=1e-9)
+    assert np.ptp(pts[[4, 6], 0]) == pytest.approx(p.light_span * p.length, rel=1e-9)
     assert pts[8:, 2].mean() + p.wheel_radius + p.roof_gap == pytest.approx(p.height, rel=1e-9)
     assert np.allclose(pts[:4].mean(0), 0, atol=1e-12)
     assert w == w.mirrored()  # exactly symmetric

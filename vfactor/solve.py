@@ -153,14 +153,12 @@ def solve_observations(
         vehicle_id, status, world_T_vehicle=world_T_vehicle, wireframe=wireframe, iterations=int(iterations),
         final_error=float(error),
     )
-    behind = _cameras_behind(obs, world_T_vehicle, wireframe)
-    if behind:
-        return VehicleResult(
-            vehicle_id, Status.FAILED,
-            message=f"the vehicle would lie behind camera(s) {', '.join(behind)} that report seeing it; check their world_T_camera",
-        )
     e = whitened_residuals(obs, world_T_vehicle, wireframe.vehicle_p_keypoints)
-    result.extras["inlier_weights"] = options.graph.loss.weight(np.linalg.norm(e, axis=1))
+    weights = options.graph.loss.weight(np.linalg.norm(e, axis=1))
+    result.extras["inlier_weights"] = weights
+    problem = _camera_disagreement(obs, weights, mean, options)
+    if problem:
+        return VehicleResult(vehicle_id, Status.FAILED, message=problem)
     if options.covariance:
         try:
             marginals = gtsam.Marginals(graph, estimate)
@@ -171,14 +169,37 @@ def solve_observations(
     return result
 
 
-def _cameras_behind(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, wireframe: Wireframe) -> list[str]:
-    world = wireframe.in_world(world_T_vehicle)
-    names = []
+def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: Wireframe, options: SolveOptions) -> str:
+    """A message when some camera's keypoints are (almost) all rejected, naming the cameras at odds.
+
+    Each camera's own PnP pose is checked against the other cameras: a vehicle that,
+    as one camera sees it, lies behind another camera that reports it points to a
+    wrong ``world_T_camera``.
+    """
+    rejected = []
     for c, camera in enumerate(obs.cameras):
         rows = obs.camera_index == c
-        if rows.any() and np.median(camera.to_camera(world[obs.keypoint_index[rows]])[:, 2]) <= 0:
-            names.append(camera.name)
-    return names
+        if rows.sum() >= options.min_keypoints_in_one_view and np.mean(weights[rows] > 0.5) < 0.3:
+            rejected.append(camera.name)
+    if not rejected:
+        return ""
+    details = []
+    for c, camera in enumerate(obs.cameras):
+        rows = obs.camera_index == c
+        if rows.sum() < options.min_keypoints_in_one_view:
+            continue
+        own = best_candidates(obs.subset(rows), mean, options.graph.loss, 1)
+        if not own:
+            continue
+        world = mean.in_world(own[0].world_T_vehicle)
+        for d, other in enumerate(obs.cameras):
+            other_rows = obs.camera_index == d
+            if d != c and other_rows.any() and np.median(other.to_camera(world)[:, 2]) <= 0:
+                details.append(f"as camera '{camera.name}' sees it, the vehicle lies behind camera '{other.name}'")
+    text = f"the keypoints of camera(s) {', '.join(repr(n) for n in rejected)} disagree with the other cameras"
+    if details:
+        text += "; " + "; ".join(details)
+    return text + ": check the cameras' world_T_camera"
 
 
 def solve_vehicle(

@@ -16,7 +16,7 @@ import numpy as np
 
 from vfactor.errors import CalibrationError
 
-__all__ = ["Camera", "as_pose3", "check_rigid_transform"]
+__all__ = ["Camera", "as_pose3", "check_rigid_transform", "project_pinhole"]
 
 _ROTATION_TOL = 1e-4
 
@@ -149,44 +149,8 @@ class Camera:
             J: (N, 2, 3) Jacobian of ``uv`` with respect to ``camera_p``
             (pixels per metre), or ``None`` when ``jacobian`` is False.
         """
-        X, Y, Z = camera_p[:, 0], camera_p[:, 1], camera_p[:, 2]
-        inv_z = 1.0 / Z
-        x, y = X * inv_z, Y * inv_z
-        fx, s, cx = self.K[0]
-        fy, cy = self.K[1, 1], self.K[1, 2]
-        k1, k2, p1, p2, k3 = self.dist
-        if self.has_distortion:
-            r2 = x * x + y * y
-            radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-            yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-        else:
-            xd, yd = x, y
-        uv = np.stack([fx * xd + s * yd + cx, fy * yd + cy], axis=1)
-        if not jacobian:
-            return uv, None
-        n = len(camera_p)
-        # d(xd, yd) / d(x, y)
-        D = np.zeros((n, 2, 2))
-        if self.has_distortion:
-            dradial = k1 + r2 * (2 * k2 + 3 * k3 * r2)  # d radial / d r2
-            D[:, 0, 0] = radial + 2 * x * x * dradial + 2 * p1 * y + 6 * p2 * x
-            D[:, 0, 1] = 2 * x * y * dradial + 2 * p1 * x + 2 * p2 * y
-            D[:, 1, 0] = 2 * x * y * dradial + 2 * p1 * x + 2 * p2 * y
-            D[:, 1, 1] = radial + 2 * y * y * dradial + 6 * p1 * y + 2 * p2 * x
-        else:
-            D[:, 0, 0] = 1.0
-            D[:, 1, 1] = 1.0
-        # d uv / d(xd, yd) @ D
-        KD = np.empty((n, 2, 2))
-        KD[:, 0, :] = fx * D[:, 0, :] + s * D[:, 1, :]
-        KD[:, 1, :] = fy * D[:, 1, :]
-        # d(x, y) / d camera_p
-        J = np.empty((n, 2, 3))
-        J[:, :, 0] = KD[:, :, 0] * inv_z[:, None]
-        J[:, :, 1] = KD[:, :, 1] * inv_z[:, None]
-        J[:, :, 2] = -(KD[:, :, 0] * (x * inv_z)[:, None] + KD[:, :, 1] * (y * inv_z)[:, None])
-        return uv, J
+        return project_pinhole(camera_p, self.K[0, 0], self.K[1, 1], self.K[0, 1], self.K[0, 2], self.K[1, 2],
+                               self.dist if self.has_distortion else None, jacobian)
 
     def undistort_pixels(self, uv: np.ndarray) -> np.ndarray:
         """Returns normalised image coordinates ``(x, y)`` (z = 1) of pixels (N, 2)."""
@@ -306,6 +270,60 @@ class Camera:
         fs.write("distortion_coefficients", np.asarray(self.dist).reshape(1, -1))
         fs.write("world_T_camera", np.asarray(self.world_T_camera))
         fs.release()
+
+
+def project_pinhole(camera_p, fx, fy, skew, cx, cy, dist=None, jacobian: bool = True):
+    """Pinhole projection with OpenCV distortion, and its Jacobian; parameters broadcast per point.
+
+    ``x = X / Z, y = Y / Z``; ``r2 = x^2 + y^2``;
+    ``xd = x (1 + k1 r2 + k2 r2^2 + k3 r2^3) + 2 p1 x y + p2 (r2 + 2 x^2)``,
+    ``yd = y (1 + ...) + p1 (r2 + 2 y^2) + 2 p2 x y``; ``u = fx xd + skew yd + cx``, ``v = fy yd + cy``.
+
+    Args:
+        camera_p: (N, 3) points in the camera frame, metres (z > 0).
+        fx, fy, skew, cx, cy: intrinsics, scalars or (N,) arrays (pixels).
+        dist: None, or ``[k1, k2, p1, p2, k3]`` as (5,) or (N, 5).
+        jacobian: whether to return ``d uv / d camera_p``.
+
+    Returns:
+        uv (N, 2) pixels and J (N, 2, 3) pixels per metre (None when not asked).
+    """
+    X, Y, Z = camera_p[:, 0], camera_p[:, 1], camera_p[:, 2]
+    inv_z = 1.0 / Z
+    x, y = X * inv_z, Y * inv_z
+    if dist is not None:
+        d = np.asarray(dist)
+        k1, k2, p1, p2, k3 = (d[..., i] for i in range(5))
+        r2 = x * x + y * y
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    else:
+        xd, yd = x, y
+    uv = np.stack([fx * xd + skew * yd + cx, fy * yd + cy], axis=1)
+    if not jacobian:
+        return uv, None
+    n = len(camera_p)
+    if dist is not None:
+        dradial = k1 + r2 * (2 * k2 + 3 * k3 * r2)  # d radial / d r2
+        d00 = radial + 2 * x * x * dradial + 2 * p1 * y + 6 * p2 * x
+        d01 = 2 * x * y * dradial + 2 * p1 * x + 2 * p2 * y
+        d11 = radial + 2 * y * y * dradial + 6 * p1 * y + 2 * p2 * x
+    else:
+        d00, d01, d11 = 1.0, 0.0, 1.0
+    # d uv / d(x, y) = [[fx, skew], [0, fy]] @ [[d00, d01], [d01, d11]]
+    a00 = fx * d00 + skew * d01
+    a01 = fx * d01 + skew * d11
+    a10 = fy * d01
+    a11 = fy * d11
+    J = np.empty((n, 2, 3))
+    J[:, 0, 0] = a00 * inv_z
+    J[:, 0, 1] = a01 * inv_z
+    J[:, 0, 2] = -(a00 * x + a01 * y) * inv_z
+    J[:, 1, 0] = a10 * inv_z
+    J[:, 1, 1] = a11 * inv_z
+    J[:, 1, 2] = -(a10 * x + a11 * y) * inv_z
+    return uv, J
 
 
 def _check_K(K) -> np.ndarray:

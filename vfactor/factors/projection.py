@@ -24,7 +24,7 @@ from functools import partial
 import gtsam
 import numpy as np
 
-from vfactor.camera import Camera
+from vfactor.camera import Camera, project_pinhole
 from vfactor.factors.robust import RobustLoss
 
 __all__ = ["KeypointObservations", "projection_factor", "project_keypoints", "whitened_residuals"]
@@ -55,6 +55,14 @@ class KeypointObservations:
         n = len(self.camera_index)
         if not (len(self.keypoint_index) == len(self.uv) == len(self.sqrt_information) == n):
             raise ValueError("KeypointObservations: camera_index, keypoint_index, uv and sqrt_information differ in length")
+        # per-observation camera parameters, so that projection is one vectorised pass
+        cams = [self.cameras[c] for c in self.camera_index]
+        K = np.array([c.K for c in cams]).reshape(n, 3, 3)
+        object.__setattr__(self, "_R_cw", np.array([c.camera_T_world[:3, :3] for c in cams]).reshape(n, 3, 3))
+        object.__setattr__(self, "_t_cw", np.array([c.camera_T_world[:3, 3] for c in cams]).reshape(n, 3))
+        object.__setattr__(self, "_intrinsics", (K[:, 0, 0], K[:, 1, 1], K[:, 0, 1], K[:, 0, 2], K[:, 1, 2]))
+        distorted = any(c.has_distortion for c in self.cameras)
+        object.__setattr__(self, "_dist", np.array([c.dist for c in cams]).reshape(n, 5) if distorted else None)
 
     def __len__(self):
         return len(self.camera_index)
@@ -84,27 +92,14 @@ def project_keypoints(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, v
     R, t = T[:3, :3], T[:3, 3]
     body = vehicle_p[obs.keypoint_index]
     world = body @ R.T + t
-    n = len(obs)
-    uv = np.empty((n, 2))
-    depth = np.empty(n)
-    J_cam = np.empty((n, 2, 3)) if jacobians else None
-    R_cw_all = np.empty((n, 3, 3)) if jacobians else None
-    for c, camera in enumerate(obs.cameras):
-        rows = obs.camera_index == c
-        if not rows.any():
-            continue
-        cam_p = camera.to_camera(world[rows])
-        depth[rows] = cam_p[:, 2]
-        cam_p[:, 2] = np.maximum(cam_p[:, 2], _MIN_DEPTH)
-        uv_c, J_c = camera.project_camera_points(cam_p, jacobian=jacobians)
-        uv[rows] = uv_c
-        if jacobians:
-            J_cam[rows] = J_c
-            R_cw_all[rows] = camera.camera_T_world[:3, :3]
+    cam_p = np.einsum("nij,nj->ni", obs._R_cw, world) + obs._t_cw
+    depth = cam_p[:, 2].copy()
+    cam_p[:, 2] = np.maximum(depth, _MIN_DEPTH)
+    uv, J_cam = project_pinhole(cam_p, *obs._intrinsics, obs._dist, jacobians)
     if not jacobians:
         return uv, depth, None, None
-    J_point = J_cam @ R_cw_all @ R  # (n, 2, 3)
-    J_pose = np.empty((n, 2, 6))
+    J_point = J_cam @ obs._R_cw @ R  # (n, 2, 3)
+    J_pose = np.empty((len(obs), 2, 6))
     # d(R p + t)/d xi = [-R [p]x, R]  =>  rows a^T (-R[p]x) = (p x (R^T a))^T with a^T R = J_point rows
     J_pose[:, :, :3] = np.cross(body[:, None, :], J_point)
     J_pose[:, :, 3:] = J_point

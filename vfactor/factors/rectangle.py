@@ -13,7 +13,7 @@ from functools import partial
 import numpy as np
 
 from vfactor.factors.shape_terms import ShapeTerm, cnorm
-from vfactor.keypoints import LAYERS
+from vfactor.keypoints import LAYER_NAMES, LAYERS
 
 __all__ = ["rectangle_term"]
 
@@ -27,4 +27,4 @@ def _residual(layer, sigma, points):
 
 def rectangle_term(layer: str = "wheel", sigma: float = 0.02) -> ShapeTerm:
     """The rectangle residual of one layer (4 rows)."""
-    return ShapeTerm("rectangle", partial(_residual, layer, sigma), 4)
+    return ShapeTerm("rectangle", partial(_residual, layer, sigma), 4, np.full(4, LAYER_NAMES.index(layer)))

@@ -7,9 +7,12 @@ several terms into a single ``gtsam.CustomFactor`` on ``[wheel, light, roof]``;
 the graph builder fuses all HWC terms of a vehicle into one factor, one Python
 call per linearisation.
 
-Jacobians come from the complex step: ``J = Im(r(x + i h e_k)) / h`` for all 36
-directions at once (one batched evaluation, exact to machine precision, no
-cancellation), so residuals must be written with complex-safe operations:
+Jacobians are analytic where a term gives them (the hinge terms), else they
+come from the complex step: ``J = Im(r(x + i h e_k)) / h``, exact to machine
+precision with no cancellation, for all directions in one batched evaluation.
+A term whose every row depends on a single layer (``row_layers``) needs only 12
+probes, each moving the same coordinate of all three layers at once. Residuals
+differentiated this way must be written with complex-safe operations:
 ``sqrt(sum(v * v))`` for norms, branches on ``.real`` (see docs/factors.md).
 """
 
@@ -22,9 +25,10 @@ from typing import Callable
 import gtsam
 import numpy as np
 
-__all__ = ["ShapeTerm", "shape_terms_factor", "evaluate_terms", "cnorm", "hinge"]
+__all__ = ["ShapeTerm", "shape_terms_factor", "evaluate_terms", "cnorm", "cross", "hinge"]
 
 _STEP = 1e-30
+_SHARED_PROBES = np.tile(np.eye(12), (1, 3))  # probe k moves coordinate k of every layer
 
 
 @dataclass(frozen=True)
@@ -35,16 +39,43 @@ class ShapeTerm:
         name: what it constrains (reported by diagnostics).
         residual: maps points (..., 12, 3) (real or complex) to (..., size).
         size: number of residual rows.
+        row_layers: optional (size,) layer index (0 wheel, 1 light, 2 roof) of
+            each row, when each row depends on that layer's points only.
+        jacobian: optional analytic Jacobian, points (12, 3) -> (size, 36).
     """
 
     name: str
     residual: Callable[[np.ndarray], np.ndarray]
     size: int
+    row_layers: np.ndarray | None = None
+    jacobian: Callable[[np.ndarray], np.ndarray] | None = None
+
+    def jacobian_at(self, x: np.ndarray) -> np.ndarray:
+        """(size, 36) Jacobian of the residual at the flattened points ``x`` (36,)."""
+        if self.jacobian is not None:
+            return self.jacobian(x.reshape(12, 3))
+        if self.row_layers is None:
+            r = self.residual((x + 1j * _STEP * np.eye(36)).reshape(36, 12, 3))
+            return r.imag.T / _STEP
+        r = self.residual((x + 1j * _STEP * _SHARED_PROBES).reshape(12, 12, 3))
+        local = r.imag.T / _STEP  # (size, 12): d row / d (its own layer's coordinates)
+        J = np.zeros((self.size, 36))
+        for layer in range(3):
+            rows = self.row_layers == layer
+            J[rows, 12 * layer : 12 * layer + 12] = local[rows]
+        return J
 
 
 def cnorm(v: np.ndarray, axis: int = -1) -> np.ndarray:
     """Euclidean norm that is complex-step safe (no conjugation)."""
     return np.sqrt(np.sum(v * v, axis=axis))
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis (a few times faster than ``np.cross`` on small arrays)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def hinge(q: np.ndarray, lo, hi) -> np.ndarray:
@@ -61,14 +92,12 @@ def evaluate_terms(terms, points: np.ndarray) -> np.ndarray:
 def _error(terms, this: gtsam.CustomFactor, values: gtsam.Values, H):
     keys = this.keys()
     x = np.concatenate([values.atVector(k) for k in keys])
-    if H is None:
-        return evaluate_terms(terms, x.reshape(12, 3))
-    probes = x + 1j * _STEP * np.eye(36)  # (36, 36): one complex direction per row
-    r = evaluate_terms(terms, probes.reshape(36, 12, 3))
-    J = r.imag.T / _STEP  # (m, 36)
-    for j in range(3):
-        H[j] = np.ascontiguousarray(J[:, 12 * j : 12 * j + 12])
-    return r[0].real
+    r = evaluate_terms(terms, x.reshape(12, 3))
+    if H is not None:
+        J = np.concatenate([t.jacobian_at(x) for t in terms], axis=0)  # (m, 36)
+        for j in range(3):
+            H[j] = np.ascontiguousarray(J[:, 12 * j : 12 * j + 12])
+    return r
 
 
 def shape_terms_factor(layer_keys, terms) -> gtsam.CustomFactor:

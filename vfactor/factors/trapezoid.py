@@ -14,24 +14,27 @@ from functools import partial
 
 import numpy as np
 
-from vfactor.factors.shape_terms import ShapeTerm, cnorm, hinge
-from vfactor.keypoints import LAYERS
+from vfactor.factors.shape_terms import ShapeTerm, cnorm, cross, hinge
+from vfactor.keypoints import LAYER_NAMES, LAYERS
 
 __all__ = ["trapezoid_term"]
 
 
-def _residual(ranges, sigma_rad, sigma_ratio, points):
-    out = []
-    for name, (lo, hi) in ranges:
-        lf, rf, lb, rb = (points[..., i, :] for i in LAYERS[name])
-        f, b = lf - rf, lb - rb
-        nf, nb = cnorm(f), cnorm(b)
-        out.append(np.cross(f / nf[..., None], b / nb[..., None]) / sigma_rad)
-        out.append((hinge(nf / nb, lo, hi) / sigma_ratio)[..., None])
-    return np.concatenate(out, axis=-1)
+def _residual(indices, lo, hi, sigma_rad, sigma_ratio, points):
+    quads = points[..., indices, :]  # (..., layers, 4, 3)
+    f = quads[..., 0, :] - quads[..., 1, :]
+    b = quads[..., 2, :] - quads[..., 3, :]
+    nf, nb = cnorm(f), cnorm(b)
+    parallel = cross(f / nf[..., None], b / nb[..., None]) / sigma_rad  # (..., layers, 3)
+    ratio = hinge(nf / nb, lo, hi)[..., None] / sigma_ratio  # (..., layers, 1)
+    return np.concatenate([parallel, ratio], axis=-1).reshape(*points.shape[:-2], -1)
 
 
 def trapezoid_term(width_ratio: dict, sigma_rad: float = 0.05, sigma_ratio: float = 0.02) -> ShapeTerm:
     """Trapezoid residuals for each layer in ``width_ratio`` (layer -> (min, max) of front/back width)."""
-    ranges = tuple((name, (float(lo), float(hi))) for name, (lo, hi) in width_ratio.items())
-    return ShapeTerm("trapezoid", partial(_residual, ranges, sigma_rad, sigma_ratio), 4 * len(ranges))
+    names = list(width_ratio)
+    indices = np.array([LAYERS[name] for name in names])
+    lo = np.array([width_ratio[name][0] for name in names], float)
+    hi = np.array([width_ratio[name][1] for name in names], float)
+    row_layers = np.repeat([LAYER_NAMES.index(name) for name in names], 4)
+    return ShapeTerm("trapezoid", partial(_residual, indices, lo, hi, sigma_rad, sigma_ratio), 4 * len(names), row_layers)

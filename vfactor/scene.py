@@ -1,0 +1,850 @@
+"""Scene files (input) and result files (output): load, validate, save.
+
+The formats are fixed by ``DESIGN.md``. Every field of a scene or result file
+is validated on load; any problem raises :class:`~vfactor.errors.SceneError`
+whose ``field`` is the full path of the offending field (for example
+``frames[3].detections[0].keypoints[5]`` or ``cameras[1].K``) and whose message
+says what was expected and what was found. Unknown keys are errors too, so a
+misspelt optional field is never silently ignored.
+
+Scene file, in short (units: pixels for image quantities, metres and seconds
+otherwise)::
+
+    {"cameras": [{"name", "K", "world_T_camera", "dist"?, "image_size"?}, ...],
+     "frames": [{"t", "detections": [detection, ...], "images"?: {camera: path}}, ...]}
+
+    detection = {"camera", "vehicle"?, "keypoints"?: 12 x [u, v, confidence],
+                 "keypoint_covariances"?: 12 x (null | 2x2), "heatmaps"?: "x.npy",
+                 "roi"?: [x0, y0, x1, y1]}
+
+``keypoint_covariances`` is a vfactor extension: per keypoint a symmetric
+positive-definite 2x2 pixel covariance (px^2), or null where unknown. Optional
+fields may also be given as null, which means "absent".
+
+Paths (``heatmaps``, ``images``) are relative to the scene file's folder (or to
+``base_dir``); in memory they are held as absolute paths, and written back
+relative to the folder of the file being saved.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import gtsam
+import numpy as np
+
+from vfactor.camera import Camera, check_rigid_transform
+from vfactor.errors import CalibrationError, SceneError
+from vfactor.heatmaps import decode_heatmaps
+from vfactor.keypoints import NUM_KEYPOINTS
+from vfactor.observations import DEFAULT_VEHICLE_ID, Detection, Frame, Scene
+from vfactor.result import FrameResult, Status, VehicleResult
+from vfactor.wireframe import Wireframe
+
+__all__ = [
+    "load_scene",
+    "scene_from_dict",
+    "save_scene",
+    "scene_to_dict",
+    "load_results",
+    "results_from_dict",
+    "save_results",
+    "results_to_dict",
+]
+
+_TOP_KEYS = ("cameras", "frames")
+_CAMERA_KEYS = ("name", "K", "dist", "image_size", "world_T_camera")
+_FRAME_KEYS = ("t", "detections", "images")
+_DETECTION_KEYS = ("camera", "vehicle", "keypoints", "keypoint_covariances", "heatmaps", "roi")
+_RESULT_TOP_KEYS = ("frames",)
+_RESULT_FRAME_KEYS = ("t", "vehicles")
+_VEHICLE_KEYS = (
+    "id",
+    "world_T_vehicle",
+    "keypoints_world",
+    "keypoints_vehicle",
+    "pose_covariance",
+    "status",
+    "iterations",
+    "final_error",
+    "message",
+    "keypoint_covariances_world",
+)
+_OK_STATUSES = (Status.CONVERGED, Status.MAX_ITERATIONS)
+#: Relative tolerance of the symmetry checks of covariance matrices.
+_SYMMETRY_RTOL = 1e-9
+#: keypoints_world must match world_T_vehicle * keypoints_vehicle to within this (metres).
+_KEYPOINTS_WORLD_TOL = 1e-6
+
+
+# ====================================================================== scenes
+def load_scene(path: str | os.PathLike) -> Scene:
+    """Loads and validates a scene file (JSON, see ``DESIGN.md``).
+
+    Relative paths in the file (``heatmaps``, ``images``) are resolved against
+    the file's folder, which becomes ``Scene.base_dir``. See
+    :func:`scene_from_dict` for what is checked and how heatmap detections are
+    decoded.
+
+    Args:
+        path: the scene file.
+
+    Returns:
+        The :class:`~vfactor.observations.Scene`, with cameras and frames in file order.
+
+    Raises:
+        SceneError: the file is missing (field: the path), is not JSON (field:
+            the path), or any field is invalid (field: its path in the file,
+            e.g. ``frames[3].detections[0].keypoints[5]``).
+    """
+    path = Path(path)
+    data = _read_json(path)
+    return scene_from_dict(data, base_dir=Path(os.path.abspath(path)).parent)
+
+
+def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
+    """Validates a parsed scene file and builds a :class:`~vfactor.observations.Scene`.
+
+    Checks, among others: the top level is an object with ``cameras`` (a
+    non-empty list) and ``frames`` (a list); no unknown keys anywhere; camera
+    names unique and every camera valid (``K``, ``world_T_camera``, ``dist`` of
+    4 or 5 numbers, ``image_size``); each detection's camera exists; a
+    detection has ``keypoints`` (exactly 12 rows ``[u, v, confidence]``,
+    confidence in [0, 1], ``u`` and ``v`` finite where confidence > 0 and null
+    or finite where it is 0) or ``heatmaps`` with ``roi``; ``roi`` is
+    ``[x0, y0, x1, y1]`` with ``x1 > x0`` and ``y1 > y0``; a heatmap file exists
+    and holds a float ``.npy`` array of shape (12, H, W); no NaN or infinity
+    anywhere; ``vehicle`` is omitted by all detections of a frame (which then
+    hold one vehicle, :data:`~vfactor.observations.DEFAULT_VEHICLE_ID`) or by
+    none; a (camera, vehicle) pair appears once per frame; ``images`` maps
+    existing cameras to existing files. Frames need not be in time order.
+
+    Heatmaps: a detection with ``heatmaps`` and ``roi`` but no ``keypoints``
+    keeps its ``heatmaps`` (absolute path) and ``roi``, and gets ``keypoints``,
+    ``confidence`` and ``covariance`` by decoding the heatmaps with
+    :func:`vfactor.heatmaps.decode_heatmaps` (default settings), so the
+    solvers can use it directly. When ``keypoints`` are given as well, they are
+    used as given, and the covariance comes from ``keypoint_covariances`` if
+    given, else from the heatmaps' spread.
+
+    Args:
+        data: the parsed JSON (``json.load``) of a scene file.
+        base_dir: folder that relative paths start from; ``None``: the current
+            working directory.
+
+    Returns:
+        The scene; ``Scene.frames`` in the order of ``data["frames"]``.
+
+    Raises:
+        SceneError: an invalid field; ``field`` is its path (e.g.
+            ``cameras[1].K``), the message says what was expected and found.
+    """
+    base = Path(os.path.abspath(base_dir if base_dir is not None else os.getcwd()))
+    top = _object(data, "", _TOP_KEYS, required=_TOP_KEYS)
+    cameras_data = _list(top["cameras"], "cameras", "a non-empty list of cameras")
+    if not cameras_data:
+        raise SceneError("cameras", "expected a non-empty list of cameras, got an empty list")
+    cameras: dict[str, Camera] = {}
+    where: dict[str, int] = {}
+    for i, item in enumerate(cameras_data):
+        camera = _camera_from_dict(item, f"cameras[{i}]")
+        if camera.name in cameras:
+            raise SceneError(
+                f"cameras[{i}].name", f"duplicate camera name {camera.name!r} (also cameras[{where[camera.name]}])"
+            )
+        cameras[camera.name] = camera
+        where[camera.name] = i
+    frames = [
+        _frame_from_dict(item, f"frames[{i}]", cameras, base) for i, item in enumerate(_list(top["frames"], "frames"))
+    ]
+    return Scene(cameras=cameras, frames=frames, base_dir=base)
+
+
+def save_scene(scene: Scene, path: str | os.PathLike) -> None:
+    """Writes a scene file (JSON) that :func:`load_scene` reads back to the same content.
+
+    Paths of heatmaps and images are written relative to the file's folder.
+    See :func:`scene_to_dict` for the layout.
+
+    Raises:
+        SceneError: the scene holds a value a scene file cannot (e.g. a seen
+            keypoint with NaN pixels).
+    """
+    path = Path(path)
+    data = scene_to_dict(scene, base_dir=Path(os.path.abspath(path)).parent)
+    _write_json(path, data)
+
+
+def scene_to_dict(scene: Scene, base_dir: Path | None = None) -> dict:
+    """The scene as a scene-file dictionary (see ``DESIGN.md``), JSON-serialisable.
+
+    Keypoints with confidence 0 are written ``[null, null, 0]``; every detection
+    names its vehicle; ``keypoint_covariances`` is written when a detection
+    has a covariance (null for NaN blocks). A detection decoded from heatmaps
+    is written with its decoded keypoints as well as its ``heatmaps`` and ``roi``.
+
+    Args:
+        scene: the scene.
+        base_dir: folder that written paths are relative to; ``None``:
+            ``scene.base_dir`` (or paths as held when that is ``None`` too).
+            In-memory relative paths are taken relative to ``scene.base_dir``.
+
+    Raises:
+        SceneError: a value that a scene file cannot hold; ``field`` is the
+            path it would have in the file.
+    """
+    out_base = base_dir if base_dir is not None else scene.base_dir
+    cameras = [camera.to_dict() for camera in scene.cameras.values()]
+    frames = []
+    for i, frame in enumerate(scene.frames):
+        path = f"frames[{i}]"
+        t = float(frame.t)
+        if not math.isfinite(t):
+            raise SceneError(f"{path}.t", f"expected a finite number of seconds, got {t}")
+        entry: dict[str, Any] = {"t": t, "detections": []}
+        for j, det in enumerate(frame.detections):
+            entry["detections"].append(_detection_to_dict(det, f"{path}.detections[{j}]", scene.base_dir, out_base))
+        if frame.images is not None:
+            entry["images"] = {name: _path_out(p, scene.base_dir, out_base) for name, p in frame.images.items()}
+        frames.append(entry)
+    return {"cameras": cameras, "frames": frames}
+
+
+def _camera_from_dict(data, path: str) -> Camera:
+    cam = _object(data, path, _CAMERA_KEYS, required=("name", "K", "world_T_camera"))
+    name = _string(cam["name"], f"{path}.name")
+    K = _matrix(cam["K"], f"{path}.K", (3, 3))
+    world_T_camera = _matrix(cam["world_T_camera"], f"{path}.world_T_camera", (4, 4))
+    dist = cam.get("dist")
+    if dist is not None:
+        dist = _numbers(dist, f"{path}.dist", "4 or 5 numbers [k1, k2, p1, p2(, k3)]", sizes=(4, 5))
+    image_size = cam.get("image_size")
+    if image_size is not None:
+        if (
+            not isinstance(image_size, (list, tuple))
+            or len(image_size) != 2
+            or not all(_is_int(s) and s > 0 for s in image_size)
+        ):
+            raise SceneError(
+                f"{path}.image_size", f"expected [width, height], two positive integers, got {_kind(image_size)}"
+            )
+        image_size = (int(image_size[0]), int(image_size[1]))
+    try:
+        return Camera(name=name, K=K, world_T_camera=world_T_camera, dist=dist, image_size=image_size)
+    except CalibrationError as exc:
+        err = exc.within(path)
+        raise SceneError(err.field, err.problem) from None
+
+
+def _frame_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) -> Frame:
+    frame = _object(data, path, _FRAME_KEYS, required=("t", "detections"))
+    t = _number(frame["t"], f"{path}.t", "a finite number of seconds")
+    items = _list(frame["detections"], f"{path}.detections")
+    parsed = [_detection_from_dict(item, f"{path}.detections[{j}]", cameras, base) for j, item in enumerate(items)]
+    named = [has_vehicle for _, has_vehicle in parsed]
+    if any(named) and not all(named):
+        j = named.index(False)
+        raise SceneError(
+            f"{path}.detections[{j}].vehicle",
+            "missing: other detections of this frame name their vehicle; 'vehicle' may be omitted only "
+            "when no detection of the frame names one (a frame of a single vehicle)",
+        )
+    seen: dict[tuple[str, str], int] = {}
+    for j, (det, has_vehicle) in enumerate(parsed):
+        key = (det.camera, det.vehicle)
+        if key in seen:
+            hint = "" if has_vehicle else "; a frame with several vehicles must name them with 'vehicle'"
+            raise SceneError(
+                f"{path}.detections[{j}]",
+                f"camera {det.camera!r} already has a detection of vehicle {det.vehicle!r} in this frame "
+                f"(detections[{seen[key]}]){hint}",
+            )
+        seen[key] = j
+    images = frame.get("images")
+    if images is not None:
+        images = _images_from_dict(images, f"{path}.images", cameras, base)
+    return Frame(t=t, detections=[det for det, _ in parsed], images=images)
+
+
+def _images_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) -> dict[str, str]:
+    if not isinstance(data, dict):
+        raise SceneError(path, f"expected an object mapping camera names to image paths, got {_kind(data)}")
+    images = {}
+    for name, value in data.items():
+        field = f"{path}.{name}"
+        if name not in cameras:
+            raise SceneError(field, f"unknown camera {name!r}; known: {', '.join(cameras)}")
+        images[name] = _existing_file(value, field, base, "an image path")
+    return images
+
+
+def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) -> tuple[Detection, bool]:
+    det = _object(data, path, _DETECTION_KEYS, required=("camera",))
+    camera = _string(det["camera"], f"{path}.camera")
+    if camera not in cameras:
+        raise SceneError(f"{path}.camera", f"unknown camera {camera!r}; known: {', '.join(cameras)}")
+    has_vehicle = det.get("vehicle") is not None
+    vehicle = _string(det["vehicle"], f"{path}.vehicle") if has_vehicle else DEFAULT_VEHICLE_ID
+
+    roi = det.get("roi")
+    if roi is not None:
+        box = _numbers(roi, f"{path}.roi", "[x0, y0, x1, y1]", sizes=(4,))
+        if not (box[2] > box[0] and box[3] > box[1]):
+            raise SceneError(f"{path}.roi", f"expected [x0, y0, x1, y1] with x1 > x0 and y1 > y0, got {box.tolist()}")
+        roi = tuple(float(b) for b in box)
+
+    heatmaps = det.get("heatmaps")
+    if heatmaps is not None:
+        heatmaps = _existing_file(heatmaps, f"{path}.heatmaps", base, "a path to a .npy heatmap stack")
+        if roi is None:
+            raise SceneError(f"{path}.roi", "missing: required with 'heatmaps' (the box [x0, y0, x1, y1] they cover)")
+        stack = _load_heatmaps(heatmaps, f"{path}.heatmaps")
+
+    covariance = None
+    if det.get("keypoint_covariances") is not None:
+        covariance = _keypoint_covariances(det["keypoint_covariances"], f"{path}.keypoint_covariances")
+
+    if det.get("keypoints") is not None:
+        keypoints, confidence = _keypoints(det["keypoints"], f"{path}.keypoints")
+        if covariance is None and heatmaps is not None:
+            covariance = _decode(stack, roi, f"{path}.heatmaps").covariance
+    elif heatmaps is not None:
+        decoded = _decode(stack, roi, f"{path}.heatmaps")
+        keypoints, confidence = decoded.uv, decoded.confidence
+        if covariance is None:
+            covariance = decoded.covariance
+    else:
+        raise SceneError(path, "expected 'keypoints', or 'heatmaps' with 'roi'; found neither")
+    detection = Detection(
+        camera=camera,
+        vehicle=vehicle,
+        keypoints=keypoints,
+        confidence=confidence,
+        covariance=covariance,
+        heatmaps=heatmaps,
+        roi=roi,
+    )
+    return detection, has_vehicle
+
+
+def _keypoints(data, path: str) -> tuple[np.ndarray, np.ndarray]:
+    rows = _list(data, path, f"a list of {NUM_KEYPOINTS} rows [u, v, confidence]")
+    if len(rows) != NUM_KEYPOINTS:
+        raise SceneError(
+            path,
+            f"expected {NUM_KEYPOINTS} rows [u, v, confidence] (one per keypoint, fixed order), got {len(rows)} rows",
+        )
+    uv = np.full((NUM_KEYPOINTS, 2), np.nan)
+    confidence = np.zeros(NUM_KEYPOINTS)
+    for k, row in enumerate(rows):
+        field = f"{path}[{k}]"
+        if not isinstance(row, (list, tuple)) or len(row) != 3:
+            raise SceneError(field, f"expected [u, v, confidence], got {_kind(row)}")
+        c = row[2]
+        if not _is_number(c) or not 0.0 <= float(c) <= 1.0:
+            raise SceneError(field, f"confidence: expected a number in [0, 1], got {_kind(c)}")
+        c = float(c)
+        for name, value in zip("uv", row[:2], strict=True):
+            if c > 0 and not (_is_number(value) and math.isfinite(value)):
+                raise SceneError(
+                    field, f"{name}: expected a finite number (pixels) as confidence is {c:g} > 0, got {_kind(value)}"
+                )
+            if c == 0 and value is not None and not (_is_number(value) and math.isfinite(value)):
+                raise SceneError(field, f"{name}: expected a finite number or null, got {_kind(value)}")
+        confidence[k] = c
+        if c > 0:
+            uv[k] = (float(row[0]), float(row[1]))
+    return uv, confidence
+
+
+def _keypoint_covariances(data, path: str) -> np.ndarray:
+    items = _list(data, path, f"a list of {NUM_KEYPOINTS} entries (null or a 2x2 matrix, px^2)")
+    if len(items) != NUM_KEYPOINTS:
+        raise SceneError(path, f"expected {NUM_KEYPOINTS} entries (null or a 2x2 matrix, px^2), got {len(items)}")
+    out = np.full((NUM_KEYPOINTS, 2, 2), np.nan)
+    for k, item in enumerate(items):
+        if item is None:
+            continue
+        field = f"{path}[{k}]"
+        S = _matrix(item, field, (2, 2), "a 2x2 covariance matrix (px^2) or null")
+        if abs(S[0, 1] - S[1, 0]) > _SYMMETRY_RTOL * np.abs(S).max():
+            raise SceneError(field, f"expected a symmetric matrix, got {S.tolist()}")
+        if not (S[0, 0] > 0 and np.linalg.det(S) > 0):
+            raise SceneError(field, f"expected a positive-definite matrix, got {S.tolist()}")
+        out[k] = S
+    return out
+
+
+def _load_heatmaps(path_str: str, field: str) -> np.ndarray:
+    try:
+        stack = np.load(path_str, mmap_mode="r", allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise SceneError(field, f"expected a .npy file, could not read {path_str}: {exc}") from None
+    if not isinstance(stack, np.ndarray):
+        if hasattr(stack, "close"):
+            stack.close()
+        raise SceneError(field, f"expected a .npy array, got a {type(stack).__name__} in {path_str}")
+    if stack.ndim != 3 or stack.shape[0] != NUM_KEYPOINTS or stack.shape[1] < 1 or stack.shape[2] < 1:
+        raise SceneError(field, f"expected an array of shape ({NUM_KEYPOINTS}, H, W), got {stack.shape} in {path_str}")
+    if not np.issubdtype(stack.dtype, np.floating):
+        raise SceneError(field, f"expected a float array, got dtype {stack.dtype} in {path_str}")
+    return stack
+
+
+def _decode(stack: np.ndarray, roi, field: str):
+    try:
+        return decode_heatmaps(np.asarray(stack), roi=roi)
+    except ValueError as exc:
+        raise SceneError(field, str(exc)) from None
+
+
+def _detection_to_dict(det: Detection, path: str, scene_base: Path | None, out_base: Path | None) -> dict:
+    keypoints = np.asarray(det.keypoints, dtype=float)
+    confidence = np.asarray(det.confidence, dtype=float)
+    if keypoints.shape != (NUM_KEYPOINTS, 2) or confidence.shape != (NUM_KEYPOINTS,):
+        raise SceneError(
+            f"{path}.keypoints",
+            f"expected keypoints (12, 2) and confidence (12,), got {keypoints.shape} and {confidence.shape}",
+        )
+    rows = []
+    for k in range(NUM_KEYPOINTS):
+        c = float(confidence[k])
+        if not 0.0 <= c <= 1.0:
+            raise SceneError(f"{path}.keypoints[{k}]", f"confidence: expected a number in [0, 1], got {c}")
+        if c == 0:
+            rows.append([None, None, 0])
+            continue
+        u, v = float(keypoints[k, 0]), float(keypoints[k, 1])
+        if not (math.isfinite(u) and math.isfinite(v)):
+            raise SceneError(
+                f"{path}.keypoints[{k}]", f"expected finite u, v as confidence is {c:g} > 0, got [{u}, {v}]"
+            )
+        rows.append([u, v, c])
+    out: dict[str, Any] = {"camera": det.camera, "vehicle": det.vehicle, "keypoints": rows}
+    if det.covariance is not None:
+        cov = np.asarray(det.covariance, dtype=float)
+        if cov.shape != (NUM_KEYPOINTS, 2, 2):
+            raise SceneError(f"{path}.keypoint_covariances", f"expected shape (12, 2, 2), got {cov.shape}")
+        blocks = [S.tolist() if np.all(np.isfinite(S)) else None for S in cov]
+        if any(b is not None for b in blocks):
+            out["keypoint_covariances"] = blocks
+    if det.heatmaps is not None:
+        out["heatmaps"] = _path_out(det.heatmaps, scene_base, out_base)
+    if det.roi is not None:
+        out["roi"] = [float(b) for b in det.roi]
+    return out
+
+
+# ===================================================================== results
+def save_results(path: str | os.PathLike, frames: list[FrameResult]) -> None:
+    """Writes a result file (JSON, see ``DESIGN.md`` and :func:`results_to_dict`).
+
+    Raises:
+        SceneError: a result that the file cannot hold (e.g. a converged
+            vehicle without a pose); ``field`` is its path in the file.
+    """
+    _write_json(Path(path), results_to_dict(frames))
+
+
+def results_to_dict(frames: list[FrameResult]) -> dict:
+    """The results as a result-file dictionary, JSON-serialisable.
+
+    Each vehicle entry holds, in this order: ``id``; ``world_T_vehicle`` (4x4,
+    body -> world, metres); ``keypoints_world`` and ``keypoints_vehicle``
+    (12x3, metres); ``pose_covariance`` (6x6, GTSAM tangent order: rotation
+    (rad) then translation (m), body frame; null when not computed); ``status``
+    (the :class:`~vfactor.result.Status` value); ``iterations``;
+    ``final_error`` (null when NaN); ``message`` (when non-empty); and
+    ``keypoint_covariances_world`` (12x3x3, m^2) when computed. For a
+    ``degenerate`` or ``failed`` vehicle the pose, keypoint and covariance
+    fields are null. A covariance with non-finite entries is written as null.
+
+    Raises:
+        SceneError: a converged / max_iterations vehicle without a pose or wireframe.
+    """
+    out = []
+    for i, frame in enumerate(frames):
+        t = float(frame.t)
+        if not math.isfinite(t):
+            raise SceneError(f"frames[{i}].t", f"expected a finite number of seconds, got {t}")
+        vehicles = [_vehicle_to_dict(v, f"frames[{i}].vehicles[{j}]") for j, v in enumerate(frame.vehicles)]
+        out.append({"t": t, "vehicles": vehicles})
+    return {"frames": out}
+
+
+def load_results(path: str | os.PathLike) -> list[FrameResult]:
+    """Loads and validates a result file written by :func:`save_results`.
+
+    Raises:
+        SceneError: missing file or not JSON (field: the path), or an invalid
+            field (field: its path, e.g. ``frames[0].vehicles[1].status``).
+    """
+    return results_from_dict(_read_json(Path(path)))
+
+
+def results_from_dict(data: dict) -> list[FrameResult]:
+    """Validates a parsed result file and builds the :class:`~vfactor.result.FrameResult` list.
+
+    Checks every field: shapes (4x4 rigid ``world_T_vehicle``, 12x3 keypoints,
+    6x6 symmetric ``pose_covariance``, 12x3x3 ``keypoint_covariances_world``),
+    finite numbers, a known ``status``, null pose/keypoints/covariances for
+    ``degenerate`` and ``failed`` and a pose and keypoints otherwise,
+    ``keypoints_world`` consistent with the pose and ``keypoints_vehicle``,
+    unique vehicle ids per frame, no unknown keys.
+
+    Raises:
+        SceneError: an invalid field, named by its path.
+    """
+    top = _object(data, "", _RESULT_TOP_KEYS, required=_RESULT_TOP_KEYS)
+    frames = []
+    for i, item in enumerate(_list(top["frames"], "frames")):
+        path = f"frames[{i}]"
+        frame = _object(item, path, _RESULT_FRAME_KEYS, required=_RESULT_FRAME_KEYS)
+        t = _number(frame["t"], f"{path}.t", "a finite number of seconds")
+        vehicles = []
+        ids: dict[str, int] = {}
+        for j, entry in enumerate(_list(frame["vehicles"], f"{path}.vehicles")):
+            vehicle = _vehicle_from_dict(entry, f"{path}.vehicles[{j}]")
+            if vehicle.id in ids:
+                raise SceneError(
+                    f"{path}.vehicles[{j}].id",
+                    f"duplicate vehicle id {vehicle.id!r} (also vehicles[{ids[vehicle.id]}])",
+                )
+            ids[vehicle.id] = j
+            vehicles.append(vehicle)
+        frames.append(FrameResult(t=t, vehicles=vehicles))
+    return frames
+
+
+def _vehicle_to_dict(v: VehicleResult, path: str) -> dict:
+    try:
+        status = Status(v.status)
+    except ValueError:
+        raise SceneError(f"{path}.status", f"expected one of {[s.value for s in Status]}, got {v.status!r}") from None
+    ok = status in _OK_STATUSES
+    if ok and (v.world_T_vehicle is None or v.wireframe is None):
+        raise SceneError(f"{path}.world_T_vehicle", f"status {status.value!r} needs a pose and a wireframe, got None")
+    out: dict[str, Any] = {"id": str(v.id)}
+    if ok:
+        out["world_T_vehicle"] = np.asarray(v.world_T_vehicle.matrix(), dtype=float).tolist()
+        out["keypoints_world"] = v.keypoints_world.tolist()
+        out["keypoints_vehicle"] = v.keypoints_vehicle.tolist()
+        out["pose_covariance"] = _finite_or_none(v.pose_covariance, (6, 6), f"{path}.pose_covariance")
+    else:
+        out.update(world_T_vehicle=None, keypoints_world=None, keypoints_vehicle=None, pose_covariance=None)
+    out["status"] = status.value
+    out["iterations"] = int(v.iterations)
+    error = float("nan") if v.final_error is None else float(v.final_error)
+    out["final_error"] = error if math.isfinite(error) else None
+    if v.message:
+        out["message"] = str(v.message)
+    if ok:
+        kp_cov = _finite_or_none(
+            v.keypoint_covariances_world, (NUM_KEYPOINTS, 3, 3), f"{path}.keypoint_covariances_world"
+        )
+        if kp_cov is not None:
+            out["keypoint_covariances_world"] = kp_cov
+    return out
+
+
+def _finite_or_none(value, shape, path):
+    if value is None:
+        return None
+    array = np.asarray(value, dtype=float)
+    if array.shape != shape:
+        raise SceneError(path, f"expected shape {shape}, got {array.shape}")
+    return array.tolist() if np.all(np.isfinite(array)) else None
+
+
+def _vehicle_from_dict(data, path: str) -> VehicleResult:
+    entry = _object(data, path, _VEHICLE_KEYS, required=("id", "status"))
+    vid = _string(entry["id"], f"{path}.id")
+    status_value = entry["status"]
+    try:
+        status = Status(status_value) if isinstance(status_value, str) else None
+    except ValueError:
+        status = None
+    if status is None:
+        raise SceneError(
+            f"{path}.status", f"expected one of {', '.join(s.value for s in Status)}, got {_kind(status_value)}"
+        )
+    ok = status in _OK_STATUSES
+    fields = (
+        "world_T_vehicle",
+        "keypoints_world",
+        "keypoints_vehicle",
+        "pose_covariance",
+        "keypoint_covariances_world",
+    )
+    if not ok:
+        for name in fields:
+            if entry.get(name) is not None:
+                raise SceneError(
+                    f"{path}.{name}", f"expected null for a {status.value!r} vehicle, got {_kind(entry[name])}"
+                )
+    pose = wireframe = pose_covariance = keypoint_covariances = None
+    if ok:
+        for name in ("world_T_vehicle", "keypoints_vehicle"):
+            if entry.get(name) is None:
+                raise SceneError(f"{path}.{name}", f"missing: required for a {status.value!r} vehicle")
+        T = _matrix(entry["world_T_vehicle"], f"{path}.world_T_vehicle", (4, 4))
+        try:
+            check_rigid_transform(T, f"{path}.world_T_vehicle")
+        except CalibrationError as exc:
+            raise SceneError(exc.field, exc.problem) from None
+        pose = gtsam.Pose3(T)
+        wireframe = Wireframe(_matrix(entry["keypoints_vehicle"], f"{path}.keypoints_vehicle", (NUM_KEYPOINTS, 3)))
+        if entry.get("keypoints_world") is not None:
+            world = _matrix(entry["keypoints_world"], f"{path}.keypoints_world", (NUM_KEYPOINTS, 3))
+            gap = float(np.abs(world - wireframe.in_world(pose)).max())
+            if gap > _KEYPOINTS_WORLD_TOL * max(1.0, float(np.abs(world).max())):
+                raise SceneError(
+                    f"{path}.keypoints_world",
+                    f"expected world_T_vehicle applied to keypoints_vehicle, differs by up to {gap:.3g} m",
+                )
+        if entry.get("pose_covariance") is not None:
+            pose_covariance = _matrix(entry["pose_covariance"], f"{path}.pose_covariance", (6, 6))
+            _check_symmetric(pose_covariance, f"{path}.pose_covariance")
+        if entry.get("keypoint_covariances_world") is not None:
+            field = f"{path}.keypoint_covariances_world"
+            items = _list(entry["keypoint_covariances_world"], field, f"a list of {NUM_KEYPOINTS} 3x3 matrices (m^2)")
+            if len(items) != NUM_KEYPOINTS:
+                raise SceneError(field, f"expected {NUM_KEYPOINTS} 3x3 matrices (m^2), got {len(items)} entries")
+            keypoint_covariances = np.stack([_matrix(S, f"{field}[{k}]", (3, 3)) for k, S in enumerate(items)])
+            for k, S in enumerate(keypoint_covariances):
+                _check_symmetric(S, f"{field}[{k}]")
+    iterations = entry.get("iterations", 0)
+    if not _is_int(iterations) or iterations < 0:
+        raise SceneError(f"{path}.iterations", f"expected a non-negative integer, got {_kind(iterations)}")
+    final_error = entry.get("final_error")
+    final_error = (
+        float("nan") if final_error is None else _number(final_error, f"{path}.final_error", "a finite number or null")
+    )
+    message = entry.get("message", "")
+    if not isinstance(message, str):
+        raise SceneError(f"{path}.message", f"expected a string, got {_kind(message)}")
+    return VehicleResult(
+        id=vid,
+        status=status,
+        world_T_vehicle=pose,
+        wireframe=wireframe,
+        pose_covariance=pose_covariance,
+        keypoint_covariances_world=keypoint_covariances,
+        iterations=int(iterations),
+        final_error=final_error,
+        message=message,
+    )
+
+
+def _check_symmetric(S: np.ndarray, field: str) -> None:
+    if np.abs(S - S.T).max() > _SYMMETRY_RTOL * max(np.abs(S).max(), np.finfo(float).tiny):
+        raise SceneError(field, "expected a symmetric matrix, got an asymmetric one")
+    if np.any(np.diag(S) < 0):
+        raise SceneError(field, f"expected non-negative variances on the diagonal, got {np.diag(S).tolist()}")
+
+
+# ============================================================== JSON helpers
+class _NonFinite:
+    """Stands in for the NaN / Infinity literals Python's json accepts, so that
+    validation reports them at their field."""
+
+    __slots__ = ("text",)
+
+    def __init__(self, text: str):
+        self.text = text
+
+    def __repr__(self):
+        return self.text
+
+
+def _no_duplicate_keys(pairs):
+    out = {}
+    for key, value in pairs:
+        if key in out:
+            raise _DuplicateKey(key)
+        out[key] = value
+    return out
+
+
+class _DuplicateKey(Exception):
+    pass
+
+
+def _read_json(path: Path):
+    where = str(path)
+    if not path.is_file():
+        raise SceneError(where, "file not found" if not path.exists() else "expected a file, got a directory")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(where, f"could not read the file: {exc}") from None
+    try:
+        return json.loads(text, parse_constant=_NonFinite, object_pairs_hook=_no_duplicate_keys)
+    except json.JSONDecodeError as exc:
+        raise SceneError(where, f"not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}") from None
+    except _DuplicateKey as exc:
+        raise SceneError(where, f"not valid: key {exc.args[0]!r} appears twice in one object") from None
+
+
+def _write_json(path: Path, data) -> None:
+    path.write_text(_dumps(data) + "\n", encoding="utf-8")
+
+
+def _depth(value) -> int:
+    if isinstance(value, list):
+        return 1 + max((_depth(v) for v in value), default=0)
+    return 0
+
+
+def _dumps(value, indent: int = 0) -> str:
+    """JSON with one line per matrix row (or per small matrix) and strict finite floats."""
+    pad = "  " * indent
+    if isinstance(value, dict):
+        if not value:
+            return "{}"
+        items = [f"{pad}  {json.dumps(str(k))}: {_dumps(v, indent + 1)}" for k, v in value.items()]
+        return "{\n" + ",\n".join(items) + "\n" + pad + "}"
+    if isinstance(value, list):
+        if not value or _depth(value) == 1 and not any(isinstance(v, dict) for v in value):
+            return json.dumps(value, allow_nan=False)
+        if _depth(value) in (2, 3) and not _has_dict(value):
+            items = [f"{pad}  {json.dumps(v, allow_nan=False)}" for v in value]
+        else:
+            items = [f"{pad}  {_dumps(v, indent + 1)}" for v in value]
+        return "[\n" + ",\n".join(items) + "\n" + pad + "]"
+    return json.dumps(value, allow_nan=False)
+
+
+def _has_dict(value) -> bool:
+    if isinstance(value, dict):
+        return True
+    if isinstance(value, list):
+        return any(_has_dict(v) for v in value)
+    return False
+
+
+# ========================================================= validation helpers
+def _kind(value) -> str:
+    """A short description of a found value for error messages."""
+    if value is None:
+        return "null"
+    if isinstance(value, _NonFinite):
+        return value.text
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        f = float(value)
+        if math.isnan(f):
+            return "NaN"
+        if math.isinf(f):
+            return "Infinity" if f > 0 else "-Infinity"
+        return repr(value.item() if isinstance(value, np.generic) else value)
+    if isinstance(value, str):
+        text = value if len(value) <= 40 else value[:37] + "..."
+        return f"the string {text!r}"
+    if isinstance(value, (list, tuple)):
+        return f"a list of {len(value)}"
+    if isinstance(value, dict):
+        return "an object"
+    return f"a {type(value).__name__}"
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+def _is_int(value) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def _join(path: str, key: str) -> str:
+    return f"{path}.{key}" if path else str(key)
+
+
+def _object(value, path: str, known: tuple[str, ...], required: tuple[str, ...] = ()) -> dict:
+    if not isinstance(value, dict):
+        raise SceneError(path, f"expected an object, got {_kind(value)}")
+    for key in value:
+        if key not in known:
+            raise SceneError(_join(path, str(key)), f"unknown key; known keys: {', '.join(known)}")
+    for key in required:
+        if key not in value:
+            raise SceneError(_join(path, key), "missing (required)")
+    return value
+
+
+def _list(value, path: str, what: str = "a list") -> list:
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if not isinstance(value, (list, tuple)):
+        raise SceneError(path, f"expected {what}, got {_kind(value)}")
+    return list(value)
+
+
+def _string(value, path: str) -> str:
+    if not isinstance(value, str) or not value:
+        raise SceneError(path, f"expected a non-empty string, got {_kind(value)}")
+    return value
+
+
+def _number(value, path: str, what: str = "a finite number") -> float:
+    if not _is_number(value) or not math.isfinite(float(value)):
+        raise SceneError(path, f"expected {what}, got {_kind(value)}")
+    return float(value)
+
+
+def _numbers(value, path: str, what: str, sizes: tuple[int, ...]) -> np.ndarray:
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if not isinstance(value, (list, tuple)) or len(value) not in sizes:
+        raise SceneError(path, f"expected {what}, got {_kind(value)}")
+    for k, item in enumerate(value):
+        if not _is_number(item) or not math.isfinite(float(item)):
+            raise SceneError(path, f"expected {what}, got {_kind(item)} at [{k}]")
+    return np.array(value, dtype=float)
+
+
+def _matrix(value, path: str, shape: tuple[int, int], what: str | None = None) -> np.ndarray:
+    what = what or f"a {shape[0]}x{shape[1]} matrix of finite numbers"
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if not isinstance(value, (list, tuple)) or len(value) != shape[0]:
+        raise SceneError(path, f"expected {what}, got {_kind(value)}")
+    for r, row in enumerate(value):
+        if not isinstance(row, (list, tuple)) or len(row) != shape[1]:
+            raise SceneError(path, f"expected {what}, got {_kind(row)} as row {r}")
+        for c, item in enumerate(row):
+            if not _is_number(item) or not math.isfinite(float(item)):
+                raise SceneError(path, f"expected {what}, got {_kind(item)} at [{r}][{c}]")
+    return np.array(value, dtype=float)
+
+
+def _resolve(path_str: str, base: Path | None) -> str:
+    p = Path(path_str)
+    if not p.is_absolute():
+        p = (base if base is not None else Path(os.getcwd())) / p
+    return os.path.abspath(p)
+
+
+def _existing_file(value, path: str, base: Path, what: str) -> str:
+    if not isinstance(value, str) or not value:
+        raise SceneError(path, f"expected {what} (a string), got {_kind(value)}")
+    resolved = _resolve(value, base)
+    if not os.path.isfile(resolved):
+        raise SceneError(path, f"file not found: {resolved}")
+    return resolved
+
+
+def _path_out(path_str: str, scene_base: Path | None, out_base: Path | None) -> str:
+    """A held path as written into a file whose relative paths start at ``out_base``."""
+    if out_base is None:
+        return str(path_str)
+    absolute = _resolve(str(path_str), scene_base)
+    try:
+        return Path(os.path.relpath(absolute, os.path.abspath(out_base))).as_posix()
+    except ValueError:  # another drive (Windows)
+        return absolute

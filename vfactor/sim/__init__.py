@@ -1,0 +1,96 @@
+"""Synthetic scenes: camera rigs, vehicles on the road, self-occlusion, detector noise, scenarios.
+
+Typical use::
+
+    from vfactor.sim import load_scenario, simulate, write_simulation
+
+    sim = simulate(load_scenario("intersection_2cam"), seed=1)
+    sim.scene        # a vfactor.observations.Scene: cameras and noisy detections
+    sim.truth[0]     # frame 0: vehicle id -> VehicleTruth(world_T_vehicle, wireframe, preset)
+    write_simulation(sim, "scene.json", "truth.json")
+"""
+
+from vfactor.sim.noise import NoiseModel, NoisyKeypoints, box_diagonal, corrupt_keypoints
+from vfactor.sim.rig import intersection_rig, intrinsics_from_hfov, look_at, pole_camera
+from vfactor.sim.scenario import (
+    CAMERA_FIELDS,
+    SCENARIO_FIELDS,
+    Motion,
+    Scenario,
+    list_scenarios,
+    load_scenario,
+    noise_from_value,
+    scenario_from_dict,
+    scenario_path,
+)
+from vfactor.sim.simulate import (
+    DetectionTruth,
+    Simulation,
+    VehicleTruth,
+    keypoints_in_view,
+    simulate,
+    vehicle_ids,
+)
+from vfactor.sim.truth import load_truth, save_truth, truth_from_dict, truth_to_dict, write_simulation
+from vfactor.sim.vehicles import (
+    RANDOM,
+    RandomShape,
+    footprint,
+    footprints_overlap,
+    random_wireframe,
+    road_pose,
+    symmetrised,
+    vehicle_shape,
+    within_hwc_bounds,
+)
+from vfactor.sim.visibility import HUB_PUSH, VehicleBody, occluded_keypoints, self_occluded
+
+__all__ = [
+    # rig
+    "look_at",
+    "intrinsics_from_hfov",
+    "pole_camera",
+    "intersection_rig",
+    # vehicles
+    "RANDOM",
+    "RandomShape",
+    "random_wireframe",
+    "symmetrised",
+    "vehicle_shape",
+    "within_hwc_bounds",
+    "road_pose",
+    "footprint",
+    "footprints_overlap",
+    # visibility
+    "HUB_PUSH",
+    "VehicleBody",
+    "occluded_keypoints",
+    "self_occluded",
+    # noise
+    "NoiseModel",
+    "NoisyKeypoints",
+    "corrupt_keypoints",
+    "box_diagonal",
+    # scenarios
+    "Scenario",
+    "Motion",
+    "SCENARIO_FIELDS",
+    "CAMERA_FIELDS",
+    "load_scenario",
+    "scenario_from_dict",
+    "scenario_path",
+    "list_scenarios",
+    "noise_from_value",
+    # simulation and truth
+    "simulate",
+    "Simulation",
+    "VehicleTruth",
+    "DetectionTruth",
+    "vehicle_ids",
+    "keypoints_in_view",
+    "save_truth",
+    "load_truth",
+    "truth_to_dict",
+    "truth_from_dict",
+    "write_simulation",
+]

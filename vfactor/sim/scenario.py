@@ -1,0 +1,367 @@
+"""Simulation scenarios: camera rig, vehicles, placement, noise and frames, from JSON.
+
+A scenario file (``vfactor/graphs/*.json``) is validated field by field on
+load; every problem raises :class:`vfactor.errors.ScenarioError` whose
+``field`` is the path of the offending entry (``cameras[1].height``,
+``noise.outlier_rate``). The fields are listed in :data:`SCENARIO_FIELDS` and in
+``docs/``; see :func:`scenario_from_dict`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+from vfactor.camera import Camera
+from vfactor.errors import CalibrationError, ScenarioError
+from vfactor.sim import _checks as chk
+from vfactor.sim.noise import NoiseModel
+from vfactor.sim.rig import intrinsics_from_hfov, look_at
+from vfactor.sim.vehicles import RANDOM, RandomShape
+from vfactor.wireframe import PRESETS
+
+__all__ = [
+    "Motion",
+    "Scenario",
+    "SCENARIO_FIELDS",
+    "CAMERA_FIELDS",
+    "noise_from_value",
+    "load_scenario",
+    "scenario_from_dict",
+    "scenario_path",
+    "list_scenarios",
+]
+
+#: Top-level keys of a scenario file and what each holds.
+SCENARIO_FIELDS: dict[str, str] = {
+    "name": "scenario name (default: the file's stem)",
+    "description": "free text",
+    "cameras": "list of cameras (required); see CAMERA_FIELDS",
+    "vehicles": 'list of preset names and/or "random" (required)',
+    "vehicle_order": '"cycle" (default: frame f, slot k takes vehicles[(f * n + k) % len]) or "random"',
+    "vehicles_per_frame": "integer >= 1 (default 1); ids v1, v2, ...",
+    "random_shape": '{"wheelbase": [2.5, 3.0], "jitter": 0.03, "wheel_radius": 0.33}, for "random" vehicles',
+    "region": '{"x": [min, max], "y": [min, max]}: world box of vehicle positions, metres (default +-2 m)',
+    "yaw_deg": "[min, max] heading range, degrees (default [0, 360])",
+    "visible_in": '"all" (default) or a list of camera names whose images must hold all 12 keypoints',
+    "margin_px": "margin inside the image for that check, pixels (default 20)",
+    "min_gap": "minimum distance between vehicles' footprints, metres (default 0.5)",
+    "noise": 'noise settings (see NoiseModel) or "paper" (default), "noiseless", "gaussian"',
+    "num_frames": "integer >= 1 (default 10)",
+    "dt": "seconds between frames (default 0.1)",
+    "seed": "integer >= 0 (default 0)",
+    "motion": 'null (default: independent frames) or {"speed": [min, max] m/s, "yaw_rate_deg": [min, max] deg/s}',
+}
+
+CAMERA_FIELDS: dict[str, str] = {
+    "name": "unique camera name (required)",
+    "pole": "[x, y] of the pole's foot on the road, metres",
+    "height": "camera height above the road, metres (> 0)",
+    "look_at": "[x, y, z] world point at the image centre (default [0, 0, 0])",
+    "world_T_camera": "4x4 camera -> world, instead of pole/height/look_at",
+    "hfov_deg": "horizontal field of view, degrees, in (0, 180) (or K)",
+    "K": "3x3 intrinsics (instead of hfov_deg)",
+    "image_size": "[width, height] pixels (default [1280, 720])",
+    "dist": "OpenCV distortion [k1, k2, p1, p2(, k3)] (default none)",
+}
+
+_NOISE_PRESETS = {
+    "paper": NoiseModel(),
+    "noiseless": NoiseModel.noiseless(),
+    "gaussian": NoiseModel.gaussian_only(),
+}
+
+
+@dataclass(frozen=True)
+class Motion:
+    """Constant-speed, constant-turn-rate motion of each vehicle over the frames.
+
+    Attributes:
+        speed: ``(min, max)`` of the uniform speed, m/s (forward, along body x).
+        yaw_rate: ``(min, max)`` of the uniform yaw rate, rad/s.
+    """
+
+    speed: tuple[float, float] = (3.0, 8.0)
+    yaw_rate: tuple[float, float] = (-0.2, 0.2)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Everything :func:`vfactor.sim.simulate` needs.
+
+    Attributes:
+        cameras: camera name -> :class:`Camera`, in file order.
+        vehicles: preset names and/or ``"random"``.
+        name: scenario name.
+        description: free text.
+        vehicle_order: ``"cycle"`` or ``"random"``: how each vehicle slot picks from ``vehicles``.
+        vehicles_per_frame: vehicles in each frame (ids ``v1``, ``v2``, ...).
+        random_shape: how ``"random"`` shapes are drawn.
+        region: ``((x_min, x_max), (y_min, y_max))`` world box of vehicle positions, metres
+            (with :attr:`motion`: the positions at the middle frame).
+        yaw_range: ``(min, max)`` heading, radians.
+        visible_in: cameras whose images must hold all 12 keypoints (with ``margin_px``).
+        margin_px: margin for that check, pixels.
+        min_gap: minimum gap between two vehicles' footprints, metres.
+        noise: keypoint noise.
+        num_frames: number of frames.
+        dt: time between frames, seconds.
+        seed: default random seed.
+        motion: None for independent frames (a new vehicle in every frame), or
+            the motion of vehicles that keep their id and shape over the frames.
+    """
+
+    cameras: dict[str, Camera]
+    vehicles: tuple[str, ...]
+    name: str = "scenario"
+    description: str = ""
+    vehicle_order: str = "cycle"
+    vehicles_per_frame: int = 1
+    random_shape: RandomShape = field(default_factory=RandomShape)
+    region: tuple[tuple[float, float], tuple[float, float]] = ((-2.0, 2.0), (-2.0, 2.0))
+    yaw_range: tuple[float, float] = (0.0, 2.0 * math.pi)
+    visible_in: tuple[str, ...] | None = None
+    margin_px: float = 20.0
+    min_gap: float = 0.5
+    noise: NoiseModel = field(default_factory=NoiseModel)
+    num_frames: int = 10
+    dt: float = 0.1
+    seed: int = 0
+    motion: Motion | None = None
+
+    def __post_init__(self):
+        if self.visible_in is None:
+            object.__setattr__(self, "visible_in", tuple(self.cameras))
+
+    def required_cameras(self) -> list[Camera]:
+        """The cameras whose images must hold every keypoint of every vehicle."""
+        return [self.cameras[name] for name in self.visible_in]
+
+
+def scenario_path(name_or_path: str | Path) -> Path:
+    """Resolves a packaged scenario name (``"intersection_2cam"``) or a file path.
+
+    A value naming an existing file is returned as is; otherwise a bare name
+    (with or without ``.json``) is looked up in ``vfactor/graphs/``.
+
+    Raises:
+        ScenarioError: neither a file nor a packaged scenario (the message lists the packaged ones).
+    """
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    if path.parent == Path(".") and path.suffix in ("", ".json"):
+        packaged = _graphs_dir() / f"{path.stem}.json"
+        if packaged.is_file():
+            return packaged
+    raise ScenarioError(
+        "", f"scenario {str(name_or_path)!r}: no such file or packaged scenario; packaged: {list_scenarios()}"
+    )
+
+
+def list_scenarios() -> list[str]:
+    """Names of the scenarios packaged in ``vfactor/graphs/``."""
+    return sorted(p.stem for p in _graphs_dir().glob("*.json"))
+
+
+def _graphs_dir() -> Path:
+    return Path(str(resources.files("vfactor") / "graphs"))
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Loads and validates a scenario file (a packaged name or a path).
+
+    Raises:
+        ScenarioError: the file is missing, not JSON, or a field is wrong (the error names it).
+    """
+    path = scenario_path(name_or_path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise ScenarioError("", f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    return scenario_from_dict(data, default_name=path.stem)
+
+
+def scenario_from_dict(data: dict, default_name: str = "scenario") -> Scenario:
+    """Validates a scenario (the parsed JSON) and builds a :class:`Scenario`.
+
+    See :data:`SCENARIO_FIELDS` and :data:`CAMERA_FIELDS` for the keys.
+
+    Raises:
+        ScenarioError: unknown key, missing key, wrong type or out-of-range value,
+            with the field path.
+    """
+    chk.check_mapping(data, "", SCENARIO_FIELDS, required=("cameras", "vehicles"))
+    kw: dict = {"name": chk.string(data.get("name", default_name), "name")}
+    if "description" in data:
+        if not isinstance(data["description"], str):
+            raise ScenarioError("description", f"expected a string, got {data['description']!r}")
+        kw["description"] = data["description"]
+
+    cameras = data["cameras"]
+    if not isinstance(cameras, list) or not cameras:
+        raise ScenarioError("cameras", "expected a non-empty list of cameras")
+    kw["cameras"] = {}
+    for i, entry in enumerate(cameras):
+        camera = _camera(entry, f"cameras[{i}]")
+        if camera.name in kw["cameras"]:
+            raise ScenarioError(f"cameras[{i}].name", f"duplicate camera name {camera.name!r}")
+        kw["cameras"][camera.name] = camera
+
+    vehicles = data["vehicles"]
+    if not isinstance(vehicles, list) or not vehicles:
+        raise ScenarioError("vehicles", f'expected a non-empty list of preset names or "{RANDOM}"')
+    known = set(PRESETS) | {RANDOM}
+    kw["vehicles"] = tuple(chk.string(v, f"vehicles[{i}]", choices=known) for i, v in enumerate(vehicles))
+    if "vehicle_order" in data:
+        kw["vehicle_order"] = chk.string(data["vehicle_order"], "vehicle_order", choices={"cycle", "random"})
+    if "vehicles_per_frame" in data:
+        kw["vehicles_per_frame"] = chk.number(
+            data["vehicles_per_frame"], "vehicles_per_frame", lo=1, hi=20, integer=True
+        )
+    if "random_shape" in data:
+        kw["random_shape"] = _random_shape(data["random_shape"], "random_shape")
+    if "region" in data:
+        region = chk.check_mapping(data["region"], "region", ("x", "y"), required=("x", "y"))
+        kw["region"] = (chk.interval(region["x"], "region.x"), chk.interval(region["y"], "region.y"))
+    if "yaw_deg" in data:
+        lo, hi = chk.interval(data["yaw_deg"], "yaw_deg", lo=-360.0, hi=720.0)
+        if hi - lo > 360.0:
+            raise ScenarioError("yaw_deg", f"expected a range of at most 360 degrees, got {[lo, hi]}")
+        kw["yaw_range"] = (math.radians(lo), math.radians(hi))
+    if "visible_in" in data:
+        kw["visible_in"] = _visible_in(data["visible_in"], kw["cameras"])
+    if "margin_px" in data:
+        kw["margin_px"] = chk.number(data["margin_px"], "margin_px", lo=0.0)
+    if "min_gap" in data:
+        kw["min_gap"] = chk.number(data["min_gap"], "min_gap", lo=0.0)
+    if "noise" in data:
+        kw["noise"] = noise_from_value(data["noise"], "noise")
+    if "num_frames" in data:
+        kw["num_frames"] = chk.number(data["num_frames"], "num_frames", lo=1, integer=True)
+    if "dt" in data:
+        kw["dt"] = chk.number(data["dt"], "dt", lo=0.0, lo_open=True)
+    if "seed" in data:
+        kw["seed"] = chk.number(data["seed"], "seed", lo=0, integer=True)
+    if data.get("motion") is not None:
+        kw["motion"] = _motion(data["motion"], "motion")
+    return Scenario(**kw)
+
+
+def noise_from_value(value, field: str = "noise") -> NoiseModel:
+    """A :class:`NoiseModel` from a scenario's ``noise`` entry (an object or a preset name)."""
+    if isinstance(value, str):
+        return _NOISE_PRESETS[chk.string(value, field, choices=set(_NOISE_PRESETS))]
+    defaults = NoiseModel()
+    names = list(defaults.to_dict())
+    chk.check_mapping(value, field, names)
+    kw = {}
+    for key in ("relative_sigma", "outlier_box_growth"):
+        if key in value:
+            kw[key] = chk.number(value[key], chk.join(field, key), lo=0.0, hi=10.0)
+    if "occluded_factor" in value:
+        where = chk.join(field, "occluded_factor")
+        kw["occluded_factor"] = chk.number(value["occluded_factor"], where, lo=0.0, hi=100.0)
+    for key in ("outlier_rate", "swap_rate", "missing_rate"):
+        if key in value:
+            kw[key] = chk.number(value[key], chk.join(field, key), lo=0.0, hi=1.0)
+    for key in ("confidence_visible", "confidence_occluded"):
+        if key in value:
+            lo, hi = chk.interval(value[key], chk.join(field, key), lo=0.0, hi=1.0)
+            if lo <= 0.0:
+                raise ScenarioError(
+                    chk.join(field, key), f"expected a lowest confidence > 0 (0 means unseen), got {lo}"
+                )
+            kw[key] = (lo, hi)
+    return NoiseModel(**kw)
+
+
+def _camera(entry, field: str) -> Camera:
+    chk.check_mapping(entry, field, CAMERA_FIELDS, required=("name",))
+    name = chk.string(entry["name"], chk.join(field, "name"))
+    size = entry.get("image_size", [1280, 720])
+    if (
+        not isinstance(size, list)
+        or len(size) != 2
+        or not all(isinstance(s, int) and not isinstance(s, bool) and s > 0 for s in size)
+    ):
+        raise ScenarioError(
+            chk.join(field, "image_size"), f"expected [width, height], two positive integers, got {size!r}"
+        )
+    size = (size[0], size[1])
+
+    if ("hfov_deg" in entry) == ("K" in entry):
+        raise ScenarioError(field, "give exactly one of hfov_deg and K")
+    if "hfov_deg" in entry:
+        hfov = chk.number(entry["hfov_deg"], chk.join(field, "hfov_deg"), lo=0.0, hi=180.0, lo_open=True, hi_open=True)
+        K = intrinsics_from_hfov(hfov, size)
+    else:
+        K = chk.matrix(entry["K"], chk.join(field, "K"), (3, 3))
+
+    placed = [k for k in ("pole", "height", "look_at") if k in entry]
+    if "world_T_camera" in entry:
+        if placed:
+            raise ScenarioError(
+                chk.join(field, placed[0]), "give either world_T_camera or pole/height/look_at, not both"
+            )
+        world_T_camera = chk.matrix(entry["world_T_camera"], chk.join(field, "world_T_camera"), (4, 4))
+    else:
+        for key in ("pole", "height"):
+            if key not in entry:
+                raise ScenarioError(chk.join(field, key), "missing (or give world_T_camera)")
+        pole = chk.vector(entry["pole"], chk.join(field, "pole"), 2)
+        height = chk.number(entry["height"], chk.join(field, "height"), lo=0.0, lo_open=True)
+        target = chk.vector(entry.get("look_at", [0.0, 0.0, 0.0]), chk.join(field, "look_at"), 3)
+        try:
+            world_T_camera = look_at([pole[0], pole[1], height], target)
+        except ValueError as exc:
+            raise ScenarioError(chk.join(field, "look_at"), str(exc).removeprefix("look_at: ")) from None
+
+    dist = None
+    if "dist" in entry:
+        d = entry["dist"]
+        if not isinstance(d, list) or len(d) not in (4, 5):
+            raise ScenarioError(chk.join(field, "dist"), f"expected 4 or 5 numbers [k1, k2, p1, p2(, k3)], got {d!r}")
+        dist = chk.vector(d, chk.join(field, "dist"), len(d))
+    try:
+        return Camera(name=name, K=K, world_T_camera=world_T_camera, dist=dist, image_size=size)
+    except CalibrationError as exc:
+        raise ScenarioError(chk.join(field, exc.field), exc.problem) from None
+
+
+def _visible_in(value, cameras: dict) -> tuple[str, ...]:
+    if value == "all":
+        return tuple(cameras)
+    if not isinstance(value, list) or not value:
+        raise ScenarioError("visible_in", f'expected "all" or a non-empty list of camera names, got {value!r}')
+    names = tuple(chk.string(v, f"visible_in[{i}]", choices=set(cameras)) for i, v in enumerate(value))
+    if len(set(names)) != len(names):
+        raise ScenarioError("visible_in", f"camera names repeat: {list(names)}")
+    return names
+
+
+def _random_shape(value, field: str) -> RandomShape:
+    chk.check_mapping(value, field, ("wheelbase", "jitter", "wheel_radius"))
+    kw = {}
+    if "wheelbase" in value:
+        kw["wheelbase"] = chk.interval(value["wheelbase"], chk.join(field, "wheelbase"), lo=1.5, hi=4.5)
+    if "jitter" in value:
+        kw["jitter"] = chk.number(value["jitter"], chk.join(field, "jitter"), lo=0.0, hi=0.2)
+    if "wheel_radius" in value:
+        kw["wheel_radius"] = chk.number(value["wheel_radius"], chk.join(field, "wheel_radius"), lo=0.1, hi=1.0)
+    return RandomShape(**kw)
+
+
+def _motion(value, field: str) -> Motion:
+    chk.check_mapping(value, field, ("speed", "yaw_rate_deg"))
+    kw = {}
+    if "speed" in value:
+        kw["speed"] = chk.interval(value["speed"], chk.join(field, "speed"), lo=0.0, hi=70.0)
+    if "yaw_rate_deg" in value:
+        lo, hi = chk.interval(value["yaw_rate_deg"], chk.join(field, "yaw_rate_deg"), lo=-180.0, hi=180.0)
+        kw["yaw_rate"] = (math.radians(lo), math.radians(hi))
+    return Motion(**kw)
+

@@ -1,0 +1,161 @@
+"""Simulated vehicles: shapes (presets or random PASCAL3D+ cars) and poses on the road.
+
+A vehicle stands on the road ``z = 0`` with roll = pitch = 0. Its body origin is
+the centroid of the four wheel hubs (``DESIGN.md``), so the origin lies
+``wheel_radius`` above the road and the road is the body plane
+``z = -wheel_radius``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+
+from vfactor.keypoints import LAYERS, MIRROR_PERMUTATION
+from vfactor.shape_model import DISTANCE_PAIRS, HwcBounds, default_hwc_bounds
+from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
+
+__all__ = [
+    "RANDOM",
+    "RandomShape",
+    "random_wireframe",
+    "symmetrised",
+    "vehicle_shape",
+    "within_hwc_bounds",
+    "road_pose",
+    "footprint",
+    "footprints_overlap",
+]
+
+#: Vehicle name that asks for a random PASCAL3D+ shape instead of a preset.
+RANDOM = "random"
+
+
+@dataclass(frozen=True)
+class RandomShape:
+    """How random vehicle shapes are drawn.
+
+    Attributes:
+        wheelbase: ``(min, max)`` of the uniform wheelbase, metres.
+        jitter: standard deviation of the Gaussian noise added to every
+            keypoint coordinate (before symmetrisation), metres.
+        wheel_radius: wheel radius (hub height above the road), metres.
+        max_tries: draws before giving up on a shape inside the HWC bounds.
+    """
+
+    wheelbase: tuple[float, float] = (2.5, 3.0)
+    jitter: float = 0.03
+    wheel_radius: float = 0.33
+    max_tries: int = 100
+
+
+def symmetrised(points: np.ndarray) -> np.ndarray:
+    """Averages each keypoint with the mirror image of its left/right partner (exact symmetry about y = 0)."""
+    return 0.5 * (points + points[MIRROR_PERMUTATION] * [1.0, -1.0, 1.0])
+
+
+def random_wireframe(
+    rng: np.random.Generator, spec: RandomShape = RandomShape(), bounds: HwcBounds | None = None
+) -> Wireframe:
+    """A random car: one PASCAL3D+ model times a random wheelbase, jittered, symmetrised.
+
+    The shape is re-centred on its wheel-hub centroid and redrawn until it lies
+    within the HWC ``bounds`` (default :func:`default_hwc_bounds`).
+
+    Args:
+        rng: random generator (the only source of randomness).
+        spec: wheelbase range, jitter and number of tries.
+        bounds: HWC bounds the shape must satisfy.
+
+    Raises:
+        RuntimeError: no shape within the bounds after ``spec.max_tries`` draws.
+    """
+    bounds = default_hwc_bounds() if bounds is None else bounds
+    shapes = pascal3d_shapes()
+    for _ in range(spec.max_tries):
+        model = shapes[rng.integers(len(shapes))]
+        wheelbase = rng.uniform(*spec.wheelbase)
+        points = model * wheelbase + rng.normal(0.0, spec.jitter, size=model.shape)
+        points = symmetrised(points)
+        points -= points[list(LAYERS["wheel"])].mean(axis=0)
+        wireframe = Wireframe(points)
+        if within_hwc_bounds(wireframe, bounds):
+            return wireframe
+    raise RuntimeError(f"random_wireframe: no shape within the HWC bounds after {spec.max_tries} draws")
+
+
+def within_hwc_bounds(wireframe: Wireframe, bounds: HwcBounds | None = None) -> bool:
+    """Whether a wireframe satisfies every HWC range: distances, trapezoid width ratios, layer offsets."""
+    bounds = default_hwc_bounds() if bounds is None else bounds
+    p = wireframe.vehicle_p_keypoints
+    d = np.linalg.norm(p[DISTANCE_PAIRS[:, 0]] - p[DISTANCE_PAIRS[:, 1]], axis=1)
+    if np.any(d < bounds.distance[:, 0]) or np.any(d > bounds.distance[:, 1]):
+        return False
+    wheel_centroid = p[list(LAYERS["wheel"])].mean(axis=0)
+    for name, (lo, hi) in bounds.width_ratio.items():
+        lf, rf, lb, rb = LAYERS[name]
+        ratio = np.linalg.norm(p[lf] - p[rf]) / np.linalg.norm(p[lb] - p[rb])
+        if not lo <= ratio <= hi:
+            return False
+    for name, box in bounds.layer_offset.items():
+        off = (p[list(LAYERS[name])].mean(axis=0) - wheel_centroid)[[0, 2]]
+        if np.any(off < box[:, 0]) or np.any(off > box[:, 1]):
+            return False
+    return True
+
+
+def vehicle_shape(
+    name: str, rng: np.random.Generator, random_shape: RandomShape = RandomShape()
+) -> tuple[Wireframe, float]:
+    """Shape and wheel radius of a preset (by name) or of a random car (``"random"``).
+
+    Returns:
+        (wireframe in metres, wheel radius in metres).
+
+    Raises:
+        ValueError: unknown preset name.
+    """
+    if name == RANDOM:
+        return random_wireframe(rng, random_shape), random_shape.wheel_radius
+    if name not in PRESETS:
+        raise ValueError(f"vehicle: unknown preset {name!r}; known: {sorted(PRESETS)} or {RANDOM!r}")
+    p = PRESETS[name]
+    return p.wireframe(), p.wheel_radius
+
+
+def road_pose(x: float, y: float, yaw: float, wheel_radius: float) -> gtsam.Pose3:
+    """``world_T_vehicle`` of a vehicle standing on the road at ``(x, y)`` heading ``yaw`` (rad, from world x)."""
+    return gtsam.Pose3(gtsam.Rot3.Yaw(yaw), np.array([x, y, wheel_radius], dtype=float))
+
+
+def footprint(wireframe: Wireframe, world_T_vehicle: gtsam.Pose3, pad: float = 0.1) -> np.ndarray:
+    """(4, 2) corners (counter-clockwise) of the vehicle's rectangle on the road, world x-y, metres.
+
+    The rectangle spans the keypoints' body x and y ranges grown by ``pad`` on every side.
+    """
+    p = wireframe.vehicle_p_keypoints
+    x0, x1 = p[:, 0].min() - pad, p[:, 0].max() + pad
+    y0, y1 = p[:, 1].min() - pad, p[:, 1].max() + pad
+    corners = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
+    T = world_T_vehicle.matrix()
+    return (corners @ T[:3, :3].T + T[:3, 3])[:, :2]
+
+
+def footprints_overlap(a: np.ndarray, b: np.ndarray, gap: float = 0.0) -> bool:
+    """Whether two convex polygons (N, 2) come closer than ``gap`` along some separating axis.
+
+    Separating-axis test over the edge normals of both polygons: the polygons
+    are apart when, on at least one axis, their projections are separated by
+    ``gap`` or more.
+    """
+    for poly in (a, b):
+        edges = np.roll(poly, -1, axis=0) - poly
+        normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1)
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        pa, pb = a @ normals.T, b @ normals.T
+        separation = np.maximum(pb.min(0) - pa.max(0), pa.min(0) - pb.max(0))
+        if np.any(separation >= gap):
+            return False
+    return True

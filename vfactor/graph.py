@@ -24,7 +24,7 @@ from vfactor.factors.projection import KeypointObservations, projection_factor
 from vfactor.factors.rectangle import rectangle_term
 from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_prior import shape_prior_factor
-from vfactor.factors.shape_terms import shape_terms_factor
+from vfactor.factors.shape_terms import evaluate_terms, shape_terms_factor
 from vfactor.factors.symmetry import symmetry_factor
 from vfactor.factors.trapezoid import trapezoid_term
 from vfactor.keypoints import LAYER_NAMES
@@ -41,6 +41,8 @@ __all__ = [
     "insert_vehicle_values",
     "build_vehicle_graph",
     "hwc_terms",
+    "hwc_factor",
+    "hwc_violation",
 ]
 
 
@@ -56,8 +58,14 @@ class GraphConfig:
         symmetry_sigma: left/right asymmetry allowed per coordinate, metres.
         body_frame_sigma: gauge tightness (hub centroid at the origin, hubs level), metres.
         shape_prior_weight: scales the information of the mean-shape prior.
-        hwc: whether to add the nonlinear HWC factors (planes, rectangle,
-            trapezoids, distance and layer-offset bounds).
+        hwc: the nonlinear HWC factor (planes, rectangle, trapezoids, distance
+            and layer-offset bounds): ``"always"`` in the graph from the start;
+            ``"lazy"`` (default) added by the solver only when the solution
+            without it breaks an HWC condition by more than ``hwc_tolerance``
+            sigmas, then solved again with it (an active-set strategy: the HWC
+            terms are hinges or nearly implied by symmetry, so they are rarely
+            active and the Python factor is rarely paid for); ``"off"`` never.
+        hwc_tolerance: whitened HWC residual (sigmas) beyond which ``"lazy"`` adds the factor.
         plane_sigma_m, plane_sigma_rad: layer planarity (m) and perpendicularity (rad).
         rectangle_sigma: wheel-layer rectangle, metres.
         trapezoid_sigma_rad, width_ratio_sigma: trapezoid parallel sides and width-ratio hinge.
@@ -70,7 +78,8 @@ class GraphConfig:
     symmetry_sigma: float = 0.01
     body_frame_sigma: float = 1e-3
     shape_prior_weight: float = 1.0
-    hwc: bool = True
+    hwc: str = "lazy"
+    hwc_tolerance: float = 1.0
     plane_sigma_m: float = 0.02
     plane_sigma_rad: float = 0.05
     rectangle_sigma: float = 0.02
@@ -82,11 +91,13 @@ class GraphConfig:
         for name in (
             "relative_pixel_sigma", "min_pixel_sigma", "symmetry_sigma", "body_frame_sigma", "shape_prior_weight",
             "plane_sigma_m", "plane_sigma_rad", "rectangle_sigma", "trapezoid_sigma_rad", "width_ratio_sigma",
-            "hinge_sigma",
+            "hinge_sigma", "hwc_tolerance",
         ):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
                 raise ValueError(f"GraphConfig.{name}: expected a positive number, got {value!r}")
+        if self.hwc not in ("always", "lazy", "off"):
+            raise ValueError(f"GraphConfig.hwc: expected 'always', 'lazy' or 'off', got {self.hwc!r}")
 
 
 def observations_from_detections(
@@ -149,17 +160,28 @@ def add_shape_factors(
     prior: ShapePrior | None = None,
     bounds: HwcBounds | None = None,
 ) -> None:
-    """Adds one vehicle's shape factors: body frame, symmetry, mean-shape prior, HWC.
+    """Adds one vehicle's shape factors: body frame, symmetry, mean-shape prior, and HWC when ``config.hwc == "always"``.
 
-    Add these once per vehicle (the shape is shared by all its frames).
+    Add these once per vehicle (the shape is shared by all its frames). With
+    ``"lazy"``, add :func:`hwc_factor` yourself when :func:`hwc_violation` says so.
     """
     layer_keys = keys.layer_keys(vehicle)
     graph.add(body_frame_factor(layer_keys[0], config.body_frame_sigma))
     for key in layer_keys:
         graph.add(symmetry_factor(key, config.symmetry_sigma))
     graph.add(shape_prior_factor(layer_keys, prior or default_shape_prior(), config.shape_prior_weight))
-    if config.hwc:
-        graph.add(shape_terms_factor(layer_keys, hwc_terms(config, bounds)))
+    if config.hwc == "always":
+        graph.add(hwc_factor(keys, vehicle, config, bounds))
+
+
+def hwc_factor(keys: KeyScheme, vehicle: int = 0, config: GraphConfig = GraphConfig(), bounds: HwcBounds | None = None):
+    """The fused nonlinear HWC factor of one vehicle (one Python call per linearisation)."""
+    return shape_terms_factor(keys.layer_keys(vehicle), hwc_terms(config, bounds))
+
+
+def hwc_violation(wireframe: Wireframe, config: GraphConfig = GraphConfig(), bounds: HwcBounds | None = None) -> float:
+    """Largest whitened HWC residual (sigmas) of a wireframe; 0 when every condition holds."""
+    return float(np.abs(evaluate_terms(hwc_terms(config, bounds), wireframe.vehicle_p_keypoints)).max())
 
 
 def add_observation_factor(

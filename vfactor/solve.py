@@ -17,8 +17,16 @@ import numpy as np
 from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.projection import KeypointObservations, whitened_residuals
-from vfactor.graph import GraphConfig, build_vehicle_graph, insert_vehicle_values, observations_from_detections
+from vfactor.graph import (
+    GraphConfig,
+    build_vehicle_graph,
+    hwc_factor,
+    hwc_violation,
+    insert_vehicle_values,
+    observations_from_detections,
+)
 from vfactor.init import best_candidates
+from vfactor.keypoints import LAYER_NAMES
 from vfactor.keys import KeyScheme
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
@@ -127,27 +135,23 @@ def solve_observations(
         starts = [(c.world_T_vehicle, c.wireframe) for c in candidates]
     graph = build_vehicle_graph(obs, keys, config=options.graph, prior=prior, bounds=bounds)
     best = None
+    failure = "no start"
     for world_T_vehicle, wireframe in starts:
         values = gtsam.Values()
         insert_vehicle_values(values, keys, world_T_vehicle, wireframe)
-        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.lm_params())
         try:
-            estimate = optimizer.optimize()
+            outcome = _optimise(graph, values, keys, options, bounds)
         except RuntimeError as exc:
-            if best is None:
-                best = (None, None, str(exc))
+            failure = str(exc)
             continue
-        error = graph.error(estimate)
-        if best is None or best[0] is None or error < best[1]:
-            best = (estimate, error, optimizer.iterations())
-    if best is None or best[0] is None:
-        return VehicleResult(vehicle_id, Status.FAILED, message=f"optimisation failed: {best[2] if best else 'no start'}")
-    estimate, error, iterations = best
+        if best is None or outcome[1] < best[1]:
+            best = outcome
+    if best is None:
+        return VehicleResult(vehicle_id, Status.FAILED, message=f"optimisation failed: {failure}")
+    estimate, error, iterations, graph = best
     pose_key = keys.pose_key()
     world_T_vehicle = estimate.atPose3(pose_key)
-    wireframe = Wireframe.from_layer_vectors(
-        {name: estimate.atVector(k) for name, k in zip(("wheel", "light", "roof"), keys.layer_keys())}
-    )
+    wireframe = _wireframe_of(estimate, keys)
     status = Status.CONVERGED if iterations < options.max_iterations else Status.MAX_ITERATIONS
     result = VehicleResult(
         vehicle_id, status, world_T_vehicle=world_T_vehicle, wireframe=wireframe, iterations=int(iterations),
@@ -167,6 +171,31 @@ def solve_observations(
         except RuntimeError as exc:
             result.message = f"covariance unavailable: {exc}"
     return result
+
+
+def _wireframe_of(values: gtsam.Values, keys: KeyScheme, vehicle: int = 0) -> Wireframe:
+    return Wireframe.from_layer_vectors({name: values.atVector(k) for name, k in zip(LAYER_NAMES, keys.layer_keys(vehicle))})
+
+
+def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, bounds):
+    """LM on ``graph``; with ``hwc="lazy"``, again with the HWC factor when the shape breaks HWC.
+
+    Returns (estimate, final error, total iterations, the graph finally used).
+    """
+    optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.lm_params())
+    estimate = optimizer.optimize()
+    iterations = optimizer.iterations()
+    config = options.graph
+    if config.hwc == "lazy" and hwc_violation(_wireframe_of(estimate, keys), config, bounds) > config.hwc_tolerance:
+        with_hwc = gtsam.NonlinearFactorGraph()
+        for i in range(graph.size()):  # shares the factors: a Python CustomFactor cannot be cloned
+            with_hwc.add(graph.at(i))
+        with_hwc.add(hwc_factor(keys, 0, config, bounds))
+        graph = with_hwc
+        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.lm_params())
+        estimate = optimizer.optimize()
+        iterations += optimizer.iterations()
+    return estimate, graph.error(estimate), iterations, graph
 
 
 def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: Wireframe, options: SolveOptions) -> str:

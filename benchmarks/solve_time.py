@@ -1,0 +1,123 @@
+"""Benchmark: one-frame solve of one vehicle (2 cameras x 12 keypoints) against an all-native GTSAM graph.
+
+The reference, solved in the same run on the same observations and from the
+same initial values, is GTSAM's own C++ factors only: the inverse vehicle pose
+``vehicle_T_world`` as the variable, 12 body-frame ``Point3`` keypoints,
+``GenericProjectionFactorCal3_S2`` per observation with the camera extrinsic as
+``body_P_sensor`` and a Cauchy ``noiseModel.Robust``, and a ``PriorFactorPoint3``
+per keypoint toward the mean shape. vfactor's graph has the same observations
+plus symmetry, body frame, full-covariance shape prior and the HWC factors.
+
+Run: ``python benchmarks/solve_time.py [--repeats 200]``. Prints median times and
+their ratios (machines here are shared and noisy; compare ratios, not times).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import gtsam
+import numpy as np
+
+from vfactor.graph import GraphConfig, build_vehicle_graph, insert_vehicle_values, observations_from_detections
+from vfactor.init import best_candidates
+from vfactor.keys import KeyScheme
+from vfactor.shape_model import default_shape_prior
+from vfactor.sim import load_scenario, simulate
+from vfactor.solve import SolveOptions, solve_vehicle
+from vfactor.wireframe import Wireframe
+
+
+def native_graph(obs, prior, config: GraphConfig, start_pose: gtsam.Pose3, start_shape: Wireframe):
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    pose_key = gtsam.symbol("p", 0)
+    for i, (c, k) in enumerate(zip(obs.camera_index, obs.keypoint_index)):
+        camera = obs.cameras[c]
+        fx, s, cx = camera.K[0]
+        cal = gtsam.Cal3_S2(fx, camera.K[1, 1], s, cx, camera.K[1, 2])
+        sigma = 1.0 / obs.sqrt_information[i, 0, 0]
+        noise = gtsam.noiseModel.Robust.Create(
+            gtsam.noiseModel.mEstimator.Cauchy.Create(config.loss.threshold), gtsam.noiseModel.Isotropic.Sigma(2, sigma)
+        )
+        graph.add(gtsam.GenericProjectionFactorCal3_S2(obs.uv[i], noise, pose_key, gtsam.symbol("q", int(k)), cal, camera.pose))
+    sigmas = np.sqrt(np.diag(prior.covariance)).reshape(12, 3)
+    for k in range(12):
+        graph.add(gtsam.PriorFactorPoint3(gtsam.symbol("q", k), prior.mean[k], gtsam.noiseModel.Diagonal.Sigmas(sigmas[k])))
+        values.insert(gtsam.symbol("q", k), start_shape.vehicle_p_keypoints[k])
+    values.insert(pose_key, start_pose.inverse())
+    return graph, values
+
+
+def time_lm(graph, values, params) -> tuple[float, int]:
+    t0 = time.perf_counter()
+    optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
+    optimizer.optimize()
+    return time.perf_counter() - t0, optimizer.iterations()
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=200)
+    parser.add_argument("--scenes", type=int, default=10, help="distinct simulated vehicles cycled through")
+    args = parser.parse_args(argv)
+
+    sim = simulate(load_scenario("intersection_2cam"), seed=7, num_frames=args.scenes)
+    options = SolveOptions()
+    prior = default_shape_prior()
+    keys = KeyScheme()
+    params = options.lm_params()
+    cases = []
+    for frame in sim.scene.frames:
+        for vid in frame.vehicle_ids():
+            dets = frame.detections_of(vid)
+            obs = observations_from_detections(dets, sim.scene.cameras, options.graph)
+            start = best_candidates(obs, Wireframe(prior.mean), options.graph.loss, 1)[0]
+            cases.append((dets, obs, start))
+    times = {name: [] for name in ("native", "vfactor_lm", "vfactor_lm_no_hwc", "vfactor_build_lm", "vfactor_solve_vehicle")}
+    iterations = {"native": [], "vfactor_lm": []}
+    no_hwc = GraphConfig(hwc="off")
+    always = GraphConfig(hwc="always")
+    for r in range(args.repeats):
+        dets, obs, start = cases[r % len(cases)]
+        graph, values = native_graph(obs, prior, options.graph, start.world_T_vehicle, start.wireframe)
+        t, it = time_lm(graph, values, params)
+        times["native"].append(t)
+        iterations["native"].append(it)
+
+        ours_values = gtsam.Values()
+        insert_vehicle_values(ours_values, keys, start.world_T_vehicle, start.wireframe)
+        t0 = time.perf_counter()
+        ours = build_vehicle_graph(obs, keys, config=always, prior=prior)
+        t_build = time.perf_counter() - t0
+        t, it = time_lm(ours, ours_values, params)
+        times["vfactor_lm"].append(t)
+        times["vfactor_build_lm"].append(t + t_build)
+        iterations["vfactor_lm"].append(it)
+        t, _ = time_lm(build_vehicle_graph(obs, keys, config=no_hwc, prior=prior), ours_values, params)
+        times["vfactor_lm_no_hwc"].append(t)
+
+        t0 = time.perf_counter()
+        solve_vehicle(dets, sim.scene.cameras, options)
+        times["vfactor_solve_vehicle"].append(time.perf_counter() - t0)
+
+    med = {k: float(np.median(v)) for k, v in times.items()}
+    it_native, it_ours = np.mean(iterations["native"]), np.mean(iterations["vfactor_lm"])
+    print(f"one vehicle, 2 cameras x 12 keypoints; {args.repeats} solves over {len(cases)} simulated vehicles")
+    print(f"{'what':<58}{'median ms':>10}{'ratio':>8}")
+    rows = [
+        ("native GTSAM graph, LM (reference)", "native"),
+        ("vfactor graph with the HWC factor always on, LM", "vfactor_lm"),
+        ("vfactor graph without the HWC factor, LM", "vfactor_lm_no_hwc"),
+        ("vfactor graph with the HWC factor always on, build + LM", "vfactor_build_lm"),
+        ("vfactor solve_vehicle (init, 2 starts, LM, marginals)", "vfactor_solve_vehicle"),
+    ]
+    for label, key in rows:
+        print(f"{label:<58}{1e3 * med[key]:>10.3f}{med[key] / med['native']:>8.2f}")
+    per_iter = (med["vfactor_lm"] / it_ours) / (med["native"] / it_native)
+    print(f"mean LM iterations: native {it_native:.2f}, vfactor {it_ours:.2f}; time per iteration ratio {per_iter:.2f}")
+    return {"median_s": med, "iterations": {"native": it_native, "vfactor": it_ours}, "per_iteration_ratio": per_iter}
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,116 @@
+"""Accuracy against simulated ground truth: the factor graph beside simple baselines.
+
+:func:`compare_methods` runs every method on the same simulated observations
+(one vehicle per frame and per id), :func:`accuracy_table` prints the paper's
+metrics side by side. ``vfactor eval`` is the command.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from vfactor.baselines import known_shape, triangulation
+from vfactor.graph import observations_from_detections
+from vfactor.metrics import pose_errors
+from vfactor.sim import Scenario, Simulation, load_scenario, simulate
+from vfactor.solve import SolveOptions, solve_observations
+
+__all__ = ["METHODS", "compare_methods", "summarise_methods", "accuracy_table", "noise_variant"]
+
+#: Method name -> description, in table order.
+METHODS = {
+    "factor_graph": "vfactor factor graph (LM, robust, shape + HWC)",
+    "triangulation": "multi-view triangulation + mean-shape alignment",
+    "known_shape": "reference: true shape given, pose from the truth",
+}
+
+
+def noise_variant(scenario: Scenario, outlier_rate: float | None = None, swap_rate: float | None = None) -> Scenario:
+    """The scenario with other outlier and left/right swap rates."""
+    noise = scenario.noise
+    changes = {k: v for k, v in (("outlier_rate", outlier_rate), ("swap_rate", swap_rate)) if v is not None}
+    return dataclasses.replace(scenario, noise=dataclasses.replace(noise, **changes))
+
+
+def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), methods=tuple(METHODS)) -> dict[str, list[dict]]:
+    """Errors of each method on every (frame, vehicle) of a simulation.
+
+    Returns:
+        method -> rows: ``pose_errors`` fields plus ``preset``, ``status``,
+        ``seconds``; a vehicle a method could not solve has ``status`` only and
+        counts as a failure.
+    """
+    unknown = set(methods) - set(METHODS)
+    if unknown:
+        raise ValueError(f"methods: unknown {sorted(unknown)}; known: {list(METHODS)}")
+    rows = {m: [] for m in methods}
+    for f, frame in enumerate(sim.scene.frames):
+        for vid in frame.vehicle_ids():
+            truth = sim.truth[f][vid]
+            obs = observations_from_detections(frame.detections_of(vid), sim.scene.cameras, options.graph)
+            for method in methods:
+                t0 = time.perf_counter()
+                if method == "factor_graph":
+                    result = solve_observations(obs, options, vid)
+                elif method == "triangulation":
+                    result = triangulation(obs, vid)
+                else:
+                    result = known_shape(obs, truth.world_T_vehicle, truth.wireframe, options.graph, vid)
+                seconds = time.perf_counter() - t0
+                row = {"frame": f, "vehicle": vid, "preset": truth.preset, "status": result.status.value, "seconds": seconds}
+                if result.ok:
+                    row.update(pose_errors(result.world_T_vehicle, result.keypoints_world, truth.world_T_vehicle,
+                                           truth.keypoints_world))
+                rows[method].append(row)
+    return rows
+
+
+def summarise_methods(rows: dict[str, list[dict]]) -> dict[str, dict]:
+    """Per method: count, failures, mean rotation (deg), translation (cm), keypoint error (cm) and per-keypoint means."""
+    out = {}
+    for method, rs in rows.items():
+        ok = [r for r in rs if "rotation_deg" in r]
+        out[method] = {
+            "count": len(rs),
+            "failures": len(rs) - len(ok),
+            "rotation_deg": float(np.mean([r["rotation_deg"] for r in ok])) if ok else float("nan"),
+            "translation_cm": float(np.mean([r["translation_cm"] for r in ok])) if ok else float("nan"),
+            "keypoint_cm": float(np.mean([r["mean_keypoint_cm"] for r in ok])) if ok else float("nan"),
+            "median_keypoint_cm": float(np.median([r["mean_keypoint_cm"] for r in ok])) if ok else float("nan"),
+            "per_keypoint_cm": np.mean([r["keypoint_cm"] for r in ok], axis=0) if ok else np.full(12, np.nan),
+            "seconds": float(np.median([r["seconds"] for r in rs])),
+        }
+    return out
+
+
+def accuracy_table(summary: dict[str, dict], reference: str = "known_shape") -> str:
+    """A Markdown table of the summary, with ratios to ``reference``."""
+    ref = summary.get(reference)
+    lines = [
+        "| method | vehicles | failed | rotation (deg) | translation (cm) | keypoint (cm) | median keypoint (cm) | vs reference (rot / trans / kp) | median time (ms) |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for method, s in summary.items():
+        ratio = "-"
+        if ref is not None and method != reference:
+            ratio = " / ".join(f"{s[k] / ref[k]:.2f}x" for k in ("rotation_deg", "translation_cm", "keypoint_cm"))
+        lines.append(
+            f"| {method} | {s['count']} | {s['failures']} | {s['rotation_deg']:.2f} | {s['translation_cm']:.2f} | "
+            f"{s['keypoint_cm']:.2f} | {s['median_keypoint_cm']:.2f} | {ratio} | {1e3 * s['seconds']:.1f} |"
+        )
+    return "\n".join(lines)
+
+
+def run_accuracy(scenario: str = "accuracy_2cam", frames: int | None = None, seed: int = 0,
+                 variants=((None, None), (0.15, 0.08)), options: SolveOptions = SolveOptions()) -> list[tuple[Scenario, dict]]:
+    """The accuracy experiment of docs/results.md: each noise variant simulated and every method run."""
+    base = load_scenario(scenario)
+    out = []
+    for outlier_rate, swap_rate in variants:
+        variant = noise_variant(base, outlier_rate, swap_rate)
+        sim = simulate(variant, seed=seed, num_frames=frames)
+        out.append((variant, summarise_methods(compare_methods(sim, options))))
+    return out

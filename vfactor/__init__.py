@@ -1,0 +1,79 @@
+"""vfactor: vehicle pose and shape from several fixed monocular cameras, as a GTSAM factor graph.
+
+Quick start::
+
+    import vfactor
+    scene = vfactor.load_scene("scene.json")
+    results = vfactor.solve_scene(scene)
+    for frame in results:
+        for v in frame.vehicles:
+            print(v.id, v.status.value, v.world_T_vehicle, v.pose_covariance)
+
+Conventions (frames, units, keypoint order) are in ``docs/conventions.md``.
+The keypoint network (``vfactor.net``) is the only part that needs PyTorch
+and is not imported here.
+"""
+
+from vfactor.camera import Camera
+from vfactor.errors import CalibrationError, InputError, ScenarioError, SceneError
+from vfactor.factors.robust import RobustLoss
+from vfactor.graph import (
+    GraphConfig,
+    add_observation_factor,
+    add_shape_factors,
+    build_vehicle_graph,
+    hwc_factor,
+    insert_vehicle_values,
+    observations_from_detections,
+)
+from vfactor.keypoints import KEYPOINT_NAMES, LAYERS, LEFT_RIGHT_PAIRS, NUM_KEYPOINTS
+from vfactor.keys import KeyScheme
+from vfactor.observations import Detection, Frame, Scene
+from vfactor.result import FrameResult, Status, VehicleResult
+from vfactor.scene import load_results, load_scene, save_results, save_scene
+from vfactor.shape_model import ShapePrior, default_hwc_bounds, default_shape_prior
+from vfactor.solve import SolveOptions, solve_frame, solve_observations, solve_scene, solve_vehicle
+from vfactor.wireframe import PRESETS, Wireframe
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Camera",
+    "CalibrationError",
+    "Detection",
+    "Frame",
+    "FrameResult",
+    "GraphConfig",
+    "InputError",
+    "KEYPOINT_NAMES",
+    "KeyScheme",
+    "LAYERS",
+    "LEFT_RIGHT_PAIRS",
+    "NUM_KEYPOINTS",
+    "PRESETS",
+    "RobustLoss",
+    "Scene",
+    "SceneError",
+    "ScenarioError",
+    "ShapePrior",
+    "SolveOptions",
+    "Status",
+    "VehicleResult",
+    "Wireframe",
+    "add_observation_factor",
+    "add_shape_factors",
+    "build_vehicle_graph",
+    "default_hwc_bounds",
+    "default_shape_prior",
+    "hwc_factor",
+    "insert_vehicle_values",
+    "load_results",
+    "load_scene",
+    "observations_from_detections",
+    "save_results",
+    "save_scene",
+    "solve_frame",
+    "solve_observations",
+    "solve_scene",
+    "solve_vehicle",
+]

@@ -1,0 +1,122 @@
+"""The vfactor command: every subcommand end to end, and bad input -> a named field and exit code 2."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from vfactor.cli import main
+from vfactor.scene import load_results
+
+
+@pytest.fixture
+def simulated(tmp_path):
+    scene = tmp_path / "scene.json"
+    assert main(["simulate", "intersection_2cam", "--out", str(scene), "--frames", "3", "--seed", "4"]) == 0
+    return scene
+
+
+def run_bad(tmp_path, capsys, data, *extra):
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(data) if not isinstance(data, str) else data)
+    code = main(["solve", str(path), "--out", str(tmp_path / "r.json"), *extra])
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return code, err
+
+
+def test_simulate_then_solve_round_trips(simulated, tmp_path, capsys):
+    out = tmp_path / "result.json"
+    assert main(["solve", str(simulated), "--out", str(out)]) == 0
+    assert "solved 3 of 3 vehicles" in capsys.readouterr().out
+    frames = load_results(out)
+    assert len(frames) == 3 and all(v.status.value == "converged" for f in frames for v in f.vehicles)
+    assert frames[0].vehicles[0].pose_covariance.shape == (6, 6)
+    assert (tmp_path / "scene_truth.json").is_file()
+
+
+def test_simulate_lists_scenarios(capsys):
+    assert main(["simulate", "--list"]) == 0
+    assert "intersection_2cam" in capsys.readouterr().out
+
+
+def base_scene(simulated):
+    return json.loads(simulated.read_text())
+
+
+@pytest.mark.parametrize(
+    "mutate, field",
+    [
+        (lambda d: d["frames"][0]["detections"][0]["keypoints"].pop(), "frames[0].detections[0].keypoints"),
+        (lambda d: d["frames"][0]["detections"][0].update(camera="cam9"), "frames[0].detections[0].camera"),
+        (lambda d: d["cameras"][0].update(K=[[0, 0, 640], [0, 800, 360], [0, 0, 1]]), "cameras[0].K"),
+        (lambda d: d["cameras"][1].update(world_T_camera=np.eye(3).tolist()), "cameras[1].world_T_camera"),
+        (lambda d: d["frames"][1].pop("t"), "frames[1].t"),
+    ],
+)
+def test_bad_scene_names_the_field(simulated, tmp_path, capsys, mutate, field):
+    data = base_scene(simulated)
+    mutate(data)
+    code, err = run_bad(tmp_path, capsys, data)
+    assert code == 2
+    assert field in err
+
+
+def test_nan_keypoint_is_rejected(simulated, tmp_path, capsys):
+    text = simulated.read_text()
+    data = json.loads(text)
+    data["frames"][0]["detections"][0]["keypoints"][3][0] = 1e400  # json writes Infinity
+    code, err = run_bad(tmp_path, capsys, json.dumps(data).replace("Infinity", "NaN"))
+    assert code == 2 and "frames[0].detections[0].keypoints[3]" in err
+
+
+def test_missing_and_malformed_files(tmp_path, capsys):
+    assert main(["solve", str(tmp_path / "nope.json"), "--out", str(tmp_path / "r.json")]) == 2
+    assert "nope.json" in capsys.readouterr().err
+    code, err = run_bad(tmp_path, capsys, "{not json")
+    assert code == 2 and "bad.json" in err
+
+
+def test_vehicle_behind_a_camera_is_reported_with_exit_2(simulated, tmp_path, capsys):
+    data = base_scene(simulated)
+    T = np.array(data["cameras"][1]["world_T_camera"])
+    T[:3, :3] = T[:3, :3] @ np.diag([-1.0, 1.0, -1.0])  # turned around: looks away from the road
+    data["cameras"][1]["world_T_camera"] = T.tolist()
+    code, err = run_bad(tmp_path, capsys, data)
+    assert code == 2
+    assert "cameras[1]" in err and "world_T_camera" in err
+    frames = load_results(tmp_path / "r.json")  # the result is still written, with statuses
+    assert len(frames) == 3
+
+
+def test_demo_writes_pictures_and_results(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--frames", "2"]) == 0
+    text = capsys.readouterr().out
+    assert "mean vfactor" in text and "mean triangulation" in text
+    for name in ("scene.json", "truth.json", "result.json", "overlay_cam0.png", "overlay_cam1.png", "estimate_3d.png"):
+        assert (out / name).stat().st_size > 0, name
+
+
+def test_eval_prints_the_comparison(tmp_path, capsys):
+    md = tmp_path / "acc.md"
+    assert main(["eval", "--frames", "3", "--markdown", str(md)]) == 0
+    out = capsys.readouterr().out
+    for method in ("factor_graph", "triangulation", "known_shape"):
+        assert method in out
+    assert "vfactor eval --frames 3" in md.read_text()
+
+
+def test_unknown_scenario_and_bad_counts_exit_2(tmp_path, capsys):
+    assert main(["simulate", "no_such_rig", "--out", str(tmp_path / "s.json")]) == 2
+    assert "packaged" in capsys.readouterr().err
+    assert main(["demo", "--frames", "0", "--out", str(tmp_path / "d")]) == 2
+
+
+def test_help_teaches_and_module_runs():
+    out = subprocess.run([sys.executable, "-m", "vfactor", "--help"], capture_output=True, text=True, check=True).stdout
+    assert "vfactor demo" in out and "world_T_vehicle" in out

@@ -1,0 +1,5 @@
+import sys
+
+from vfactor.cli import main
+
+sys.exit(main())

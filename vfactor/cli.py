@@ -181,6 +181,7 @@ def _solve(args) -> int:
     options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
     t0 = time.perf_counter()
     results = solve_scene(scene, options, progress=_Progress("solving", not args.quiet))
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     save_results(args.out, results)
     vehicles = [v for fr in results for v in fr.vehicles]
     solved = sum(v.ok for v in vehicles)
@@ -202,6 +203,8 @@ def _simulate(args) -> int:
     sim = simulate(load_scenario(args.scenario), seed=args.seed, num_frames=_check_positive(args.frames, "--frames"))
     out = Path(args.out)
     truth = Path(args.truth) if args.truth else out.with_name(out.stem + "_truth.json")
+    for path in (out, truth):
+        path.parent.mkdir(parents=True, exist_ok=True)
     write_simulation(sim, out, truth)
     n = sum(len(f.vehicle_ids()) for f in sim.scene.frames)
     print(f"wrote {out} ({len(sim.scene.frames)} frames, {n} vehicles, {len(sim.scene.cameras)} cameras) and {truth}")

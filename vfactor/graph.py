@@ -21,7 +21,7 @@ from vfactor.factors.distance_bounds import distance_bounds_term
 from vfactor.factors.layer_offset import layer_offset_term
 from vfactor.factors.planarity import layer_plane_term
 from vfactor.factors.projection import KeypointObservations, projection_factor
-from vfactor.factors.rectangle import rectangle_term
+from vfactor.factors.rectangle import rectangle_factor
 from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_prior import shape_prior_factor
 from vfactor.factors.shape_terms import evaluate_terms, shape_terms_factor
@@ -58,8 +58,8 @@ class GraphConfig:
         symmetry_sigma: left/right asymmetry allowed per coordinate, metres.
         body_frame_sigma: gauge tightness (hub centroid at the origin, hubs level), metres.
         shape_prior_weight: scales the information of the mean-shape prior.
-        hwc: the nonlinear HWC factor (planes, rectangle, trapezoids, distance
-            and layer-offset bounds): ``"always"`` in the graph from the start;
+        hwc: the nonlinear HWC factor (layer planes, trapezoids, distance and
+            layer-offset bounds; the wheel rectangle is linear and always in): ``"always"`` in the graph from the start;
             ``"lazy"`` (default) added by the solver only when the solution
             without it breaks an HWC condition by more than ``hwc_tolerance``
             sigmas, then solved again with it (an active-set strategy: the HWC
@@ -67,7 +67,7 @@ class GraphConfig:
             active and the Python factor is rarely paid for); ``"off"`` never.
         hwc_tolerance: whitened HWC residual (sigmas) beyond which ``"lazy"`` adds the factor.
         plane_sigma_m, plane_sigma_rad: layer planarity (m) and perpendicularity (rad).
-        rectangle_sigma: wheel-layer rectangle, metres.
+        rectangle_sigma: wheel-layer rectangle (parallelogram residual), metres.
         trapezoid_sigma_rad, width_ratio_sigma: trapezoid parallel sides and width-ratio hinge.
         hinge_sigma: distance and layer-offset hinges beyond their bounds, metres.
     """
@@ -145,7 +145,6 @@ def hwc_terms(config: GraphConfig = GraphConfig(), bounds: HwcBounds | None = No
     bounds = bounds or default_hwc_bounds()
     return [
         layer_plane_term(LAYER_NAMES, config.plane_sigma_m, config.plane_sigma_rad),
-        rectangle_term("wheel", config.rectangle_sigma),
         trapezoid_term(bounds.width_ratio, config.trapezoid_sigma_rad, config.width_ratio_sigma),
         distance_bounds_term(bounds.distance, sigma=config.hinge_sigma),
         layer_offset_term(bounds.layer_offset, sigma=config.hinge_sigma),
@@ -160,7 +159,7 @@ def add_shape_factors(
     prior: ShapePrior | None = None,
     bounds: HwcBounds | None = None,
 ) -> None:
-    """Adds one vehicle's shape factors: body frame, symmetry, mean-shape prior, and HWC when ``config.hwc == "always"``.
+    """Adds one vehicle's shape factors: body frame, symmetry, wheel rectangle, mean-shape prior, and HWC when ``config.hwc == "always"``.
 
     Add these once per vehicle (the shape is shared by all its frames). With
     ``"lazy"``, add :func:`hwc_factor` yourself when :func:`hwc_violation` says so.
@@ -169,6 +168,7 @@ def add_shape_factors(
     graph.add(body_frame_factor(layer_keys[0], config.body_frame_sigma))
     for key in layer_keys:
         graph.add(symmetry_factor(key, config.symmetry_sigma))
+    graph.add(rectangle_factor(layer_keys[0], config.rectangle_sigma))
     graph.add(shape_prior_factor(layer_keys, prior or default_shape_prior(), config.shape_prior_weight))
     if config.hwc == "always":
         graph.add(hwc_factor(keys, vehicle, config, bounds))

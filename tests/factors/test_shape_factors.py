@@ -10,7 +10,7 @@ from vfactor.factors.body_frame import body_frame_factor
 from vfactor.factors.distance_bounds import distance_bounds_term
 from vfactor.factors.layer_offset import layer_offset_term
 from vfactor.factors.planarity import layer_plane_term
-from vfactor.factors.rectangle import rectangle_term
+from vfactor.factors.rectangle import rectangle_factor
 from vfactor.factors.shape_prior import shape_prior_factor
 from vfactor.factors.shape_terms import evaluate_terms, hinge, shape_terms_factor
 from vfactor.factors.symmetry import symmetry_factor
@@ -82,7 +82,7 @@ class TestLayerPlane(ShapeFactorContract):
 
 class TestRectangle(ShapeFactorContract):
     def make_factor(self):
-        return shape_terms_factor(KEYS, [rectangle_term()])
+        return rectangle_factor(KEYS[0])
 
     def test_skewed_wheels_cost(self):
         p = self.truth.vehicle_p_keypoints.copy()

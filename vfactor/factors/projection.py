@@ -26,6 +26,7 @@ import numpy as np
 
 from vfactor.camera import Camera, project_pinhole
 from vfactor.factors.robust import RobustLoss
+from vfactor.factors.shape_terms import cross
 
 __all__ = ["KeypointObservations", "projection_factor", "project_keypoints", "whitened_residuals"]
 
@@ -63,6 +64,10 @@ class KeypointObservations:
         object.__setattr__(self, "_intrinsics", (K[:, 0, 0], K[:, 1, 1], K[:, 0, 1], K[:, 0, 2], K[:, 1, 2]))
         distorted = any(c.has_distortion for c in self.cameras)
         object.__setattr__(self, "_dist", np.array([c.dist for c in cams]).reshape(n, 5) if distorted else None)
+        # flat positions of each observation's 2x3 block in the (2n, 36) Jacobian of the 36 shape coordinates
+        rows = 2 * np.arange(n)[:, None, None] + np.arange(2)[None, :, None]
+        cols = 3 * np.asarray(self.keypoint_index)[:, None, None] + np.arange(3)[None, None, :]
+        object.__setattr__(self, "_shape_scatter", (rows * 36 + cols).ravel())
 
     def __len__(self):
         return len(self.camera_index)
@@ -98,10 +103,10 @@ def project_keypoints(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, v
     uv, J_cam = project_pinhole(cam_p, *obs._intrinsics, obs._dist, jacobians)
     if not jacobians:
         return uv, depth, None, None
-    J_point = J_cam @ obs._R_cw @ R  # (n, 2, 3)
+    J_point = np.einsum("nij,njk->nik", J_cam, obs._R_cw @ R)  # (n, 2, 3)
     J_pose = np.empty((len(obs), 2, 6))
     # d(R p + t)/d xi = [-R [p]x, R]  =>  rows a^T (-R[p]x) = (p x (R^T a))^T with a^T R = J_point rows
-    J_pose[:, :, :3] = np.cross(body[:, None, :], J_point)
+    J_pose[:, :, :3] = cross(body[:, None, :], J_point)
     J_pose[:, :, 3:] = J_point
     return uv, depth, J_pose, J_point
 
@@ -129,16 +134,14 @@ def _error(obs: KeypointObservations, loss: RobustLoss, this: gtsam.CustomFactor
     r = e * s[:, None]
     if want:
         n = len(obs)
-        # dr/de = s I + (s'/n) e e^T
-        D = s[:, None, None] * np.eye(2) + ds_over_n[:, None, None] * e[:, :, None] * e[:, None, :]
-        DL = D @ L
+        # dr/de = s I + (s'/n) e e^T, so dr/dx = s L J + (s'/n) e (e^T L J)
+        DL = s[:, None, None] * L + (ds_over_n[:, None] * e)[:, :, None] * np.einsum("ni,nij->nj", e, L)[:, None, :]
         H[0] = (DL @ J_pose).reshape(2 * n, 6)
-        Jp = DL @ J_point  # (n, 2, 3)
-        blocks = np.zeros((n, 2, 12, 3))
-        blocks[np.arange(n), :, obs.keypoint_index, :] = Jp
-        blocks = blocks.reshape(n, 2, 36)
+        shape = np.zeros(2 * n * 36)
+        shape[obs._shape_scatter] = (DL @ J_point).ravel()
+        shape = shape.reshape(2 * n, 36)
         for j in range(3):
-            H[j + 1] = blocks[:, :, 12 * j : 12 * j + 12].reshape(2 * n, 12)
+            H[j + 1] = shape[:, 12 * j : 12 * j + 12]
     return r.ravel()
 
 

@@ -1,30 +1,33 @@
 """Rectangle factor: the wheel layer is a rectangle.
 
-With ``(lf, rf, lb, rb)`` the four hubs: the parallelogram condition
-``(lf - rf) - (lb - rb) = 0`` (3 rows) and equal diagonals
-``|lf - rb| - |rf - lb| = 0`` (1 row), metres, over ``sigma``. A parallelogram
-with equal diagonals is a rectangle.
+With ``(lf, rf, lb, rb)`` the four hubs, the residual is the parallelogram
+condition ``((lf - rf) - (lb - rb)) / sigma`` (3 rows, metres): the left-right
+axle vectors of the front and back axles are equal. Together with the mirror
+symmetry of the layer (:mod:`vfactor.factors.symmetry`) this makes the layer a
+rectangle: a parallelogram symmetric about a plane through its centre that
+contains neither pair of sides' direction is an isosceles trapezoid with
+parallel legs, i.e. a rectangle. Linear, so native (see
+:mod:`vfactor.factors.linear`).
 """
 
 from __future__ import annotations
 
-from functools import partial
-
 import numpy as np
 
-from vfactor.factors.shape_terms import ShapeTerm, cnorm
-from vfactor.keypoints import LAYER_NAMES, LAYERS
+from vfactor.factors.linear import linear_vector_factor
 
-__all__ = ["rectangle_term"]
+__all__ = ["rectangle_factor", "RECTANGLE_MATRIX"]
 
-
-def _residual(layer, sigma, points):
-    lf, rf, lb, rb = (points[..., i, :] for i in LAYERS[layer])
-    parallelogram = (lf - rf) - (lb - rb)
-    diagonals = cnorm(lf - rb) - cnorm(rf - lb)
-    return np.concatenate([parallelogram, diagonals[..., None]], axis=-1) / sigma
+#: (3, 12) residual matrix on a layer ``[lf, rf, lb, rb]``.
+RECTANGLE_MATRIX = np.hstack([np.eye(3), -np.eye(3), -np.eye(3), np.eye(3)])
+RECTANGLE_MATRIX.setflags(write=False)
 
 
-def rectangle_term(layer: str = "wheel", sigma: float = 0.02) -> ShapeTerm:
-    """The rectangle residual of one layer (4 rows)."""
-    return ShapeTerm("rectangle", partial(_residual, layer, sigma), 4, np.full(4, LAYER_NAMES.index(layer)))
+def rectangle_factor(wheel_key: int, sigma: float = 0.02):
+    """Parallelogram condition of the wheel layer (rectangle with the symmetry factor).
+
+    Args:
+        wheel_key: key of the wheel layer 12-vector.
+        sigma: standard deviation of each coordinate of the axle-vector difference, metres.
+    """
+    return linear_vector_factor([wheel_key], [RECTANGLE_MATRIX], np.zeros(3), sigma)

@@ -80,13 +80,18 @@ class RobustLoss:
             return s, ds
         if self.name == "cauchy":
             u = (n / k) ** 2
-            small = u < 1e-6
-            safe_u = np.where(small, 1.0, u)
-            log_term = np.log1p(safe_u)
-            ratio = np.where(small, 1.0 - 0.5 * u, log_term / safe_u)  # s^2
+            if u.min() > 1e-6:  # the common case, without masks
+                log_term = np.log1p(u)
+                ratio = log_term / u  # s^2
+                dratio_du = (u / (1 + u) - log_term) / (u * u)
+            else:
+                small = u < 1e-6
+                safe_u = np.where(small, 1.0, u)
+                log_term = np.log1p(safe_u)
+                ratio = np.where(small, 1.0 - 0.5 * u, log_term / safe_u)
+                dratio_du = np.where(small, -0.5 + 2.0 * u / 3.0, (safe_u / (1 + safe_u) - log_term) / safe_u**2)
             s = np.sqrt(ratio)
-            # d(s^2)/du, then ds/dn = d(s^2)/du * du/dn / (2 s), du/dn = 2 n / k^2; we return ds/dn / n.
-            dratio_du = np.where(small, -0.5 + 2.0 * u / 3.0, (safe_u / (1 + safe_u) - log_term) / safe_u**2)
+            # ds/dn = d(s^2)/du * du/dn / (2 s) with du/dn = 2 n / k^2; we return ds/dn / n.
             return s, dratio_du / (k * k * s)
         # geman_mcclure: s = k / sqrt(k^2 + n^2)
         denom = k * k + n * n

@@ -268,7 +268,7 @@ def _error_cells(errors: dict | None, widths) -> str:
 
 
 def _eval(args) -> int:
-    from vfactor.evaluation import accuracy_table, run_accuracy
+    from vfactor.evaluation import accuracy_table, keypoint_table, run_accuracy
 
     t0 = time.perf_counter()
     sections = []
@@ -277,7 +277,7 @@ def _eval(args) -> int:
         title = (f"### {scenario.name}: {n.outlier_rate:.0%} outliers, {n.swap_rate:.0%} left/right swaps, "
                  f"{n.missing_rate:.0%} missing, sigma {n.relative_sigma:.0%} of the box diagonal "
                  f"(x{n.occluded_factor:g} when self-occluded), seed {args.seed}")
-        sections.append(f"{title}\n\n{accuracy_table(summary)}\n")
+        sections.append(f"{title}\n\n{accuracy_table(summary)}\n\nMean error per keypoint (cm):\n\n{keypoint_table(summary)}\n")
         print(sections[-1])
     command = "vfactor eval" + (f" --scenario {args.scenario}" if args.scenario != "accuracy_2cam" else "") + \
         (f" --frames {args.frames}" if args.frames else "") + (f" --seed {args.seed}" if args.seed else "")

@@ -18,7 +18,7 @@ from vfactor.metrics import pose_errors
 from vfactor.sim import Scenario, Simulation, load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations
 
-__all__ = ["METHODS", "compare_methods", "summarise_methods", "accuracy_table", "noise_variant"]
+__all__ = ["METHODS", "compare_methods", "summarise_methods", "accuracy_table", "keypoint_table", "noise_variant", "run_accuracy"]
 
 #: Method name -> description, in table order.
 METHODS = {
@@ -101,6 +101,19 @@ def accuracy_table(summary: dict[str, dict], reference: str = "known_shape") -> 
             f"| {method} | {s['count']} | {s['failures']} | {s['rotation_deg']:.2f} | {s['translation_cm']:.2f} | "
             f"{s['keypoint_cm']:.2f} | {s['median_keypoint_cm']:.2f} | {ratio} | {1e3 * s['seconds']:.1f} |"
         )
+    return "\n".join(lines)
+
+
+def keypoint_table(summary: dict[str, dict]) -> str:
+    """Mean error per keypoint (cm), one row per method (the layout of the paper's Table I)."""
+    from vfactor.keypoints import KEYPOINT_NAMES
+
+    short = [n.replace("_wheel", " wh").replace("_light", " lt").replace("_up_windshield", " ws").replace(
+        "_up_rear_window", " rw").replace("left", "L").replace("right", "R").replace("_", " ") for n in KEYPOINT_NAMES]
+    lines = ["| method | " + " | ".join(short) + " | mean |", "| --- " * (len(short) + 2) + "|"]
+    for method, s in summary.items():
+        cells = " | ".join(f"{e:.1f}" for e in s["per_keypoint_cm"])
+        lines.append(f"| {method} | {cells} | {s['keypoint_cm']:.1f} |")
     return "\n".join(lines)
 
 

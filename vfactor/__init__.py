@@ -10,8 +10,7 @@ Quick start::
             print(v.id, v.status.value, v.world_T_vehicle, v.pose_covariance)
 
 Conventions (frames, units, keypoint order) are in ``docs/conventions.md``.
-The keypoint network (``vfactor.net``) is the only part that needs PyTorch
-and is not imported here.
+PyTorch is never imported by the core; only a keypoint network will need it.
 """
 
 from vfactor.camera import Camera

@@ -43,4 +43,4 @@ class CalibrationError(InputError):
 
 
 class ScenarioError(InputError):
-    """A simulation scenario file (``graphs/*.json``) is malformed."""
+    """A simulation scenario file (``vfactor/graphs/*.json`` or the user's own) is malformed."""

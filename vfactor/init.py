@@ -129,15 +129,21 @@ def _pnp(camera, object_p, image_uv, threshold_px):
     return poses
 
 
-def pose_candidates(obs: KeypointObservations, wireframe: Wireframe) -> list[tuple[gtsam.Pose3, Wireframe, str]]:
-    """All candidate (pose, wireframe, source) starts for one vehicle (unscored)."""
+def pose_candidates(
+    obs: KeypointObservations, wireframe: Wireframe, min_keypoints_in_one_view: int = 4
+) -> list[tuple[gtsam.Pose3, Wireframe, str]]:
+    """All candidate (pose, wireframe, source) starts for one vehicle (unscored).
+
+    PnP runs on every camera that sees at least ``min_keypoints_in_one_view``
+    keypoints (4 at the least); triangulation needs 4 keypoints seen twice.
+    """
     out = []
     points = wireframe.vehicle_p_keypoints
     sigma = 1.0 / np.abs(obs.sqrt_information[:, 0, 0])
     flip = gtsam.Pose3(gtsam.Rot3.Yaw(np.pi), np.zeros(3))
     for c, camera in enumerate(obs.cameras):
         rows = np.flatnonzero(obs.camera_index == c)
-        if len(rows) < 4:
+        if len(rows) < max(4, min_keypoints_in_one_view):
             continue
         threshold = float(3.0 * np.median(sigma[rows]))
         for labels, tag in ((obs.keypoint_index[rows], "pnp"), (MIRROR_PERMUTATION[obs.keypoint_index[rows]], "pnp-mirrored")):
@@ -154,11 +160,11 @@ def pose_candidates(obs: KeypointObservations, wireframe: Wireframe) -> list[tup
 
 def best_candidates(
     obs: KeypointObservations, wireframe: Wireframe, loss: RobustLoss, count: int = 2,
-    min_angle_rad: float = 0.35, min_distance_m: float = 1.0,
+    min_angle_rad: float = 0.35, min_distance_m: float = 1.0, min_keypoints_in_one_view: int = 4,
 ) -> list[Candidate]:
     """The ``count`` lowest-cost candidates that differ by at least the given angle or distance."""
     scored = sorted(
-        (Candidate(pose, w, cross_projection_cost(obs, pose, w, loss), source) for pose, w, source in pose_candidates(obs, wireframe)),
+        (Candidate(pose, w, cross_projection_cost(obs, pose, w, loss), source) for pose, w, source in pose_candidates(obs, wireframe, min_keypoints_in_one_view)),
         key=lambda c: c.cost,
     )
     chosen: list[Candidate] = []

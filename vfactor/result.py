@@ -39,7 +39,9 @@ class VehicleResult:
         iterations: optimiser iterations.
         final_error: final value of the graph's cost (0.5 * sum of squared whitened residuals, robust).
         message: human-readable detail (always set for DEGENERATE and FAILED).
-        inlier_mask: optional (n_cameras, 12) mask of observations the robust loss kept.
+        extras: solver diagnostics; ``"inlier_weights"``: (n,) robust-loss weight in
+            [0, 1] of each observation, in the order of
+            :func:`vfactor.graph.observations_from_detections` (near 0: rejected).
     """
 
     id: str

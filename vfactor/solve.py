@@ -123,7 +123,8 @@ def solve_observations(
         starts = [initial]
     else:
         per_view = np.bincount(obs.camera_index, minlength=len(obs.cameras)).max()
-        candidates = best_candidates(obs, mean, options.graph.loss, options.num_starts)
+        candidates = best_candidates(obs, mean, options.graph.loss, options.num_starts,
+                                     min_keypoints_in_one_view=options.min_keypoints_in_one_view)
         if not candidates:
             return VehicleResult(
                 vehicle_id, Status.DEGENERATE,
@@ -134,13 +135,14 @@ def solve_observations(
             )
         starts = [(c.world_T_vehicle, c.wireframe) for c in candidates]
     graph = build_vehicle_graph(obs, keys, config=options.graph, prior=prior, bounds=bounds)
+    hwc = hwc_factor(keys, 0, options.graph, bounds)
     best = None
     failure = "no start"
     for world_T_vehicle, wireframe in starts:
         values = gtsam.Values()
         insert_vehicle_values(values, keys, world_T_vehicle, wireframe)
         try:
-            outcome = _optimise(graph, values, keys, options, bounds)
+            outcome = _optimise(graph, values, keys, options, bounds, hwc)
         except RuntimeError as exc:
             failure = str(exc)
             continue
@@ -148,11 +150,11 @@ def solve_observations(
             best = outcome
     if best is None:
         return VehicleResult(vehicle_id, Status.FAILED, message=f"optimisation failed: {failure}")
-    estimate, error, iterations, graph = best
+    estimate, error, iterations, hit_limit, graph = best
     pose_key = keys.pose_key()
     world_T_vehicle = estimate.atPose3(pose_key)
     wireframe = _wireframe_of(estimate, keys)
-    status = Status.CONVERGED if iterations < options.max_iterations else Status.MAX_ITERATIONS
+    status = Status.MAX_ITERATIONS if hit_limit else Status.CONVERGED
     result = VehicleResult(
         vehicle_id, status, world_T_vehicle=world_T_vehicle, wireframe=wireframe, iterations=int(iterations),
         final_error=float(error),
@@ -177,25 +179,38 @@ def _wireframe_of(values: gtsam.Values, keys: KeyScheme, vehicle: int = 0) -> Wi
     return Wireframe.from_layer_vectors({name: values.atVector(k) for name, k in zip(LAYER_NAMES, keys.layer_keys(vehicle))})
 
 
-def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, bounds):
+def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, bounds, hwc=None):
     """LM on ``graph``; with ``hwc="lazy"``, again with the HWC factor when the shape breaks HWC.
 
-    Returns (estimate, final error, total iterations, the graph finally used).
+    Args:
+        hwc: the vehicle's HWC factor (made when None).
+
+    Returns:
+        (estimate, cost, hit the iteration limit, the graph finally used). The cost
+        always includes the HWC factor's error, so that starts which did and did
+        not need it compare on the same objective.
     """
+    config = options.graph
+    hwc = hwc if hwc is not None else hwc_factor(keys, 0, config, bounds)
     optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.lm_params())
     estimate = optimizer.optimize()
+    hit_limit = optimizer.iterations() >= options.max_iterations
     iterations = optimizer.iterations()
-    config = options.graph
+    added = False
     if config.hwc == "lazy" and hwc_violation(_wireframe_of(estimate, keys), config, bounds) > config.hwc_tolerance:
         with_hwc = gtsam.NonlinearFactorGraph()
         for i in range(graph.size()):  # shares the factors: a Python CustomFactor cannot be cloned
             with_hwc.add(graph.at(i))
-        with_hwc.add(hwc_factor(keys, 0, config, bounds))
-        graph = with_hwc
+        with_hwc.add(hwc)
+        graph, added = with_hwc, True
         optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.lm_params())
         estimate = optimizer.optimize()
+        hit_limit = optimizer.iterations() >= options.max_iterations
         iterations += optimizer.iterations()
-    return estimate, graph.error(estimate), iterations, graph
+    cost = graph.error(estimate)
+    if config.hwc == "lazy" and not added:
+        cost += hwc.error(estimate)
+    return estimate, cost, iterations, hit_limit, graph
 
 
 def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: Wireframe, options: SolveOptions) -> str:

@@ -133,3 +133,14 @@ def test_robust_loss_rejects_bad_settings():
         RobustLoss("tukey-ish")
     with pytest.raises(ValueError, match="threshold"):
         RobustLoss("huber", -1.0)
+
+
+def test_jacobians_hold_for_points_behind_a_camera():
+    """Behind a camera the depth is clamped; the Jacobian must be that of the clamped projection."""
+    from vfactor.testing import check_factor_jacobians
+
+    obs = observations(2.0, np.random.default_rng(2))
+    factor = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, RobustLoss("cauchy", 2.0))
+    behind = gtsam.Pose3(gtsam.Rot3.Yaw(0.3), np.array([30.0, 20.0, 0.3]))  # behind camera "a" at (15, 10, 7)
+    assert CAMERAS[0].to_camera(TRUTH_SHAPE.in_world(behind))[:, 2].max() < 0
+    check_factor_jacobians(factor, values_at(behind, TRUTH_SHAPE), rtol=1e-5, atol=1e-5)

@@ -1,7 +1,7 @@
 """Distance bounds factor: point-to-point distances of the wireframe within bounds.
 
-For every pair ``(i, j)`` in :data:`vfactor.shape_model.DISTANCE_PAIRS` (the
-wireframe's edges and the layers' diagonals):
+For every pair ``(i, j)`` in :data:`vfactor.shape_model.DISTANCE_PAIRS` (all
+66 pairs of keypoints):
 ``hinge(|p_i - p_j|, d_min, d_max) / sigma`` (one row per pair, metres), zero
 inside the bounds: the HWC's "point-to-point distances bounded". Analytic
 Jacobian: ``+-u / sigma`` on the two points of an active row (``u`` the unit

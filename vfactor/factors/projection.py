@@ -99,10 +99,13 @@ def project_keypoints(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, v
     world = body @ R.T + t
     cam_p = np.einsum("nij,nj->ni", obs._R_cw, world) + obs._t_cw
     depth = cam_p[:, 2].copy()
+    clamped = depth < _MIN_DEPTH
     cam_p[:, 2] = np.maximum(depth, _MIN_DEPTH)
     uv, J_cam = project_pinhole(cam_p, *obs._intrinsics, obs._dist, jacobians)
     if not jacobians:
         return uv, depth, None, None
+    if clamped.any():
+        J_cam[clamped, :, 2] = 0.0  # the clamped depth no longer moves with the point
     J_point = np.einsum("nij,njk->nik", J_cam, obs._R_cw @ R)  # (n, 2, 3)
     J_pose = np.empty((len(obs), 2, 6))
     # d(R p + t)/d xi = [-R [p]x, R]  =>  rows a^T (-R[p]x) = (p x (R^T a))^T with a^T R = J_point rows

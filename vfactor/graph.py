@@ -174,14 +174,19 @@ def add_shape_factors(
         graph.add(hwc_factor(keys, vehicle, config, bounds))
 
 
-def hwc_factor(keys: KeyScheme, vehicle: int = 0, config: GraphConfig = GraphConfig(), bounds: HwcBounds | None = None):
-    """The fused nonlinear HWC factor of one vehicle (one Python call per linearisation)."""
-    return shape_terms_factor(keys.layer_keys(vehicle), hwc_terms(config, bounds))
+def hwc_factor(keys: KeyScheme, vehicle: int = 0, config: GraphConfig = GraphConfig(), bounds: HwcBounds | None = None,
+               terms=None):
+    """The fused nonlinear HWC factor of one vehicle (one Python call per linearisation).
+
+    Args:
+        terms: the HWC terms, when already made by :func:`hwc_terms`.
+    """
+    return shape_terms_factor(keys.layer_keys(vehicle), terms if terms is not None else hwc_terms(config, bounds))
 
 
-def hwc_violation(wireframe: Wireframe, config: GraphConfig = GraphConfig(), bounds: HwcBounds | None = None) -> float:
-    """Largest whitened HWC residual (sigmas) of a wireframe; 0 when every condition holds."""
-    return float(np.abs(evaluate_terms(hwc_terms(config, bounds), wireframe.vehicle_p_keypoints)).max())
+def hwc_violation(wireframe: Wireframe, terms) -> float:
+    """Largest whitened residual (sigmas) of the HWC ``terms`` (:func:`hwc_terms`); 0 when every condition holds."""
+    return float(np.abs(evaluate_terms(terms, wireframe.vehicle_p_keypoints)).max())
 
 
 def add_observation_factor(

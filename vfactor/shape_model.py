@@ -41,8 +41,13 @@ class ShapePrior:
         return Wireframe(self.mean)
 
     def sqrt_information(self) -> np.ndarray:
-        """(36, 36) upper-triangular R with ``R^T R = covariance^-1``."""
-        return np.linalg.cholesky(np.linalg.inv(self.covariance)).T
+        """(36, 36) upper-triangular R with ``R^T R = covariance^-1`` (computed once, read-only)."""
+        cached = self.__dict__.get("_sqrt_information")
+        if cached is None:
+            cached = np.linalg.cholesky(np.linalg.inv(self.covariance)).T
+            cached.setflags(write=False)
+            self.__dict__["_sqrt_information"] = cached
+        return cached
 
 
 @lru_cache(maxsize=8)

@@ -21,6 +21,7 @@ from vfactor.graph import (
     GraphConfig,
     build_vehicle_graph,
     hwc_factor,
+    hwc_terms,
     hwc_violation,
     insert_vehicle_values,
     observations_from_detections,
@@ -135,14 +136,15 @@ def solve_observations(
             )
         starts = [(c.world_T_vehicle, c.wireframe) for c in candidates]
     graph = build_vehicle_graph(obs, keys, config=options.graph, prior=prior, bounds=bounds)
-    hwc = hwc_factor(keys, 0, options.graph, bounds)
+    terms = hwc_terms(options.graph, bounds)
+    hwc = hwc_factor(keys, 0, terms=terms)
     best = None
     failure = "no start"
     for world_T_vehicle, wireframe in starts:
         values = gtsam.Values()
         insert_vehicle_values(values, keys, world_T_vehicle, wireframe)
         try:
-            outcome = _optimise(graph, values, keys, options, bounds, hwc)
+            outcome = _optimise(graph, values, keys, options, terms, hwc)
         except RuntimeError as exc:
             failure = str(exc)
             continue
@@ -179,11 +181,12 @@ def _wireframe_of(values: gtsam.Values, keys: KeyScheme, vehicle: int = 0) -> Wi
     return Wireframe.from_layer_vectors({name: values.atVector(k) for name, k in zip(LAYER_NAMES, keys.layer_keys(vehicle))})
 
 
-def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, bounds, hwc=None):
+def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc):
     """LM on ``graph``; with ``hwc="lazy"``, again with the HWC factor when the shape breaks HWC.
 
     Args:
-        hwc: the vehicle's HWC factor (made when None).
+        terms: the HWC terms (:func:`vfactor.graph.hwc_terms`).
+        hwc: the vehicle's HWC factor made of ``terms``.
 
     Returns:
         (estimate, cost, hit the iteration limit, the graph finally used). The cost
@@ -191,13 +194,12 @@ def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, bounds, hwc
         not need it compare on the same objective.
     """
     config = options.graph
-    hwc = hwc if hwc is not None else hwc_factor(keys, 0, config, bounds)
     optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.lm_params())
     estimate = optimizer.optimize()
     hit_limit = optimizer.iterations() >= options.max_iterations
     iterations = optimizer.iterations()
     added = False
-    if config.hwc == "lazy" and hwc_violation(_wireframe_of(estimate, keys), config, bounds) > config.hwc_tolerance:
+    if config.hwc == "lazy" and hwc_violation(_wireframe_of(estimate, keys), terms) > config.hwc_tolerance:
         with_hwc = gtsam.NonlinearFactorGraph()
         for i in range(graph.size()):  # shares the factors: a Python CustomFactor cannot be cloned
             with_hwc.add(graph.at(i))

@@ -144,3 +144,19 @@ def test_jacobians_hold_for_points_behind_a_camera():
     behind = gtsam.Pose3(gtsam.Rot3.Yaw(0.3), np.array([30.0, 20.0, 0.3]))  # behind camera "a" at (15, 10, 7)
     assert CAMERAS[0].to_camera(TRUTH_SHAPE.in_world(behind))[:, 2].max() < 0
     check_factor_jacobians(factor, values_at(behind, TRUTH_SHAPE), rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("name", LOSSES)
+def test_compiled_kernel_matches_the_numpy_projection_and_loss(name):
+    """The factor's compiled residuals equal NumPy's projection, whitening and robust scaling."""
+    from vfactor.factors.projection import whitened_residuals
+    from vfactor.testing import whitened_error
+
+    loss = RobustLoss(name, 1.5)
+    obs = observations(3.0, np.random.default_rng(8), anisotropic=True)
+    values = ProjectionContract().make_values(np.random.default_rng(9))
+    factor = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, loss)
+    points = np.concatenate([values.atVector(k) for k in KEYS.layer_keys()]).reshape(12, 3)
+    e = whitened_residuals(obs, values.atPose3(KEYS.pose_key()), points)
+    s, _ = loss.scale(np.linalg.norm(e, axis=1))
+    assert np.allclose(whitened_error(factor, values), (e * s[:, None]).ravel(), rtol=1e-10, atol=1e-10)

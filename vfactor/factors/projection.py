@@ -3,8 +3,11 @@
 One factor holds any number of observations ``(camera, keypoint, uv, noise)``
 of one vehicle; the graph builder puts all observations of a vehicle in a
 frame into one factor, so that a frame costs one Python call per
-linearisation instead of one per keypoint (see docs/performance.md). A single
-observation is simply a factor with one row.
+linearisation instead of one per keypoint, and the factor's residuals and
+Jacobians come from one compiled loop (:mod:`vfactor.factors.projection_kernel`;
+see docs/performance.md). A single observation is simply a factor with one
+row. :func:`project_keypoints` is the same projection in NumPy, for
+initialisation, diagnostics and the tests.
 
 For observation i of keypoint k from camera c (docs/factors.md)::
 
@@ -25,12 +28,14 @@ import gtsam
 import numpy as np
 
 from vfactor.camera import Camera, project_pinhole
+from vfactor.factors.projection_kernel import LOSS_IDS, projection_kernel
 from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_terms import cross
 
 __all__ = ["KeypointObservations", "projection_factor", "project_keypoints", "whitened_residuals"]
 
 _MIN_DEPTH = 0.05  # metres; points closer to (or behind) a camera are clamped to this depth
+_EMPTY = np.empty((0, 0))
 
 
 @dataclass(frozen=True)
@@ -64,10 +69,9 @@ class KeypointObservations:
         object.__setattr__(self, "_intrinsics", (K[:, 0, 0], K[:, 1, 1], K[:, 0, 1], K[:, 0, 2], K[:, 1, 2]))
         distorted = any(c.has_distortion for c in self.cameras)
         object.__setattr__(self, "_dist", np.array([c.dist for c in cams]).reshape(n, 5) if distorted else None)
-        # flat positions of each observation's 2x3 block in the (2n, 36) Jacobian of the 36 shape coordinates
-        rows = 2 * np.arange(n)[:, None, None] + np.arange(2)[None, :, None]
-        cols = 3 * np.asarray(self.keypoint_index)[:, None, None] + np.arange(3)[None, None, :]
-        object.__setattr__(self, "_shape_scatter", (rows * 36 + cols).ravel())
+        # contiguous tables for the compiled kernel of the projection factor
+        object.__setattr__(self, "_intrinsics_table", np.ascontiguousarray(np.stack(self._intrinsics, axis=1)).reshape(n, 5))
+        object.__setattr__(self, "_dist_table", np.array([c.dist for c in cams], dtype=float).reshape(n, 5))
 
     def __len__(self):
         return len(self.camera_index)
@@ -126,26 +130,21 @@ def _layers_to_points(values: gtsam.Values, layer_keys) -> np.ndarray:
 
 def _error(obs: KeypointObservations, loss: RobustLoss, this: gtsam.CustomFactor, values: gtsam.Values, H):
     keys = this.keys()
-    world_T_vehicle = values.atPose3(keys[0])
-    vehicle_p = _layers_to_points(values, keys[1:])
+    T = values.atPose3(keys[0]).matrix()
+    points = _layers_to_points(values, keys[1:])
+    n = len(obs)
+    r = np.empty(2 * n)
     want = H is not None
-    uv, _, J_pose, J_point = project_keypoints(obs, world_T_vehicle, vehicle_p, jacobians=want)
-    L = obs.sqrt_information
-    e = np.einsum("nij,nj->ni", L, uv - obs.uv)
-    norm = np.sqrt(np.einsum("ni,ni->n", e, e))
-    s, ds_over_n = loss.scale(norm)
-    r = e * s[:, None]
+    H_pose = np.empty((2 * n, 6)) if want else _EMPTY
+    H_shape = np.zeros((2 * n, 36)) if want else _EMPTY
+    projection_kernel(T[:3, :3], T[:3, 3], points, obs.keypoint_index, obs._R_cw, obs._t_cw, obs._intrinsics_table,
+                      obs._dist_table, obs.uv, obs.sqrt_information, LOSS_IDS[loss.name], float(loss.threshold),
+                      _MIN_DEPTH, want, r, H_pose, H_shape)
     if want:
-        n = len(obs)
-        # dr/de = s I + (s'/n) e e^T, so dr/dx = s L J + (s'/n) e (e^T L J)
-        DL = s[:, None, None] * L + (ds_over_n[:, None] * e)[:, :, None] * np.einsum("ni,nij->nj", e, L)[:, None, :]
-        H[0] = (DL @ J_pose).reshape(2 * n, 6)
-        shape = np.zeros(2 * n * 36)
-        shape[obs._shape_scatter] = (DL @ J_point).ravel()
-        shape = shape.reshape(2 * n, 36)
+        H[0] = H_pose
         for j in range(3):
-            H[j + 1] = shape[:, 12 * j : 12 * j + 12]
-    return r.ravel()
+            H[j + 1] = H_shape[:, 12 * j : 12 * j + 12]
+    return r
 
 
 def projection_factor(

@@ -1,0 +1,155 @@
+"""Compiled (numba) kernel of the keypoint projection factor.
+
+The projection factor is the one factor of the default graph that runs in
+Python; linearised per LM iteration, its NumPy form cost about 90 us for 24
+observations, more than GTSAM's whole native iteration. This kernel computes
+the same residuals and Jacobians in one compiled loop (a few microseconds), so
+only the ~10 us of the ``CustomFactor`` call itself remain (docs/performance.md).
+
+The maths is that of :mod:`vfactor.factors.projection` (docs/factors.md):
+projection with OpenCV distortion as :func:`vfactor.camera.project_pinhole`,
+whitening by ``L``, and the robust loss of :mod:`vfactor.factors.robust` as
+``r = s(n) e``; the tests check it against those NumPy implementations and
+against numerical derivatives.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["LOSS_IDS", "projection_kernel"]
+
+#: Loss name -> id used by the kernel.
+LOSS_IDS = {"none": 0, "huber": 1, "cauchy": 2, "geman_mcclure": 3}
+
+
+@njit(cache=True, inline="always")
+def _scale(loss_id, k, n):
+    """Returns s(n) = sqrt(2 rho(n)) / n and s'(n) / n (see robust.py)."""
+    if loss_id == 0:
+        return 1.0, 0.0
+    if loss_id == 1:
+        if n <= k:
+            return 1.0, 0.0
+        root = math.sqrt(2.0 * k * n - k * k)
+        return root / n, (k * k - k * n) / (n * n * n * root)
+    if loss_id == 2:
+        u = (n / k) ** 2
+        if u < 1e-6:
+            ratio = 1.0 - 0.5 * u
+            dratio = -0.5 + 2.0 * u / 3.0
+        else:
+            log_term = math.log1p(u)
+            ratio = log_term / u
+            dratio = (u / (1.0 + u) - log_term) / (u * u)
+        s = math.sqrt(ratio)
+        return s, dratio / (k * k * s)
+    denom = k * k + n * n
+    return k / math.sqrt(denom), -k / denom**1.5
+
+
+@njit(cache=True)
+def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, dist, uv, L, loss_id, k, min_depth,
+                      want_jacobians, r_out, H_pose, H_shape):
+    """Fills the robust whitened residuals and, if asked, the Jacobians of every observation.
+
+    Args:
+        R, t: rotation (3, 3) and translation (3,) of ``world_T_vehicle``.
+        points: (12, 3) body-frame keypoints.
+        keypoint_index: (n,) keypoint of each observation.
+        R_cw, t_cw: (n, 3, 3), (n, 3) world -> camera of each observation's camera.
+        intrinsics: (n, 5) ``fx, fy, skew, cx, cy``.
+        dist: (n, 5) ``k1, k2, p1, p2, k3``.
+        uv: (n, 2) measured pixels.
+        L: (n, 2, 2) square-root information.
+        loss_id, k: robust loss (see :data:`LOSS_IDS`) and its threshold.
+        min_depth: depth clamp, metres.
+        want_jacobians: whether to fill ``H_pose`` and ``H_shape``.
+        r_out: (2n,) residuals, written.
+        H_pose: (2n, 6) d r / d xi (right perturbation, rotation first), written.
+        H_shape: (2n, 36) d r / d body points, written (must be zero on entry).
+    """
+    n = keypoint_index.shape[0]
+    for i in range(n):
+        kp = keypoint_index[i]
+        p0, p1, p2 = points[kp, 0], points[kp, 1], points[kp, 2]
+        # world point, then camera point
+        w = np.empty(3)
+        for a in range(3):
+            w[a] = R[a, 0] * p0 + R[a, 1] * p1 + R[a, 2] * p2 + t[a]
+        c = np.empty(3)
+        for a in range(3):
+            c[a] = R_cw[i, a, 0] * w[0] + R_cw[i, a, 1] * w[1] + R_cw[i, a, 2] * w[2] + t_cw[i, a]
+        clamped = c[2] < min_depth
+        Z = min_depth if clamped else c[2]
+        inv_z = 1.0 / Z
+        x, y = c[0] * inv_z, c[1] * inv_z
+        fx, fy, skew, cx, cy = intrinsics[i, 0], intrinsics[i, 1], intrinsics[i, 2], intrinsics[i, 3], intrinsics[i, 4]
+        k1, k2, q1, q2, k3 = dist[i, 0], dist[i, 1], dist[i, 2], dist[i, 3], dist[i, 4]
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2.0 * q1 * x * y + q2 * (r2 + 2.0 * x * x)
+        yd = y * radial + q1 * (r2 + 2.0 * y * y) + 2.0 * q2 * x * y
+        du = fx * xd + skew * yd + cx - uv[i, 0]
+        dv = fy * yd + cy - uv[i, 1]
+        e0 = L[i, 0, 0] * du + L[i, 0, 1] * dv
+        e1 = L[i, 1, 0] * du + L[i, 1, 1] * dv
+        norm = math.sqrt(e0 * e0 + e1 * e1)
+        s, ds = _scale(loss_id, k, norm)
+        r_out[2 * i] = s * e0
+        r_out[2 * i + 1] = s * e1
+        if not want_jacobians:
+            continue
+        # d uv / d camera point
+        dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+        d00 = radial + 2.0 * x * x * dradial + 2.0 * q1 * y + 6.0 * q2 * x
+        d01 = 2.0 * x * y * dradial + 2.0 * q1 * x + 2.0 * q2 * y
+        d11 = radial + 2.0 * y * y * dradial + 6.0 * q1 * y + 2.0 * q2 * x
+        a00 = fx * d00 + skew * d01
+        a01 = fx * d01 + skew * d11
+        a10 = fy * d01
+        a11 = fy * d11
+        J = np.empty((2, 3))
+        J[0, 0] = a00 * inv_z
+        J[0, 1] = a01 * inv_z
+        J[1, 0] = a10 * inv_z
+        J[1, 1] = a11 * inv_z
+        if clamped:
+            J[0, 2] = 0.0
+            J[1, 2] = 0.0
+        else:
+            J[0, 2] = -(a00 * x + a01 * y) * inv_z
+            J[1, 2] = -(a10 * x + a11 * y) * inv_z
+        # DL = s L + (s'/n) e (e^T L)
+        eL0 = e0 * L[i, 0, 0] + e1 * L[i, 1, 0]
+        eL1 = e0 * L[i, 0, 1] + e1 * L[i, 1, 1]
+        DL = np.empty((2, 2))
+        DL[0, 0] = s * L[i, 0, 0] + ds * e0 * eL0
+        DL[0, 1] = s * L[i, 0, 1] + ds * e0 * eL1
+        DL[1, 0] = s * L[i, 1, 0] + ds * e1 * eL0
+        DL[1, 1] = s * L[i, 1, 1] + ds * e1 * eL1
+        # M = R_cw R (camera <- body rotation); Jp = DL J M
+        DJ = np.empty((2, 3))
+        for a in range(2):
+            for b in range(3):
+                DJ[a, b] = DL[a, 0] * J[0, b] + DL[a, 1] * J[1, b]
+        for a in range(2):
+            row = 2 * i + a
+            g = np.empty(3)  # DJ[a] @ R_cw
+            for b in range(3):
+                g[b] = DJ[a, 0] * R_cw[i, 0, b] + DJ[a, 1] * R_cw[i, 1, b] + DJ[a, 2] * R_cw[i, 2, b]
+            jp = np.empty(3)  # g @ R: d r / d body point
+            for b in range(3):
+                jp[b] = g[0] * R[0, b] + g[1] * R[1, b] + g[2] * R[2, b]
+            # d r / d xi = [p x jp, jp]
+            H_pose[row, 0] = p1 * jp[2] - p2 * jp[1]
+            H_pose[row, 1] = p2 * jp[0] - p0 * jp[2]
+            H_pose[row, 2] = p0 * jp[1] - p1 * jp[0]
+            H_pose[row, 3] = jp[0]
+            H_pose[row, 4] = jp[1]
+            H_pose[row, 5] = jp[2]
+            for b in range(3):
+                H_shape[row, 3 * kp + b] = jp[b]

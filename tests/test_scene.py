@@ -713,3 +713,23 @@ def test_bad_results_raise_scene_error_naming_the_field(tmp_path, name, edit, fi
         load_results(path)
     assert info.value.field == field
     assert message in info.value.problem, info.value.problem
+
+
+def test_ground_plane_round_trips_and_is_validated(tmp_path):
+    from vfactor.factors.ground_plane import GroundPlane
+    from vfactor.scene import load_scene, save_scene, scene_from_dict
+    from vfactor.errors import SceneError
+
+    data = {"cameras": [{"name": "c", "K": [[800, 0, 640], [0, 800, 360], [0, 0, 1]],
+                         "world_T_camera": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}],
+            "frames": [], "ground_plane": {"normal": [0, 0, 2], "offset": 0.1}}
+    scene = scene_from_dict(data)
+    assert scene.ground_plane == GroundPlane((0.0, 0.0, 1.0), 0.1)
+    save_scene(scene, tmp_path / "s.json")
+    assert load_scene(tmp_path / "s.json").ground_plane == scene.ground_plane
+    for bad, field in (({"normal": [0, 0, -1]}, "ground_plane.normal"), ({"normal": [0, 1]}, "ground_plane.normal"),
+                       ({"normal": [0, 0, 1], "tilt": 1}, "ground_plane.tilt")):
+        data["ground_plane"] = bad
+        with pytest.raises(SceneError) as info:
+            scene_from_dict(data)
+        assert info.value.field == field

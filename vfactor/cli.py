@@ -30,7 +30,8 @@ Start here:
                                         compare with triangulation, write pictures
   vfactor simulate --list               the packaged scenarios (camera rigs, vehicles, noise)
   vfactor simulate intersection_2cam --out scene.json --truth truth.json
-  vfactor solve scene.json --out result.json
+  vfactor solve scene.json --out result.json      every frame on its own
+  vfactor track scene.json --out result.json      tracks over frames (iSAM2: shared shape, motion)
   vfactor eval                          accuracy against ground truth, beside baselines
 
 Scene and result formats, conventions and the factors' maths: docs/ in the
@@ -56,6 +57,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
     p.add_argument("--loss", default="cauchy", choices=("none", "huber", "cauchy", "geman_mcclure"),
                    help="robust loss per keypoint (default: cauchy)")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+
+    p = sub.add_parser(
+        "track", help="track every vehicle through the frames of a scene (iSAM2, shared shape, motion model)",
+        description="Track every vehicle (by its track id) through the frames of SCENE with one incremental "
+        "smoother (iSAM2) per track: one pose per frame, one shape per track, a non-holonomic motion model between "
+        "poses, and a ground-plane factor when the scene gives a road plane. Writes RESULT in the format of "
+        "'vfactor solve' (final, smoothed estimates; --online for the estimates as each frame arrived). Frames out "
+        "of time order are tracked in time order and reported.",
+    )
+    p.add_argument("scene", help="scene file (JSON) with track ids in the detections' 'vehicle'")
+    p.add_argument("--out", required=True, help="result file to write (JSON)")
+    p.add_argument("--lag", type=float, help="fixed lag in seconds: bounded memory and time per frame for long streams")
+    p.add_argument("--batch", action="store_true", help="offline batch smoothing (Levenberg-Marquardt over each whole track)")
+    p.add_argument("--online", action="store_true", help="write the estimates as each frame arrived (filtered)")
+    p.add_argument("--plot", help="also write a PNG of the trajectories with covariance ellipses")
+    p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
 
     p = sub.add_parser(
@@ -100,7 +118,7 @@ def main(argv=None) -> int:
     if args.command is None:
         parser.print_help()
         return EXIT_OK
-    handlers = {"solve": _solve, "simulate": _simulate, "demo": _demo, "eval": _eval}
+    handlers = {"solve": _solve, "track": _track, "simulate": _simulate, "demo": _demo, "eval": _eval}
     try:
         return handlers[args.command](args)
     except InputError as exc:
@@ -191,6 +209,42 @@ def _solve(args) -> int:
     return _report_unsolved(results, scene, args.quiet)
 
 
+def _track(args) -> int:
+    from vfactor.scene import load_scene, save_results
+    from vfactor.solve import SolveOptions
+    from vfactor.track import TrackOptions, smooth_scene, track_scene
+
+    if args.lag is not None and not (np.isfinite(args.lag) and args.lag > 0):
+        raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
+    if args.batch and (args.lag is not None or args.online):
+        raise InputError("--batch", "batch smoothing uses every frame: it takes neither --lag nor --online")
+    scene = load_scene(args.scene)
+    options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance)
+    t0 = time.perf_counter()
+    if args.batch:
+        results, messages = smooth_scene(scene, options), []
+    else:
+        run = track_scene(scene, options, progress=_Progress("tracking", not args.quiet))
+        results, messages = (run.online if args.online else run.frames), run.messages
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    save_results(args.out, results)
+    for message in messages:
+        print(f"note: {message}", file=sys.stderr)
+    vehicles = [v for fr in results for v in fr.vehicles]
+    tracks = {v.id for v in vehicles}
+    if not args.quiet:
+        print(f"tracked {len(tracks)} vehicles over {len(results)} frames: {sum(v.ok for v in vehicles)} of "
+              f"{len(vehicles)} poses solved ({time.perf_counter() - t0:.2f} s); wrote {args.out}")
+    if args.plot:
+        from vfactor.viz import plot_trajectories
+
+        Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
+        plot_trajectories(scene.cameras, results, args.plot)
+        if not args.quiet:
+            print(f"wrote {args.plot}")
+    return _report_unsolved(results, scene, args.quiet)
+
+
 def _simulate(args) -> int:
     from vfactor.sim import list_scenarios, load_scenario, simulate, write_simulation
 
@@ -206,8 +260,9 @@ def _simulate(args) -> int:
     for path in (out, truth):
         path.parent.mkdir(parents=True, exist_ok=True)
     write_simulation(sim, out, truth)
-    n = sum(len(f.vehicle_ids()) for f in sim.scene.frames)
-    print(f"wrote {out} ({len(sim.scene.frames)} frames, {n} vehicles, {len(sim.scene.cameras)} cameras) and {truth}")
+    ids = {vid for f in sim.scene.frames for vid in f.vehicle_ids()}
+    print(f"wrote {out} ({len(sim.scene.frames)} frames, {len(ids)} vehicle ids, {len(sim.scene.cameras)} cameras) "
+          f"and {truth}")
     return EXIT_OK
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from vfactor.camera import Camera
+from vfactor.factors.ground_plane import GroundPlane
 
 __all__ = ["DEFAULT_VEHICLE_ID", "Detection", "Frame", "Scene"]
 
@@ -84,8 +85,11 @@ class Scene:
         cameras: camera name -> :class:`Camera`, in file order.
         frames: frames in file order.
         base_dir: folder that relative paths in the scene (heatmaps, images) start from.
+        ground_plane: the road plane when the scene gives one (tracking then adds
+            a ground-plane factor per pose); ``None`` otherwise.
     """
 
     cameras: dict[str, Camera]
     frames: list[Frame]
     base_dir: Path | None = None
+    ground_plane: GroundPlane | None = None

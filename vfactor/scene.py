@@ -38,6 +38,7 @@ import gtsam
 import numpy as np
 
 from vfactor.camera import Camera, check_rigid_transform
+from vfactor.factors.ground_plane import GroundPlane
 from vfactor.errors import CalibrationError, SceneError
 from vfactor.heatmaps import decode_heatmaps
 from vfactor.keypoints import NUM_KEYPOINTS
@@ -56,7 +57,8 @@ __all__ = [
     "results_to_dict",
 ]
 
-_TOP_KEYS = ("cameras", "frames")
+_TOP_KEYS = ("cameras", "frames", "ground_plane")
+_REQUIRED_TOP_KEYS = ("cameras", "frames")
 _CAMERA_KEYS = ("name", "K", "dist", "image_size", "world_T_camera")
 _FRAME_KEYS = ("t", "detections", "images")
 _DETECTION_KEYS = ("camera", "vehicle", "keypoints", "keypoint_covariances", "heatmaps", "roi")
@@ -110,7 +112,9 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
     """Validates a parsed scene file and builds a :class:`~vfactor.observations.Scene`.
 
     Checks, among others: the top level is an object with ``cameras`` (a
-    non-empty list) and ``frames`` (a list); no unknown keys anywhere; camera
+    non-empty list) and ``frames`` (a list), optionally ``ground_plane``
+    (``{"normal": [nx, ny, nz], "offset": d}``, the road ``n . x = d``, normal
+    pointing up); no unknown keys anywhere; camera
     names unique and every camera valid (``K``, ``world_T_camera``, ``dist`` of
     4 or 5 numbers, ``image_size``); each detection's camera exists; a
     detection has ``keypoints`` (exactly 12 rows ``[u, v, confidence]``,
@@ -144,7 +148,7 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
             ``cameras[1].K``), the message says what was expected and found.
     """
     base = Path(os.path.abspath(base_dir if base_dir is not None else os.getcwd()))
-    top = _object(data, "", _TOP_KEYS, required=_TOP_KEYS)
+    top = _object(data, "", _TOP_KEYS, required=_REQUIRED_TOP_KEYS)
     cameras_data = _list(top["cameras"], "cameras", "a non-empty list of cameras")
     if not cameras_data:
         raise SceneError("cameras", "expected a non-empty list of cameras, got an empty list")
@@ -161,7 +165,20 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
     frames = [
         _frame_from_dict(item, f"frames[{i}]", cameras, base) for i, item in enumerate(_list(top["frames"], "frames"))
     ]
-    return Scene(cameras=cameras, frames=frames, base_dir=base)
+    return Scene(cameras=cameras, frames=frames, base_dir=base, ground_plane=_ground_plane(top.get("ground_plane")))
+
+
+def _ground_plane(value) -> GroundPlane | None:
+    """The optional ``ground_plane``: ``{"normal": [nx, ny, nz], "offset": d}``, the road ``n . x = d``."""
+    if value is None:
+        return None
+    data = _object(value, "ground_plane", ("normal", "offset"), required=("normal",))
+    normal = _numbers(data["normal"], "ground_plane.normal", "3 numbers [nx, ny, nz]", (3,))
+    offset = _number(data.get("offset", 0.0), "ground_plane.offset", "a finite number of metres")
+    try:
+        return GroundPlane(tuple(normal), offset)
+    except ValueError as exc:
+        raise SceneError("ground_plane.normal", str(exc).split(": ", 1)[-1]) from None
 
 
 def save_scene(scene: Scene, path: str | os.PathLike) -> None:
@@ -211,7 +228,10 @@ def scene_to_dict(scene: Scene, base_dir: Path | None = None) -> dict:
         if frame.images is not None:
             entry["images"] = {name: _path_out(p, scene.base_dir, out_base) for name, p in frame.images.items()}
         frames.append(entry)
-    return {"cameras": cameras, "frames": frames}
+    out = {"cameras": cameras, "frames": frames}
+    if scene.ground_plane is not None:
+        out["ground_plane"] = {"normal": list(scene.ground_plane.normal), "offset": scene.ground_plane.offset}
+    return out
 
 
 def _camera_from_dict(data, path: str) -> Camera:

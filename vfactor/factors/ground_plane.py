@@ -1,0 +1,71 @@
+"""Ground-plane factor: the vehicle stands on the road.
+
+For a road plane ``{x : n . x = d}`` (unit normal ``n`` pointing up, world frame)
+and a pose ``T = (R, t)`` whose origin is the wheel-hub centroid:
+
+* height: ``(n . t - d - hub_height) / sigma_height``, the hubs at the wheel
+  radius above the road (``sigma_height`` covers the unknown radius);
+* tilt: the x and y components of ``v = R^T n`` (the road normal in the body
+  frame, ``(0, 0, 1)`` when the car sits flat) over ``sigma_tilt``: roll and
+  pitch near the plane's.
+
+Jacobians (right perturbation ``T Exp(xi)``): ``d(n . t)/d rho = n^T R``;
+``d v / d w = [v]x`` (``R Exp(w)`` gives ``Exp(-w) v ~ v + v x w``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+
+import gtsam
+import numpy as np
+
+__all__ = ["GroundPlane", "ground_plane_factor"]
+
+
+@dataclass(frozen=True)
+class GroundPlane:
+    """A road plane ``n . x = offset`` in the world frame (``normal`` is made unit length).
+
+    Attributes:
+        normal: (3,) upward normal.
+        offset: metres.
+    """
+
+    normal: tuple = (0.0, 0.0, 1.0)
+    offset: float = 0.0
+
+    def __post_init__(self):
+        n = np.asarray(self.normal, dtype=float)
+        if n.shape != (3,) or not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
+            raise ValueError(f"ground_plane.normal: expected a non-zero 3-vector, got {self.normal!r}")
+        n = n / np.linalg.norm(n)
+        if n[2] <= 0:
+            raise ValueError(f"ground_plane.normal: must point up (positive z), got {self.normal!r}")
+        if not np.isfinite(self.offset):
+            raise ValueError(f"ground_plane.offset: expected a finite number, got {self.offset!r}")
+        object.__setattr__(self, "normal", tuple(float(v) for v in n))
+        object.__setattr__(self, "offset", float(self.offset))
+
+
+def _error(plane: GroundPlane, hub_height, sigma_height, sigma_tilt, this, values, H):
+    T = values.atPose3(this.keys()[0])
+    R, t = T.rotation().matrix(), T.translation()
+    n = np.asarray(plane.normal)
+    v = R.T @ n
+    r = np.array([(n @ t - plane.offset - hub_height) / sigma_height, v[0] / sigma_tilt, v[1] / sigma_tilt])
+    if H is not None:
+        J = np.zeros((3, 6))
+        J[0, 3:] = (n @ R) / sigma_height
+        skew = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+        J[1:, :3] = skew[:2] / sigma_tilt
+        H[0] = J
+    return r
+
+
+def ground_plane_factor(pose_key: int, plane: GroundPlane = GroundPlane(), hub_height: float = 0.34,
+                        sigma_height: float = 0.05, sigma_tilt: float = 0.03) -> gtsam.CustomFactor:
+    """The vehicle pose ``pose_key`` on the road plane (3 rows)."""
+    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(3), [pose_key],
+                              partial(_error, plane, float(hub_height), float(sigma_height), float(sigma_tilt)))

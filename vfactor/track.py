@@ -1,0 +1,453 @@
+"""Tracking vehicles over frames: iSAM2 (optionally fixed-lag) and batch smoothing.
+
+Each track id gets its own incremental smoother, so a track that cannot be
+solved never stops the others. Per frame and vehicle there is one new
+``world_T_vehicle`` variable; the three shape layers are shared by the whole
+track. The factors of a track are those of the one-frame graph (projection,
+body frame, symmetry, rectangle, shape prior, lazy HWC) plus, between
+consecutive poses, the non-holonomic motion factor and, over three poses, the
+acceleration factor (:mod:`vfactor.factors.motion`), and, when the scene
+gives a road plane, the ground-plane factor on every pose.
+
+* :class:`Tracker` — online: :meth:`Tracker.add_frame` returns the estimates of
+  the frame's vehicles as soon as the frame is in.
+* :func:`track_scene` — runs a Tracker over a scene and returns the final
+  estimates of every frame (and the online ones).
+* :func:`smooth_scene` — offline: Levenberg-Marquardt over every track at once.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import gtsam
+import numpy as np
+
+from vfactor.camera import Camera
+from vfactor.errors import InputError
+from vfactor.factors.ground_plane import GroundPlane, ground_plane_factor
+from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomic_factor
+from vfactor.factors.projection import KeypointObservations
+from vfactor.graph import (
+    add_observation_factor,
+    add_shape_factors,
+    hwc_factor,
+    hwc_terms,
+    hwc_violation,
+    insert_vehicle_values,
+    observations_from_detections,
+)
+from vfactor.init import best_candidates, cross_projection_cost
+from vfactor.keypoints import LAYER_NAMES
+from vfactor.keys import KeyScheme
+from vfactor.observations import Frame, Scene
+from vfactor.result import FrameResult, Status, VehicleResult
+from vfactor.shape_model import HwcBounds, ShapePrior, default_hwc_bounds, default_shape_prior
+from vfactor.solve import SolveOptions, solve_observations
+from vfactor.wireframe import Wireframe
+
+__all__ = ["TrackOptions", "Tracker", "TrackRun", "track_scene", "smooth_scene", "frame_order"]
+
+
+@dataclass(frozen=True)
+class TrackOptions:
+    """Settings of tracking and batch smoothing.
+
+    Attributes:
+        solve: one-frame settings (graph noise, robust loss, initialisation).
+        motion: the vehicle motion model.
+        lag: fixed lag in seconds (poses older than this are marginalised out,
+            so memory and time per frame stay flat); ``None`` keeps every pose.
+        ground_plane: road plane for the ground-plane factor; ``None`` uses the
+            scene's plane if it gives one, else no ground factor.
+        hub_height, sigma_height, sigma_tilt: ground-plane factor settings (m, m, rad).
+        max_updates: extra iSAM2 ``update()`` calls per frame, until the new pose
+            moves less than ``update_tolerance``.
+        update_tolerance: metres (and radians) below which extra updates stop.
+        relinearize_threshold: iSAM2's relinearisation threshold.
+        covariance: compute each pose's marginal covariance.
+    """
+
+    solve: SolveOptions = field(default_factory=SolveOptions)
+    motion: MotionModel = field(default_factory=MotionModel)
+    lag: float | None = None
+    ground_plane: GroundPlane | None = None
+    hub_height: float = 0.34
+    sigma_height: float = 0.06
+    sigma_tilt: float = 0.03
+    max_updates: int = 4
+    update_tolerance: float = 1e-4
+    relinearize_threshold: float = 0.01
+    covariance: bool = True
+
+    def __post_init__(self):
+        if self.lag is not None and (not np.isfinite(self.lag) or self.lag <= 0):
+            raise ValueError(f"TrackOptions.lag: expected a positive number of seconds or None, got {self.lag!r}")
+        if not isinstance(self.max_updates, int) or self.max_updates < 0:
+            raise ValueError(f"TrackOptions.max_updates: expected an integer >= 0, got {self.max_updates!r}")
+
+
+@dataclass
+class _TrackState:
+    """One track's smoother and bookkeeping."""
+
+    id: str
+    index: int
+    smoother: gtsam.IncrementalFixedLagSmoother | None = None
+    poses: list = field(default_factory=list)  # (frame index, t, pose key)
+    hwc_added: bool = False
+    frames_seen: int = 0
+
+
+def frame_order(scene: Scene) -> list[int]:
+    """Frame indices in time order.
+
+    Raises:
+        InputError: two frames with the same time (tracking needs increasing times).
+    """
+    order = sorted(range(len(scene.frames)), key=lambda i: scene.frames[i].t)
+    for a, b in zip(order, order[1:]):
+        if scene.frames[a].t == scene.frames[b].t:
+            raise InputError(f"frames[{b}].t", f"same time as frames[{a}] ({scene.frames[b].t} s): tracking needs "
+                             "one frame per time")
+    return order
+
+
+class Tracker:
+    """Online tracking of every vehicle seen by fixed cameras, one iSAM2 smoother per track.
+
+    Args:
+        cameras: camera name -> camera.
+        options: tracking settings.
+        prior, bounds: shape prior and HWC bounds (defaults: PASCAL3D+ cars).
+        keys: key scheme of the variables (each track's smoother uses vehicle index
+            0..n-1 in order of first appearance).
+    """
+
+    def __init__(self, cameras: dict[str, Camera], options: TrackOptions = TrackOptions(),
+                 prior: ShapePrior | None = None, bounds: HwcBounds | None = None, keys: KeyScheme = KeyScheme()):
+        self.cameras = cameras
+        self.options = options
+        self.prior = prior or default_shape_prior()
+        self.bounds = bounds or default_hwc_bounds()
+        self.keys = keys
+        self.ground_plane = options.ground_plane
+        self._terms = hwc_terms(options.solve.graph, self.bounds)
+        self._tracks: dict[str, _TrackState] = {}
+        self._frame_counter = 0
+        self._last_t: float | None = None
+
+    # ------------------------------------------------------------------ public
+    @property
+    def track_ids(self) -> list[str]:
+        return list(self._tracks)
+
+    def add_frame(self, frame: Frame, frame_index: int | None = None) -> FrameResult:
+        """Adds a frame and returns the current estimates of its vehicles.
+
+        Args:
+            frame: the frame (times must increase from frame to frame).
+            frame_index: index used in the pose keys (default: a running count).
+
+        Raises:
+            InputError: the frame's time does not follow the previous frame's.
+        """
+        if self._last_t is not None and frame.t <= self._last_t:
+            raise InputError("t", f"frame at {frame.t} s does not follow the previous frame at {self._last_t} s")
+        self._last_t = frame.t
+        index = self._frame_counter if frame_index is None else frame_index
+        self._frame_counter = index + 1
+        vehicles = []
+        for vid in frame.vehicle_ids():
+            try:
+                obs = observations_from_detections(frame.detections_of(vid), self.cameras, self.options.solve.graph)
+                vehicles.append(self._add(vid, index, frame.t, obs))
+            except (InputError, RuntimeError, np.linalg.LinAlgError) as exc:
+                track = self._tracks.get(vid)
+                if track is not None:  # restart this track from its next solvable frame
+                    track.smoother, track.poses, track.hwc_added = None, [], False
+                vehicles.append(VehicleResult(vid, Status.FAILED, message=str(exc)))
+        return FrameResult(frame.t, vehicles)
+
+    def estimates(self) -> dict[tuple[int, str], VehicleResult]:
+        """Current estimates of every pose still held by the smoothers: (frame index, id) -> result."""
+        out = {}
+        for track in self._tracks.values():
+            if track.smoother is None:
+                continue
+            estimate = track.smoother.calculateEstimate()
+            wireframe = self._wireframe(estimate, track)
+            for frame_index, _, key in track.poses:
+                if estimate.exists(key):
+                    out[(frame_index, track.id)] = self._result(track, estimate, key, wireframe)
+        return out
+
+    # ----------------------------------------------------------------- private
+    def _track(self, vid: str) -> _TrackState:
+        if vid not in self._tracks:
+            self._tracks[vid] = _TrackState(vid, len(self._tracks))
+        return self._tracks[vid]
+
+    def _new_smoother(self) -> gtsam.IncrementalFixedLagSmoother:
+        params = gtsam.ISAM2Params()
+        params.setRelinearizeThreshold(self.options.relinearize_threshold)
+        params.relinearizeSkip = 1
+        lag = self.options.lag if self.options.lag is not None else 1e12
+        return gtsam.IncrementalFixedLagSmoother(lag, params)
+
+    def _wireframe(self, estimate: gtsam.Values, track: _TrackState) -> Wireframe:
+        keys = self.keys.layer_keys(track.index)
+        return Wireframe.from_layer_vectors({n: estimate.atVector(k) for n, k in zip(LAYER_NAMES, keys)})
+
+    def _result(self, track, estimate, key, wireframe, covariance=None, message="") -> VehicleResult:
+        return VehicleResult(track.id, Status.CONVERGED, world_T_vehicle=estimate.atPose3(key), wireframe=wireframe,
+                             pose_covariance=covariance, message=message)
+
+    def _pose_factors(self, graph, track: _TrackState, key: int, t: float) -> None:
+        """Motion factors to the previous poses and the ground factor of a new pose."""
+        motion = self.options.motion
+        if track.poses:
+            _, t1, k1 = track.poses[-1]
+            graph.add(nonholonomic_factor(k1, key, t - t1, motion))
+            if len(track.poses) >= 2:
+                _, t0, k0 = track.poses[-2]
+                if self.options.lag is None or t - t0 < self.options.lag:
+                    graph.add(acceleration_factor(k0, k1, key, t1 - t0, t - t1, motion))
+        if self.ground_plane is not None:
+            graph.add(ground_plane_factor(key, self.ground_plane, self.options.hub_height,
+                                          self.options.sigma_height, self.options.sigma_tilt))
+
+    def _predict(self, track: _TrackState, estimate: gtsam.Values, t: float) -> gtsam.Pose3:
+        """Constant-twist prediction of the pose at ``t`` from the last two poses."""
+        _, t1, k1 = track.poses[-1]
+        T1 = estimate.atPose3(k1)
+        if len(track.poses) < 2:
+            return T1
+        _, t0, k0 = track.poses[-2]
+        twist = gtsam.Pose3.Logmap(estimate.atPose3(k0).between(T1)) / (t1 - t0)
+        return T1.compose(gtsam.Pose3.Expmap(twist * (t - t1)))
+
+    def _start(self, track: _TrackState, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
+        first = solve_observations(obs, self.options.solve, track.id, self.prior, self.bounds)
+        if not first.ok:
+            return first
+        track.smoother = self._new_smoother()
+        track.poses, track.hwc_added = [], False
+        key = self.keys.pose_key(track.index, frame_index)
+        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        add_shape_factors(graph, self.keys, track.index, self.options.solve.graph, self.prior, self.bounds)
+        add_observation_factor(graph, self.keys, obs, track.index, frame_index, self.options.solve.graph)
+        self._pose_factors(graph, track, key, t)
+        insert_vehicle_values(values, self.keys, first.world_T_vehicle, first.wireframe, track.index, frame_index)
+        stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}}
+        track.smoother.update(graph, values, stamps)
+        track.poses.append((frame_index, t, key))
+        return self._finish(track, key, t)
+
+    def _add(self, vid: str, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
+        track = self._track(vid)
+        if len(obs) == 0:
+            return VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen in this frame")
+        track.frames_seen += 1
+        if track.smoother is None:
+            return self._start(track, frame_index, t, obs)
+        options = self.options.solve
+        if len(obs) < options.min_observations and len(obs) < 3:
+            return VehicleResult(vid, Status.DEGENERATE, message=f"only {len(obs)} keypoints seen in this frame")
+        estimate = track.smoother.calculateEstimate()
+        wireframe = self._wireframe(estimate, track)
+        guess = self._predict(track, estimate, t)
+        # a poor prediction (a long gap, a sharp manoeuvre) is replaced by the best PnP/triangulation start
+        loss = options.graph.loss
+        if cross_projection_cost(obs, guess, wireframe, loss) > 2.0 * len(obs):
+            starts = best_candidates(obs, wireframe, loss, 1, min_keypoints_in_one_view=options.min_keypoints_in_one_view)
+            if starts and starts[0].cost < cross_projection_cost(obs, guess, wireframe, loss):
+                guess = starts[0].world_T_vehicle
+        key = self.keys.pose_key(track.index, frame_index)
+        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        add_observation_factor(graph, self.keys, obs, track.index, frame_index, options.graph)
+        self._pose_factors(graph, track, key, t)
+        values.insert(key, guess)
+        stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}}
+        track.smoother.update(graph, values, stamps)
+        track.poses.append((frame_index, t, key))
+        if self.options.lag is not None:
+            track.poses = [p for p in track.poses if t - p[1] <= self.options.lag]
+        return self._finish(track, key, t)
+
+    def _finish(self, track: _TrackState, key: int, t: float) -> VehicleResult:
+        """Extra iSAM2 updates until the new pose settles, lazy HWC, and the frame's result."""
+        smoother = track.smoother
+        previous = smoother.calculateEstimate().atPose3(key)
+        for _ in range(self.options.max_updates):
+            smoother.update()
+            current = smoother.calculateEstimate().atPose3(key)
+            moved = np.linalg.norm(previous.localCoordinates(current))
+            previous = current
+            if moved < self.options.update_tolerance:
+                break
+        estimate = smoother.calculateEstimate()
+        wireframe = self._wireframe(estimate, track)
+        config = self.options.solve.graph
+        if config.hwc == "lazy" and not track.hwc_added and hwc_violation(wireframe, self._terms) > config.hwc_tolerance:
+            graph = gtsam.NonlinearFactorGraph()
+            graph.add(hwc_factor(self.keys, track.index, terms=self._terms))
+            smoother.update(graph, gtsam.Values(), {k: t for k in self.keys.layer_keys(track.index)})
+            track.hwc_added = True
+            estimate = smoother.calculateEstimate()
+            wireframe = self._wireframe(estimate, track)
+        covariance = smoother.marginalCovariance(key) if self.options.covariance else None
+        message = "" if track.frames_seen > 1 else "first frame of the track: no motion factors yet"
+        return self._result(track, estimate, key, wireframe, covariance, message)
+
+
+@dataclass
+class TrackRun:
+    """What :func:`track_scene` returns.
+
+    Attributes:
+        frames: final estimates, one :class:`FrameResult` per scene frame in file
+            order (poses still in the smoother at the end are smoothed by every
+            later frame; with a lag, older poses keep their estimate from when
+            they left the window).
+        online: the estimates as each frame arrived (filtered), same layout.
+        messages: scene-level notes (frames out of time order, tracks seen once).
+    """
+
+    frames: list[FrameResult]
+    online: list[FrameResult]
+    messages: list[str]
+
+
+def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
+                progress: Callable[[int, int], None] | None = None, **kwargs) -> TrackRun:
+    """Tracks every vehicle through a scene (``vfactor track``).
+
+    Frames are processed in time order (out-of-order frames are reported in
+    ``messages``); results come back in the scene's order.
+    """
+    messages = []
+    order = frame_order(scene)
+    if order != sorted(order):
+        moved = [i for pos, i in enumerate(order) if i != pos]
+        messages.append(f"frames are not in time order (e.g. frames[{moved[0]}]); tracked in time order")
+    if options.ground_plane is None and getattr(scene, "ground_plane", None) is not None:
+        options = _with_plane(options, scene.ground_plane)
+    tracker = Tracker(scene.cameras, options, **kwargs)
+    online: dict[int, FrameResult] = {}
+    final: dict[tuple[int, str], VehicleResult] = {}
+    for n, i in enumerate(order):
+        online[i] = tracker.add_frame(scene.frames[i], i)
+        for v in online[i].vehicles:
+            final[(i, v.id)] = v
+        if options.lag is not None:  # keep the last estimate of poses before they leave the window
+            final.update(_keep_meta(tracker.estimates(), final))
+        if progress is not None:
+            progress(n + 1, len(order))
+    final.update(_keep_meta(tracker.estimates(), final, with_covariance=options.covariance, tracker=tracker))
+    seen: dict[str, int] = {}
+    for (_, vid), v in final.items():
+        seen[vid] = seen.get(vid, 0) + (1 if v.ok else 0)
+    for vid, count in seen.items():
+        if count == 1:
+            messages.append(f"vehicle '{vid}' was solved in one frame only: no motion information")
+    frames = [FrameResult(f.t, [final[(i, vid)] for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
+    return TrackRun(frames=frames, online=[online[i] for i in range(len(scene.frames))], messages=messages)
+
+
+def _with_plane(options: TrackOptions, plane: GroundPlane) -> TrackOptions:
+    import dataclasses
+
+    return dataclasses.replace(options, ground_plane=plane)
+
+
+def _keep_meta(estimates, previous, with_covariance=False, tracker: Tracker | None = None):
+    """Smoothed estimates, keeping each result's message (and covariance unless recomputed)."""
+    out = {}
+    for key, v in estimates.items():
+        old = previous.get(key)
+        if old is not None:
+            v.message = old.message
+            v.pose_covariance = old.pose_covariance
+        if with_covariance and tracker is not None:
+            track = tracker._tracks[key[1]]
+            pose_key = tracker.keys.pose_key(track.index, key[0])
+            v.pose_covariance = track.smoother.marginalCovariance(pose_key)
+        out[key] = v
+    return out
+
+
+def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: ShapePrior | None = None,
+                 bounds: HwcBounds | None = None) -> list[FrameResult]:
+    """Batch smoothing: every track's whole graph solved at once by Levenberg-Marquardt.
+
+    Each track starts from its one-frame solves (the first solvable frame's
+    shape, each frame's pose, predicted where a frame cannot be solved alone).
+    """
+    prior = prior or default_shape_prior()
+    bounds = bounds or default_hwc_bounds()
+    order = frame_order(scene)
+    plane = options.ground_plane or getattr(scene, "ground_plane", None)
+    keys = KeyScheme()
+    config = options.solve.graph
+    per_track: dict[str, list] = {}
+    for i in order:
+        frame = scene.frames[i]
+        for vid in frame.vehicle_ids():
+            obs = observations_from_detections(frame.detections_of(vid), scene.cameras, config)
+            per_track.setdefault(vid, []).append((i, frame.t, obs))
+    results: dict[tuple[int, str], VehicleResult] = {}
+    for index, (vid, items) in enumerate(per_track.items()):
+        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        add_shape_factors(graph, keys, index, config, prior, bounds)
+        posed = []
+        for i, t, obs in items:
+            first = solve_observations(obs, options.solve, vid, prior, bounds) if len(obs) else None
+            if first is None or not first.ok:
+                if not posed:
+                    results[(i, vid)] = first or VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen")
+                    continue
+                guess = values.atPose3(posed[-1][2])
+            else:
+                guess = first.world_T_vehicle
+                if not values.exists(keys.layer_key("wheel", index)):
+                    insert_vehicle_values(values, keys, None, first.wireframe, index)
+            key = keys.pose_key(index, i)
+            add_observation_factor(graph, keys, obs, index, i, config)
+            if posed:
+                graph.add(nonholonomic_factor(posed[-1][2], key, t - posed[-1][1], options.motion))
+                if len(posed) >= 2:
+                    graph.add(acceleration_factor(posed[-2][2], posed[-1][2], key, posed[-1][1] - posed[-2][1],
+                                                  t - posed[-1][1], options.motion))
+            if plane is not None:
+                graph.add(ground_plane_factor(key, plane, options.hub_height, options.sigma_height, options.sigma_tilt))
+            values.insert(key, guess)
+            posed.append((i, t, key))
+        if not posed:
+            continue
+        try:
+            optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.solve.lm_params())
+            estimate = optimizer.optimize()
+            terms = hwc_terms(config, bounds)
+            shape = Wireframe.from_layer_vectors(
+                {n: estimate.atVector(k) for n, k in zip(LAYER_NAMES, keys.layer_keys(index))})
+            if config.hwc == "lazy" and hwc_violation(shape, terms) > config.hwc_tolerance:
+                graph.add(hwc_factor(keys, index, terms=terms))
+                optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.solve.lm_params())
+                estimate = optimizer.optimize()
+            marginals = gtsam.Marginals(graph, estimate) if options.covariance else None
+        except RuntimeError as exc:
+            for i, _, _ in posed:
+                results[(i, vid)] = VehicleResult(vid, Status.FAILED, message=f"batch smoothing failed: {exc}")
+            continue
+        wireframe = Wireframe.from_layer_vectors(
+            {n: estimate.atVector(k) for n, k in zip(LAYER_NAMES, keys.layer_keys(index))})
+        hit = optimizer.iterations() >= options.solve.max_iterations
+        for i, _, key in posed:
+            results[(i, vid)] = VehicleResult(
+                vid, Status.MAX_ITERATIONS if hit else Status.CONVERGED, world_T_vehicle=estimate.atPose3(key),
+                wireframe=wireframe, pose_covariance=marginals.marginalCovariance(key) if marginals else None,
+                iterations=optimizer.iterations(), final_error=graph.error(estimate))
+    return [FrameResult(f.t, [results[(i, vid)] for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]

@@ -120,3 +120,18 @@ def test_unknown_scenario_and_bad_counts_exit_2(tmp_path, capsys):
 def test_help_teaches_and_module_runs():
     out = subprocess.run([sys.executable, "-m", "vfactor", "--help"], capture_output=True, text=True, check=True).stdout
     assert "vfactor demo" in out and "world_T_vehicle" in out
+
+
+def test_track_writes_results_and_plot(tmp_path, capsys):
+    scene = tmp_path / "track.json"
+    assert main(["simulate", "intersection_2cam_track", "--out", str(scene), "--frames", "8"]) == 0
+    out, plot = tmp_path / "tracked.json", tmp_path / "tracks.png"
+    assert main(["track", str(scene), "--out", str(out), "--plot", str(plot)]) == 0
+    assert "tracked 1 vehicles over 8 frames" in capsys.readouterr().out
+    frames = load_results(out)
+    assert len(frames) == 8 and all(f.vehicles[0].status.value == "converged" for f in frames)
+    assert plot.stat().st_size > 0
+    assert main(["track", str(scene), "--out", str(out), "--lag", "0.3", "--online"]) == 0
+    assert main(["track", str(scene), "--out", str(out), "--batch"]) == 0
+    assert main(["track", str(scene), "--out", str(out), "--lag", "-1"]) == 2
+    assert "--lag" in capsys.readouterr().err

@@ -1,0 +1,134 @@
+"""Tracking over frames: iSAM2 against frame-by-frame and batch, fixed lag, and awkward input."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from vfactor.errors import InputError
+from vfactor.metrics import pose_errors
+from vfactor.observations import Detection, Frame, Scene
+from vfactor.result import Status
+from vfactor.sim import load_scenario, simulate
+from vfactor.solve import solve_scene
+from vfactor.track import TrackOptions, Tracker, smooth_scene, track_scene
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return simulate(load_scenario("intersection_2cam_track"), seed=1)
+
+
+@pytest.fixture(scope="module")
+def tracked(sim):
+    return track_scene(sim.scene)
+
+
+def mean_errors(sim, frames):
+    rows = []
+    for f, frame in enumerate(frames):
+        for v in frame.vehicles:
+            if v.ok:
+                truth = sim.truth[f][v.id]
+                e = pose_errors(v.world_T_vehicle, v.keypoints_world, truth.world_T_vehicle, truth.keypoints_world)
+                rows.append((e["rotation_deg"], e["translation_cm"]))
+    return np.mean(rows, axis=0), len(rows)
+
+
+def test_tracking_halves_frame_by_frame_errors(sim, tracked):
+    (rot_t, trans_t), n_t = mean_errors(sim, tracked.frames)
+    (rot_f, trans_f), n_f = mean_errors(sim, solve_scene(sim.scene))
+    assert n_t == n_f == len(sim.scene.frames)
+    assert rot_t <= 0.5 * rot_f and trans_t <= 0.5 * trans_f
+
+
+def test_shared_shape_converges(sim, tracked):
+    last = tracked.frames[-1].vehicles[0]
+    truth = sim.truth[-1][last.id]
+    error_cm = 100 * np.linalg.norm(last.keypoints_vehicle - truth.keypoints_vehicle, axis=1).mean()
+    assert error_cm <= 5.0
+    shapes = {v.wireframe for f in tracked.frames for v in f.vehicles}
+    assert len(shapes) == 1  # one shape for the whole track
+
+
+def test_isam2_agrees_with_batch(sim, tracked):
+    batch = smooth_scene(sim.scene)
+    for a, b in zip(tracked.frames, batch):
+        va, vb = a.vehicles[0], b.vehicles[0]
+        assert np.linalg.norm(va.world_T_vehicle.translation() - vb.world_T_vehicle.translation()) < 0.01
+        angle = np.degrees(np.linalg.norm(va.world_T_vehicle.rotation().logmap(vb.world_T_vehicle.rotation())))
+        assert angle < 0.5
+
+
+def test_covariance_shrinks_as_frames_accumulate(tracked):
+    online = [f.vehicles[0].pose_covariance for f in tracked.online]
+    assert np.trace(online[-1][3:, 3:]) < 0.5 * np.trace(online[0][3:, 3:])
+
+
+def test_fixed_lag_keeps_a_bounded_window(sim):
+    tracker = Tracker(sim.scene.cameras, TrackOptions(lag=0.35))
+    for i, frame in enumerate(sim.scene.frames):
+        result = tracker.add_frame(frame, i)
+        assert result.vehicles[0].ok
+        assert len(tracker.estimates()) <= 5  # poses within 0.35 s at 10 Hz
+    run = track_scene(sim.scene, TrackOptions(lag=0.35))
+    (rot, trans), _ = mean_errors(sim, run.frames)
+    (rot_f, trans_f), _ = mean_errors(sim, solve_scene(sim.scene))
+    assert rot < rot_f and trans < trans_f
+
+
+def test_frames_out_of_order_are_tracked_in_time_order(sim, tracked):
+    shuffled = copy.copy(sim.scene)
+    order = [1, 0] + list(range(2, len(sim.scene.frames)))
+    shuffled.frames = [sim.scene.frames[i] for i in order]
+    run = track_scene(shuffled)
+    assert any("not in time order" in m for m in run.messages)
+    for pos, i in enumerate(order):  # results in the file's order, same estimates
+        a, b = run.frames[pos].vehicles[0], tracked.frames[i].vehicles[0]
+        assert np.allclose(a.world_T_vehicle.matrix(), b.world_T_vehicle.matrix(), atol=1e-6)
+
+
+def test_duplicate_times_name_the_frame(sim):
+    scene = copy.copy(sim.scene)
+    scene.frames = list(sim.scene.frames)
+    scene.frames[3] = Frame(scene.frames[2].t, scene.frames[3].detections)
+    with pytest.raises(InputError) as info:
+        track_scene(scene)
+    assert info.value.field == "frames[3].t"
+
+
+def test_gaps_single_frame_vehicles_and_bad_tracks(sim):
+    scene = copy.copy(sim.scene)
+    frames = []
+    for i, frame in enumerate(sim.scene.frames):
+        dets = [] if i in (5, 6, 7) else list(frame.detections)  # v1 unseen for 0.3 s
+        if i == 4:  # a vehicle seen once
+            dets += [Detection(d.camera, "once", d.keypoints, d.confidence) for d in frame.detections]
+        if i >= 10:  # a track whose detections name a camera the tracker does not have
+            dets += [Detection("cam9", "ghost", d.keypoints, d.confidence) for d in frame.detections[:1]]
+        frames.append(Frame(frame.t, dets))
+    scene.frames = frames
+    run = track_scene(scene)
+    status = {(f, v.id): v.status for f, fr in enumerate(run.frames) for v in fr.vehicles}
+    assert all(status[(f, "v1")] == Status.CONVERGED for f in range(20) if f not in (5, 6, 7))
+    assert status[(4, "once")] == Status.CONVERGED
+    assert any("'once'" in m and "one frame only" in m for m in run.messages)
+    assert all(status[(f, "ghost")] == Status.FAILED for f in range(10, 20))
+    (rot, trans), _ = mean_errors(sim, only(run.frames, "v1"))
+    assert rot < 1.5 and trans < 8.0
+
+
+def only(frames, vid):
+    """The frames' results of one track (empty where it is absent)."""
+    from vfactor.result import FrameResult
+
+    return [FrameResult(f.t, [v for v in f.vehicles if v.id == vid]) for f in frames]
+
+
+def test_tracker_rejects_time_going_backwards(sim):
+    tracker = Tracker(sim.scene.cameras)
+    tracker.add_frame(sim.scene.frames[1])
+    with pytest.raises(InputError, match="does not follow"):
+        tracker.add_frame(sim.scene.frames[0])

@@ -15,6 +15,8 @@ PyTorch is never imported by the core; only a keypoint network will need it.
 
 from vfactor.camera import Camera
 from vfactor.errors import CalibrationError, InputError, ScenarioError, SceneError
+from vfactor.factors.ground_plane import GroundPlane
+from vfactor.factors.motion import MotionModel
 from vfactor.factors.robust import RobustLoss
 from vfactor.graph import (
     GraphConfig,
@@ -32,6 +34,7 @@ from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.scene import load_results, load_scene, save_results, save_scene
 from vfactor.shape_model import ShapePrior, default_hwc_bounds, default_shape_prior
 from vfactor.solve import SolveOptions, solve_frame, solve_observations, solve_scene, solve_vehicle
+from vfactor.track import Tracker, TrackOptions, TrackRun, smooth_scene, track_scene
 from vfactor.wireframe import PRESETS, Wireframe
 
 __version__ = "0.1.0"
@@ -43,11 +46,13 @@ __all__ = [
     "Frame",
     "FrameResult",
     "GraphConfig",
+    "GroundPlane",
     "InputError",
     "KEYPOINT_NAMES",
     "KeyScheme",
     "LAYERS",
     "LEFT_RIGHT_PAIRS",
+    "MotionModel",
     "NUM_KEYPOINTS",
     "PRESETS",
     "RobustLoss",
@@ -57,6 +62,9 @@ __all__ = [
     "ShapePrior",
     "SolveOptions",
     "Status",
+    "TrackOptions",
+    "TrackRun",
+    "Tracker",
     "VehicleResult",
     "Wireframe",
     "add_observation_factor",
@@ -75,4 +83,6 @@ __all__ = [
     "solve_observations",
     "solve_scene",
     "solve_vehicle",
+    "smooth_scene",
+    "track_scene",
 ]

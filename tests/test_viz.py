@@ -11,7 +11,7 @@ import pytest
 from vfactor import viz
 from vfactor.camera import Camera
 from vfactor.observations import Detection, Frame
-from vfactor.result import Status, VehicleResult
+from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.wireframe import PRESETS
 
 WIDTH, HEIGHT = 640, 480
@@ -273,3 +273,125 @@ def test_write_overlays_one_file_per_camera(tmp_path, vehicle):
         img = cv2.imread(str(path))
         assert img is not None
         assert img.shape[1::-1] == camera.image_size
+
+
+# --------------------------------------------------------------- trajectories
+DT = 0.1
+NUM_TRACK_FRAMES = 15
+
+
+def track_cameras() -> dict[str, Camera]:
+    """Two pole cameras on opposite corners of an intersection, as in intersection_2cam."""
+    return {
+        "cam0": make_camera("cam0", eye=(-14.0, -11.0, 7.5)),
+        "cam1": make_camera("cam1", eye=(13.0, 12.0, 7.0)),
+    }
+
+
+def tracking_results(gap: bool = True):
+    """A 15-frame, 2-track tracking result with truth and frame-by-frame estimates.
+
+    v1 drives along +x at 8 m/s in the near lane, v2 along -x at 6 m/s in the far
+    lane. The tracked covariance shrinks with the frames (std 20 cm for v1, 26 cm for v2, over sqrt(f + 1)
+    along the car, half across); the frame-by-frame one stays at 20 cm. With
+    ``gap``, v2 fails in frames 6 and 7, and a third vehicle v3 is detected once
+    and comes out degenerate.
+    """
+    rng = np.random.default_rng(3)
+    shapes = {"v1": PRESETS["toyota_prius"].wireframe(), "v2": PRESETS["toyota_prius"].wireframe().scaled(1.1)}
+    starts = {"v1": (-8.0, -1.75, 0.0, 8.0), "v2": (7.0, 1.75, np.pi, 6.0)}  # x, y, yaw, speed
+    frames, truth, frame_by_frame = [], [], []
+    for f in range(NUM_TRACK_FRAMES):
+        t = f * DT
+        tracked, independent, true = [], [], {}
+        for vid, (x0, y0, yaw, speed) in starts.items():
+            heading = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+            pose = gtsam.Pose3(gtsam.Rot3.Yaw(yaw), np.array([x0, y0, 0.33]) + speed * t * heading)
+            true[vid] = (pose, shapes[vid])
+            if gap and vid == "v2" and f in (6, 7):
+                tracked.append(VehicleResult(id=vid, status=Status.FAILED, message="solve raised"))
+                independent.append(VehicleResult(id=vid, status=Status.DEGENERATE, message="3 keypoints seen"))
+                continue
+            std = (0.20 if vid == "v1" else 0.26) / np.sqrt(f + 1.0)
+            cov = np.diag([(0.02 / np.sqrt(f + 1)) ** 2, 1e-5, (0.04 / np.sqrt(f + 1)) ** 2, std**2, (std / 2) ** 2,
+                           (std / 3) ** 2])
+            noise = rng.normal(size=3) * [std, std / 2, std / 3]
+            est = gtsam.Pose3(gtsam.Rot3.Yaw(yaw + rng.normal() * 0.01), pose.transformFrom(noise))
+            tracked.append(VehicleResult(id=vid, status=Status.CONVERGED, world_T_vehicle=est,
+                                         wireframe=shapes[vid], pose_covariance=cov))
+            cov_fbf = np.diag([4e-4, 4e-4, 2e-3, 0.2**2, 0.1**2, 0.07**2])
+            noise = rng.normal(size=3) * [0.2, 0.1, 0.07]
+            est = gtsam.Pose3(gtsam.Rot3.Yaw(yaw + rng.normal() * 0.04), pose.transformFrom(noise))
+            independent.append(VehicleResult(id=vid, status=Status.CONVERGED, world_T_vehicle=est,
+                                             wireframe=shapes[vid], pose_covariance=cov_fbf))
+        if gap and f == 9:
+            tracked.append(VehicleResult(id="v3", status=Status.DEGENERATE, message="2 keypoints seen"))
+        frames.append(FrameResult(t=t, vehicles=tracked))
+        frame_by_frame.append(FrameResult(t=t, vehicles=independent))
+        truth.append(true)
+    return frames, truth, frame_by_frame
+
+
+def test_plot_trajectories_writes_a_png(tmp_path):
+    frames, truth, frame_by_frame = tracking_results()
+    backend = matplotlib.get_backend()
+    path = viz.plot_trajectories(
+        track_cameras(), frames, tmp_path / "sub" / "trajectories.png", truth=truth, title="test",
+        frame_by_frame=frame_by_frame,
+    )
+    assert matplotlib.get_backend() == backend
+    assert path == tmp_path / "sub" / "trajectories.png"
+    assert path.is_file() and path.stat().st_size > 50_000
+    img = cv2.imread(str(path))
+    assert img is not None and img.shape[0] > 800 and img.shape[1] > 1200
+    # Not a blank page: plenty of non-white pixels, and the track colours appear.
+    assert np.mean(np.any(img < 240, axis=2)) > 0.05
+
+
+def test_plot_trajectories_accepts_vehicle_truth_and_plain_inputs(tmp_path):
+    from vfactor.sim import VehicleTruth
+
+    frames, truth, _ = tracking_results(gap=False)
+    vt = [{vid: VehicleTruth(pose, wf, "toyota_prius") for vid, (pose, wf) in entry.items()} for entry in truth]
+    vt[4] = None  # a frame without truth
+    path = viz.plot_trajectories(track_cameras(), frames, tmp_path / "a.png", truth=vt, sigma=2.0, ellipse_every=3)
+    assert cv2.imread(str(path)) is not None
+    # Lists of VehicleResults instead of FrameResults, no cameras, no truth.
+    lists = [fr.vehicles for fr in frames]
+    assert cv2.imread(str(viz.plot_trajectories({}, lists, tmp_path / "b.png", ellipse_every=1))) is not None
+
+
+def test_plot_trajectories_gaps_failures_and_degenerate_inputs(tmp_path):
+    frames, truth, frame_by_frame = tracking_results(gap=True)
+    # v2 fails in frames 6-7 (a break in its track), v3 exists only as a degenerate result.
+    assert not frames[6].vehicles[1].ok and frames[9].vehicles[-1].id == "v3"
+    path = viz.plot_trajectories(track_cameras(), frames, tmp_path / "gap.png", truth=truth,
+                                 frame_by_frame=frame_by_frame, ellipse_every=2)
+    assert cv2.imread(str(path)) is not None
+    # No covariances at all, one frame, nothing but failures, no frames.
+    no_cov = [FrameResult(fr.t, [VehicleResult(r.id, r.status, r.world_T_vehicle, r.wireframe, None)
+                                  for r in fr.vehicles]) for fr in frames]
+    assert cv2.imread(str(viz.plot_trajectories(track_cameras(), no_cov, tmp_path / "c.png", truth=truth)))is not None
+    assert cv2.imread(str(viz.plot_trajectories(track_cameras(), frames[:1], tmp_path / "d.png"))) is not None
+    failed = [FrameResult(0.0, [VehicleResult("v1", Status.FAILED, message="x")])]
+    assert cv2.imread(str(viz.plot_trajectories(track_cameras(), failed, tmp_path / "e.png"))) is not None
+    assert cv2.imread(str(viz.plot_trajectories({}, [], tmp_path / "f.png"))) is not None
+    # Times that do not increase: frame indices on the time axis.
+    same_t = [FrameResult(0.0, fr.vehicles) for fr in frames]
+    assert cv2.imread(str(viz.plot_trajectories(track_cameras(), same_t, tmp_path / "g.png"))) is not None
+
+
+def test_plot_trajectories_rejects_bad_arguments(tmp_path):
+    frames, truth, frame_by_frame = tracking_results(gap=False)
+    cameras = track_cameras()
+    for sigma in (0, -1.0, float("nan"), float("inf"), "three"):
+        with pytest.raises(ValueError, match="sigma"):
+            viz.plot_trajectories(cameras, frames, tmp_path / "x.png", sigma=sigma)
+    for every in (0, -2, 2.5, True, "5"):
+        with pytest.raises(ValueError, match="ellipse_every"):
+            viz.plot_trajectories(cameras, frames, tmp_path / "x.png", ellipse_every=every)
+    with pytest.raises(ValueError, match="truth"):
+        viz.plot_trajectories(cameras, frames, tmp_path / "x.png", truth=truth[:-1])
+    with pytest.raises(ValueError, match="frame_by_frame"):
+        viz.plot_trajectories(cameras, frames, tmp_path / "x.png", frame_by_frame=frame_by_frame[1:])
+    assert not (tmp_path / "x.png").exists()

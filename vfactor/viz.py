@@ -11,7 +11,10 @@ Two kinds of output:
 - A figure of the estimates (``matplotlib``, PNG): :func:`plot_estimates`
   shows the camera rig and the vehicles in 3D, a top-down view of the vehicles
   with their position-covariance ellipses, and one panel per vehicle with the
-  ellipse at its true size in centimetres.
+  ellipse at its true size in centimetres; :func:`plot_trajectories` shows
+  tracking results over many frames: each track's trajectory with heading
+  arrows and position ellipses, and its uncertainty (and error, given the
+  truth) against time, beside the frame-by-frame estimates.
 
 Everything is projected with :meth:`vfactor.camera.Camera.project`, so lens
 distortion is honoured; points behind a camera (depth below 0.1 m) are never
@@ -48,6 +51,7 @@ __all__ = [
     "draw_overlay",
     "position_covariance_world",
     "plot_estimates",
+    "plot_trajectories",
     "write_overlays",
 ]
 
@@ -649,6 +653,54 @@ def _draw_wireframe_xy(ax, pts, truth=False):
             )
 
 
+def _draw_cameras_xy(ax, cameras: Mapping[str, Camera], xlim, ylim) -> tuple[int, int]:
+    """Draws the cameras in a top-down panel: a square and its viewing direction
+    when inside the view, else an arrow at the border pointing at the camera,
+    with its name and distance from the view centre.
+
+    Returns:
+        The numbers of cameras drawn inside and outside the view.
+    """
+    from matplotlib.patches import FancyArrowPatch
+
+    mid = np.array([0.5 * (xlim[0] + xlim[1]), 0.5 * (ylim[0] + ylim[1])])
+    hx, hy = 0.5 * (xlim[1] - xlim[0]), 0.5 * (ylim[1] - ylim[0])
+    h = min(hx, hy)
+    counts = [0, 0]
+    for cam in cameras.values():
+        c = cam.center[:2]
+        axis = cam.world_T_camera[:3, 2][:2]
+        axis = axis / max(np.linalg.norm(axis), 1e-9)
+        inside = xlim[0] <= c[0] <= xlim[1] and ylim[0] <= c[1] <= ylim[1]
+        counts[0 if inside else 1] += 1
+        if inside:
+            ax.plot(*c, marker="s", color="k", ms=6, zorder=8)
+            ax.add_patch(
+                FancyArrowPatch(c, c + 0.12 * h * axis, arrowstyle="-|>", mutation_scale=10, color="k", zorder=8)
+            )
+            ax.annotate(cam.name, c, xytext=(5, 5), textcoords="offset points", fontsize=9, zorder=8)
+        else:
+            d = c - mid
+            dist = np.linalg.norm(cam.center - np.array([*mid, 0.0]))
+            # Where the line from the view centre to the camera leaves the view.
+            scale_t = min((hx * 0.84) / abs(d[0]) if d[0] else np.inf, (hy * 0.84) / abs(d[1]) if d[1] else np.inf)
+            b = mid + d * scale_t
+            u_dir = d / np.linalg.norm(d)
+            ax.add_patch(
+                FancyArrowPatch(
+                    b - 0.06 * h * u_dir, b + 0.04 * h * u_dir, arrowstyle="-|>", mutation_scale=12,
+                    color="0.3", lw=1.2, zorder=8,
+                )
+            )
+            ha = "right" if u_dir[0] > 0.3 else "left" if u_dir[0] < -0.3 else "center"
+            va = "top" if u_dir[1] > 0.3 else "bottom" if u_dir[1] < -0.3 else "center"
+            ax.annotate(
+                f"{cam.name}\n{dist:.0f} m", b - 0.09 * h * u_dir, fontsize=8.5, color="0.25", ha=ha, va=va,
+                zorder=8, bbox=dict(fc="white", ec="none", alpha=0.75, pad=1.0),
+            )
+    return counts[0], counts[1]
+
+
 def plot_estimates(
     cameras: Mapping[str, Camera],
     results: Iterable[VehicleResult],
@@ -824,36 +876,7 @@ def plot_estimates(
             r.id, (p[0], y_top), xytext=(0, 8), textcoords="offset points",
             ha="center", fontsize=10, fontweight="bold", zorder=8,
         )
-    for cam in cameras.values():
-        c = cam.center[:2]
-        axis = cam.world_T_camera[:3, 2][:2]
-        axis = axis / max(np.linalg.norm(axis), 1e-9)
-        inside = xlim[0] <= c[0] <= xlim[1] and ylim[0] <= c[1] <= ylim[1]
-        if inside:
-            ax2.plot(*c, marker="s", color="k", ms=6, zorder=8)
-            ax2.add_patch(
-                FancyArrowPatch(c, c + 0.12 * half * axis, arrowstyle="-|>", mutation_scale=10, color="k", zorder=8)
-            )
-            ax2.annotate(cam.name, c, xytext=(5, 5), textcoords="offset points", fontsize=9)
-        else:
-            d = c - mid
-            dist = np.linalg.norm(cam.center - np.array([*mid, 0.0]))
-            # Where the line from the view centre to the camera leaves the view.
-            scale_t = min((half * 0.84) / abs(d[0]) if d[0] else np.inf, (half * 0.84) / abs(d[1]) if d[1] else np.inf)
-            b = mid + d * scale_t
-            u_dir = d / np.linalg.norm(d)
-            ax2.add_patch(
-                FancyArrowPatch(
-                    b - 0.06 * half * u_dir, b + 0.04 * half * u_dir, arrowstyle="-|>", mutation_scale=12,
-                    color="0.3", lw=1.2, zorder=8,
-                )
-            )
-            ha = "right" if u_dir[0] > 0.3 else "left" if u_dir[0] < -0.3 else "center"
-            va = "top" if u_dir[1] > 0.3 else "bottom" if u_dir[1] < -0.3 else "center"
-            ax2.annotate(
-                f"{cam.name}\n{dist:.0f} m", b - 0.09 * half * u_dir, fontsize=8.5, color="0.25", ha=ha, va=va,
-                zorder=8, bbox=dict(fc="white", ec="none", alpha=0.75, pad=1.0),
-            )
+    _draw_cameras_xy(ax2, cameras, xlim, ylim)
     ax2.set_xlabel("x [m]")
     ax2.set_ylabel("y [m]")
     ax2.set_title("Top view (x-y)", fontsize=11)
@@ -949,6 +972,482 @@ def _plot_uncertainty_panel(ax, ax_text, result: VehicleResult, cov_world, truth
         0.0, 1.0, "\n".join(lines) + f"\nshaded: {sigma:g}\u03c3, dashed: 1\u03c3 (true scale)",
         transform=ax_text.transAxes, ha="left", va="top", fontsize=8, linespacing=1.35,
     )
+
+
+# ---------------------------------------------------------------- trajectories
+#: Track colours of :func:`plot_trajectories`: distinct from the layer colours
+#: (orange, cyan, magenta), the ellipse red and the truth's near-black.
+_TRACK_COLORS = (
+    "#1f5fbf",  # blue
+    "#2a9d3a",  # green
+    "#7b3fa0",  # purple
+    "#8c564b",  # brown
+    "#0f7c7c",  # teal
+    "#9a8a00",  # olive
+    "#5a5a5a",  # grey
+    "#1b2f6b",  # navy
+)
+_TRUTH_RGB = "0.15"
+
+
+def _vehicles_of(frame) -> list:
+    """The VehicleResults of a FrameResult (or of a plain list of them)."""
+    if frame is None:
+        return []
+    return list(frame.vehicles if hasattr(frame, "vehicles") else frame)
+
+
+def _truth_pose_wireframe(entry):
+    """(pose, wireframe) of a VehicleTruth or of a (pose, wireframe) pair."""
+    if hasattr(entry, "world_T_vehicle"):
+        return entry.world_T_vehicle, entry.wireframe
+    pose, wireframe = entry
+    return pose, wireframe
+
+
+def _has_pose(r) -> bool:
+    """Whether a VehicleResult is drawn: its status is ok and it has a pose."""
+    return r.world_T_vehicle is not None and r.ok
+
+
+def _track_series(frames, n: int) -> dict:
+    """Per track id: arrays over the n frames (NaN where the vehicle has no pose).
+
+    Keys: ``pos`` (n, 3) m, ``fwd`` (n, 2) unit heading in x-y, ``cov`` (n, 3, 3)
+    world position covariance m^2, ``pos_std`` (n,) cm (sqrt of the largest
+    eigenvalue), ``yaw_std`` (n,) deg, ``last`` the last VehicleResult with a pose.
+    """
+    out: dict[str, dict] = {}
+
+    def new():
+        return {
+            "pos": np.full((n, 3), np.nan),
+            "fwd": np.full((n, 2), np.nan),
+            "cov": np.full((n, 3, 3), np.nan),
+            "pos_std": np.full(n, np.nan),
+            "yaw_std": np.full(n, np.nan),
+            "last": None,
+            "missing": {},
+        }
+
+    for f, frame in enumerate(frames):
+        for r in _vehicles_of(frame):
+            s = out.setdefault(r.id, new())
+            if not _has_pose(r):
+                status = getattr(r.status, "value", r.status)
+                s["missing"][status] = s["missing"].get(status, 0) + 1
+                continue
+            T = r.world_T_vehicle.matrix()
+            s["pos"][f] = T[:3, 3]
+            fwd = T[:2, 0]
+            s["fwd"][f] = fwd / max(np.linalg.norm(fwd), 1e-9)
+            if r.wireframe is not None:
+                s["last"] = r
+            cov = None if r.pose_covariance is None else np.asarray(r.pose_covariance, dtype=float)
+            if cov is not None and cov.shape == (6, 6) and np.all(np.isfinite(cov)):
+                c = position_covariance_world(r.world_T_vehicle, cov)
+                s["cov"][f] = c
+                s["pos_std"][f] = 100.0 * math.sqrt(_eig_sorted(c)[0][0])
+                R = T[:3, :3]
+                # Right perturbation R Exp(w): the world-frame rotation error is R w; yaw is its z part.
+                s["yaw_std"][f] = math.degrees(math.sqrt(max(float((R @ cov[:3, :3] @ R.T)[2, 2]), 0.0)))
+    return out
+
+
+def _frame_times(frames) -> tuple[np.ndarray, str]:
+    """The frames' times (s), or their indices when times are missing or not increasing."""
+    n = len(frames)
+    try:
+        t = np.array([float(getattr(f, "t")) for f in frames])
+    except (AttributeError, TypeError, ValueError):
+        t = None
+    if t is None or not np.all(np.isfinite(t)) or (n > 1 and not np.all(np.diff(t) > 0)):
+        return np.arange(n, dtype=float), "frame"
+    return t, "time [s]"
+
+
+def _fit_limits(lo, hi, aspect: float):
+    """x and y limits around the box [lo, hi] with width / height = ``aspect`` (metres per metre)."""
+    mid = 0.5 * (lo + hi)
+    w, h = hi - lo
+    if w / h < aspect:
+        w = h * aspect
+    else:
+        h = w / aspect
+    return (mid[0] - w / 2, mid[0] + w / 2), (mid[1] - h / 2, mid[1] + h / 2)
+
+
+def _ellipse_frames(valid: np.ndarray, every: int) -> list[int]:
+    """Frames of a track that get an ellipse and a heading arrow: every ``every``-th
+    frame with a pose, counted from the track's first, and its last frame."""
+    idx = np.nonzero(valid)[0]
+    if len(idx) == 0:
+        return []
+    picked = list(idx[::every])
+    if idx[-1] != picked[-1] and len(idx) - 1 - (len(picked) - 1) * every >= max(every / 2, 1):
+        picked.append(idx[-1])
+    return [int(i) for i in picked]
+
+
+def plot_trajectories(
+    cameras: Mapping[str, Camera],
+    frames: Sequence,
+    path: str | Path,
+    truth: Sequence[Mapping[str, object] | None] | None = None,
+    title: str | None = None,
+    sigma: float = 3.0,
+    ellipse_every: int = 5,
+    frame_by_frame: Sequence | None = None,
+) -> Path:
+    """Writes a PNG figure of tracking results: trajectories, uncertainty and error over time.
+
+    Panels:
+
+    - Top-down (x-y) view: per track (``VehicleResult.id``), the estimated
+      trajectory of the body origin (``world_T_vehicle.translation()``) as a
+      line with a marker per frame, in a colour of its own; a heading arrow
+      (body x) and the ``sigma``-sigma position ellipse every
+      ``ellipse_every`` frames of the track (and at its last frame); the
+      final estimated wireframe (layer colours) at the last pose, labelled
+      with the id; the true trajectory dashed (and the true final wireframe)
+      when ``truth`` is given; the ``frame_by_frame`` estimates as faint dots
+      when given; and the cameras (or arrows at the border pointing at them
+      with their distance, when they lie outside the view). Ellipses are
+      magnified by a round factor stated in the legend when they would be
+      too small to see, as in :func:`plot_estimates`.
+    - Position uncertainty against time: the 1-sigma standard deviation of
+      the position along its worst axis, ``sqrt`` of the largest eigenvalue
+      of the world position covariance, in cm.
+    - Heading uncertainty against time: the 1-sigma standard deviation of
+      the yaw, in degrees (the z part of the world-frame rotation
+      covariance ``R cov[0:3, 0:3] R^T``).
+    - When ``truth`` is given: the position error (distance between the
+      estimated and the true body origin, 3D) against time, in cm, with its
+      median per track in the legend.
+
+    In the time panels, the ``frame_by_frame`` results are drawn dotted in
+    the track's colour, so the reader sees what tracking gained. Vehicles
+    without a pose in a frame (status ``degenerate`` or ``failed``) are
+    skipped: their track shows a break there, and a note under the figure
+    counts them.
+
+    Args:
+        cameras: camera name -> camera.
+        frames: the tracking result, one :class:`~vfactor.result.FrameResult`
+            per frame in time order (their ``t`` is the time axis; frame
+            indices are used when the times are not increasing).
+        path: PNG file to write (its folder is created).
+        truth: per frame (aligned with ``frames``), vehicle id ->
+            :class:`vfactor.sim.VehicleTruth` or ``(world_T_vehicle,
+            Wireframe)``; a frame may be ``None``.
+        title: figure title.
+        sigma: the ellipses show ``sigma`` standard deviations.
+        ellipse_every: an ellipse and a heading arrow every this many frames
+            of a track (a positive integer).
+        frame_by_frame: the per-frame independent estimates of the same
+            frames (e.g. :func:`vfactor.solve.solve_scene`), aligned with
+            ``frames``.
+
+    Returns:
+        The path written.
+
+    Raises:
+        ValueError: ``sigma`` not a positive number, ``ellipse_every`` not a
+            positive integer, or ``truth`` / ``frame_by_frame`` not as long
+            as ``frames``.
+    """
+    from matplotlib.legend_handler import HandlerTuple
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import FancyArrowPatch, Polygon
+
+    path = Path(path)
+    try:
+        sigma = float(sigma)
+    except (TypeError, ValueError):
+        raise ValueError(f"sigma: expected a positive number, got {sigma!r}") from None
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"sigma: expected a positive number, got {sigma}")
+    if isinstance(ellipse_every, bool) or not isinstance(ellipse_every, (int, np.integer)) or ellipse_every < 1:
+        raise ValueError(f"ellipse_every: expected a positive integer, got {ellipse_every!r}")
+    ellipse_every = int(ellipse_every)
+    frames = list(frames)
+    n = len(frames)
+    if truth is not None:
+        truth = list(truth)
+        if len(truth) != n:
+            raise ValueError(f"truth: expected one entry per frame ({n}), got {len(truth)}")
+    if frame_by_frame is not None:
+        frame_by_frame = list(frame_by_frame)
+        if len(frame_by_frame) != n:
+            raise ValueError(f"frame_by_frame: expected one entry per frame ({n}), got {len(frame_by_frame)}")
+
+    times, time_label = _frame_times(frames)
+    est = _track_series(frames, n)
+    fbf = _track_series(frame_by_frame, n) if frame_by_frame is not None else {}
+    true_pos: dict[str, np.ndarray] = {}
+    true_last: dict[str, tuple] = {}
+    for f, entry in enumerate(truth or []):
+        for vid, item in dict(entry or {}).items():
+            pose, wireframe = _truth_pose_wireframe(item)
+            true_pos.setdefault(vid, np.full((n, 3), np.nan))[f] = np.asarray(pose.translation(), dtype=float)
+            true_last[vid] = (pose, wireframe)
+    ids = list(dict.fromkeys([*est, *fbf, *true_pos]))
+    colour = {vid: _TRACK_COLORS[k % len(_TRACK_COLORS)] for k, vid in enumerate(ids)}
+    has_truth = bool(true_pos)
+    has_fbf = bool(fbf)
+    # Tracks with at least one pose (others appear only in the note under the figure).
+    tracked_ids = [vid for vid in ids if vid in est and np.isfinite(est[vid]["pos"]).any()]
+
+    # --------------------------------------------------------- view of the map
+    cloud = [s["pos"][:, :2] for s in [*est.values(), *fbf.values()]] + [p[:, :2] for p in true_pos.values()]
+    final_pts = {vid: s["last"].keypoints_world for vid, s in est.items() if s["last"] is not None}
+    true_final_pts = {vid: wf.in_world(pose) for vid, (pose, wf) in true_last.items()}
+    cloud += [p[:, :2] for p in final_pts.values()] + [p[:, :2] for p in true_final_pts.values()]
+    cloud = np.concatenate(cloud) if cloud else np.zeros((0, 2))
+    cloud = cloud[np.all(np.isfinite(cloud), axis=1)]
+    if len(cloud) == 0:
+        cloud = np.zeros((1, 2))
+    lo, hi = cloud.min(0) - 2.5, cloud.max(0) + 2.5
+    lo, hi = np.minimum(lo, 0.5 * (lo + hi) - 4.0), np.maximum(hi, 0.5 * (lo + hi) + 4.0)
+    # Take the cameras into the view when that does not shrink the vehicles too much.
+    if cameras:
+        cams = np.array([c.center[:2] for c in cameras.values()])
+        clo, chi = np.minimum(lo, cams.min(0) - 2.0), np.maximum(hi, cams.max(0) + 2.0)
+        if np.max(chi - clo) <= 1.3 * np.max(hi - lo):
+            lo, hi = clo, chi
+    wide = (hi[0] - lo[0]) >= 1.25 * (hi[1] - lo[1])
+
+    # ------------------------------------------------------------------ layout
+    n_time = 3 if has_truth else 2
+    if wide:
+        fig = _new_figure((16.0, 10.0))
+        gs = fig.add_gridspec(2, 1, height_ratios=[1.55, 1.0], hspace=0.22, left=0.055, right=0.985,
+                              top=0.93, bottom=0.085)
+        top = gs[0].subgridspec(1, 2, width_ratios=[1.0, 0.25], wspace=0.02)
+        ax = fig.add_subplot(top[0, 0])
+        ax_legend = fig.add_subplot(top[0, 1])
+        bottom = gs[1].subgridspec(1, n_time, wspace=0.28)
+        tax = [fig.add_subplot(bottom[0, k]) for k in range(n_time)]
+    else:
+        fig = _new_figure((16.0, 10.0))
+        gs = fig.add_gridspec(1, 2, width_ratios=[1.25, 1.0], wspace=0.16, left=0.05, right=0.985,
+                              top=0.93, bottom=0.085)
+        left = gs[0].subgridspec(2, 1, height_ratios=[1.0, 0.2], hspace=0.1)
+        ax = fig.add_subplot(left[0, 0])
+        ax_legend = fig.add_subplot(left[1, 0])
+        right = gs[1].subgridspec(n_time, 1, hspace=0.42)
+        tax = [fig.add_subplot(right[k, 0]) for k in range(n_time)]
+    ax_legend.axis("off")
+    box = ax.get_position()
+    fw, fh = fig.get_size_inches()
+    xlim, ylim = _fit_limits(lo, hi, (box.width * fw) / (box.height * fh))
+    ax.set_xlim(*xlim)
+    ax.set_ylim(*ylim)
+    ax.set_aspect("equal", adjustable="box")
+    ax.grid(True, color="0.88", lw=0.6)
+    ax.set_axisbelow(True)
+
+    # ------------------------------------------------------------ map content
+    diag = {vid: s["last"].wireframe.diagonal for vid, s in est.items() if s["last"] is not None}
+    vehicle_size = float(np.median(list(diag.values()))) if diag else 4.5
+    picks = {vid: _ellipse_frames(np.all(np.isfinite(s["pos"]), axis=1), ellipse_every) for vid, s in est.items()}
+    largest = 0.0
+    for vid, s in est.items():
+        for f in picks[vid]:
+            if np.all(np.isfinite(s["cov"][f])):
+                largest = max(largest, sigma * math.sqrt(_eig_sorted(s["cov"][f][:2, :2])[0][0]))
+    mag = _nice_factor(0.25 * vehicle_size / largest) if largest > 0 else 1.0
+
+    for vid, p in true_pos.items():
+        ax.plot(p[:, 0], p[:, 1], color=_TRUTH_RGB, lw=1.1, ls=(0, (4, 3)), zorder=3)
+    for vid, pts in true_final_pts.items():
+        _draw_wireframe_xy(ax, pts, truth=True)
+    for vid, s in fbf.items():
+        ax.plot(s["pos"][:, 0], s["pos"][:, 1], ls="", marker="o", ms=4.5, color=colour[vid], alpha=0.4,
+                mec="none", zorder=2)
+    for vid, pts in final_pts.items():
+        _draw_wireframe_xy(ax, pts)
+    for vid, s in est.items():
+        p = s["pos"]
+        ax.plot(p[:, 0], p[:, 1], color=colour[vid], lw=1.8, marker="o", ms=3.2, zorder=6)
+        L = 0.3 * diag.get(vid, vehicle_size)
+        for f in picks[vid]:
+            c = s["cov"][f]
+            if np.all(np.isfinite(c)):
+                e = _ellipse_xy(c[:2, :2], sigma * mag) + p[f, :2]
+                ax.add_patch(Polygon(e, closed=True, fc=(*_ELLIPSE_RGB, 0.14), ec=_ELLIPSE_RGB, lw=1.1, zorder=5))
+            ax.add_patch(
+                FancyArrowPatch(
+                    p[f, :2], p[f, :2] + L * s["fwd"][f], arrowstyle="-|>", mutation_scale=11,
+                    color=colour[vid], lw=1.3, zorder=7,
+                )
+            )
+        valid = np.nonzero(np.all(np.isfinite(p), axis=1))[0]
+        if len(valid):
+            first = valid[0]
+            ax.plot(*p[first, :2], marker="o", ms=7.5, mfc="white", mec=colour[vid], mew=1.8, zorder=7)
+            ax.annotate(
+                f"{times[first]:g} s" if time_label.startswith("time") else f"frame {first}", p[first, :2],
+                xytext=(0, -9), textcoords="offset points", ha="center", va="top", fontsize=8, color=colour[vid],
+                zorder=9, bbox=dict(fc="white", ec="none", alpha=0.7, pad=0.5),
+            )
+            anchor = final_pts[vid] if vid in final_pts else p[valid[-1]][None]
+            ax.annotate(
+                vid, (float(np.mean(anchor[:, 0])), float(anchor[:, 1].max())), xytext=(0, 6),
+                textcoords="offset points", ha="center", va="bottom", fontsize=11, fontweight="bold",
+                color=colour[vid], zorder=9, bbox=dict(fc="white", ec="none", alpha=0.7, pad=0.8),
+            )
+    cams_inside, cams_outside = _draw_cameras_xy(ax, cameras, xlim, ylim)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title("Trajectories, top view (x-y)", fontsize=11, loc="left")
+    if not ids:
+        ax.text(0.5, 0.5, "no vehicle estimates", transform=ax.transAxes, ha="center", va="center",
+                fontsize=12, color="0.4")
+
+    # ------------------------------------------------------------------ legend
+    handles, labels = [], []
+    for vid in tracked_ids:
+        k = int(np.all(np.isfinite(est[vid]["pos"]), axis=1).sum())
+        handles.append(Line2D([], [], color=colour[vid], lw=1.8, marker="o", ms=3.2))
+        labels.append(f"{vid}: tracked ({k} frame{'s' if k != 1 else ''})")
+    if any(s["last"] is not None for s in est.values()):
+        handles.append(Line2D([], [], color="0.4", marker="o", ms=7.5, mfc="white", mew=1.8, ls=""))
+        labels.append("start of a track")
+    if has_fbf:
+        handles.append(
+            tuple(Line2D([], [], color=colour[vid], marker="o", ms=4.5, alpha=0.4, mec="none", ls="")
+                  for vid in list(fbf)[:3])
+        )
+        labels.append("frame-by-frame estimates")
+    if has_truth:
+        handles.append(Line2D([], [], color=_TRUTH_RGB, lw=1.1, ls=(0, (4, 3))))
+        labels.append("ground truth")
+    if any(np.isfinite(s["cov"]).any() for s in est.values()):
+        handles.append(Polygon([[0, 0]], closed=True, fc=(*_ELLIPSE_RGB, 0.14), ec=_ELLIPSE_RGB))
+        mag_txt = f",\nmagnified \u00d7{mag:g}" if mag > 1 else ""
+        labels.append(f"position {sigma:g}\u03c3 ellipse{mag_txt}\n(every {ellipse_every} frames)")
+    if est:
+        handles.append(Line2D([], [], color="0.3", marker=r"$\rightarrow$", ls="", ms=12))
+        labels.append("heading (body x)")
+    if final_pts:
+        handles.append(tuple(Line2D([], [], color=LAYER_COLORS_RGB[k], lw=2) for k in ("wheel", "light", "roof")))
+        labels.append("final wireframe:\nwheel / light / roof")
+    if cams_inside:
+        handles.append(Line2D([], [], color="k", marker="s", ms=6, ls=""))
+        labels.append("camera (and its viewing direction)")
+    if cams_outside:
+        handles.append(Line2D([], [], color="0.3", marker=r"$\nearrow$", ls="", ms=12))
+        labels.append("direction to a camera outside\nthe view (distance from its centre)")
+    if handles:
+        ax_legend.legend(
+            handles, labels, loc="upper left" if wide else "upper center", fontsize=9, frameon=False,
+            handler_map={tuple: HandlerTuple(ndivide=None, pad=0.3)}, ncol=1 if wide else 3,
+            handlelength=2.6, labelspacing=0.9, borderaxespad=0.0,
+        )
+
+    # ------------------------------------------------------------- time panels
+    def series(ax_t, key, ylabel, panel_title, show_legend):
+        drawn = False
+        values = []
+        for vid in ids:
+            if vid in fbf and np.isfinite(fbf[vid][key]).any():
+                ax_t.plot(times, fbf[vid][key], color=colour[vid], lw=1.0, ls=(0, (1.5, 1.5)), marker="o", ms=2.5,
+                          alpha=0.75, zorder=3)
+                values.append(fbf[vid][key])
+                drawn = True
+            if vid in est and np.isfinite(est[vid][key]).any():
+                ax_t.plot(times, est[vid][key], color=colour[vid], lw=1.8, marker="o", ms=3.2, zorder=4)
+                values.append(est[vid][key])
+                drawn = True
+        _style_time_axis(ax_t, ylabel, panel_title, time_label, values, allow_log=True,
+                         headroom=1.3 if show_legend else 1.12)
+        if not drawn:
+            ax_t.text(0.5, 0.5, "no covariances", transform=ax_t.transAxes, ha="center", va="center",
+                      color="0.45", fontsize=10)
+        elif show_legend:
+            _time_legend(ax_t, tracked_ids, colour, has_fbf)
+
+    series(tax[0], "pos_std", "1\u03c3 [cm]", "Position uncertainty (1\u03c3, worst axis)", True)
+    series(tax[1], "yaw_std", "1\u03c3 [deg]", "Heading uncertainty (1\u03c3 yaw)", False)
+    if has_truth:
+        ax_e = tax[2]
+        values, handles, labels = [], [], []
+        for vid in ids:
+            if vid not in true_pos:
+                continue
+            for source, style in ((fbf, "fbf"), (est, "est")):
+                if vid not in source:
+                    continue
+                err = 100.0 * np.linalg.norm(source[vid]["pos"] - true_pos[vid], axis=1)
+                if not np.isfinite(err).any():
+                    continue
+                if style == "fbf":
+                    h, = ax_e.plot(times, err, color=colour[vid], lw=1.0, ls=(0, (1.5, 1.5)), marker="o", ms=2.5,
+                                   alpha=0.75, zorder=3)
+                    name = "frame-by-frame"
+                else:
+                    h, = ax_e.plot(times, err, color=colour[vid], lw=1.8, marker="o", ms=3.2, zorder=4)
+                    name = "tracked"
+                values.append(err)
+                handles.append(h)
+                labels.append(f"{vid} {name}: median {np.nanmedian(err):.1f} cm")
+        _style_time_axis(ax_e, "error [cm]", "Position error vs. ground truth (3D)", time_label, values,
+                         headroom=1.15 + 0.08 * len(handles))
+        if handles:
+            order = sorted(range(len(handles)), key=lambda k: (labels[k].split(" ")[0], "frame" in labels[k]))
+            ax_e.legend([handles[k] for k in order], [labels[k] for k in order], fontsize=8, loc="best",
+                        framealpha=0.9)
+        else:
+            ax_e.text(0.5, 0.5, "no estimate with a true pose", transform=ax_e.transAxes, ha="center",
+                      va="center", color="0.45", fontsize=10)
+
+    # -------------------------------------------------------------------- notes
+    notes = []
+    for vid in ids:
+        missing = {**est.get(vid, {}).get("missing", {})}
+        if missing:
+            parts = ", ".join(f"{cnt} {status}" for status, cnt in missing.items())
+            notes.append(f"{vid}: {parts}")
+    if notes:
+        fig.text(0.01, 0.012, "Frames without a pose (gaps in the tracks): " + "; ".join(notes), fontsize=9,
+                 color="0.3")
+    fig.suptitle(title or "Vehicle tracks: trajectories and uncertainty", fontsize=13, y=0.985)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def _style_time_axis(ax, ylabel, panel_title, time_label, values, allow_log: bool = False, headroom=1.12) -> None:
+    """Grid, labels, and a y range from 0 to ``headroom`` times the largest value
+    (with ``allow_log``, a log scale when the values span more than 20x)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator
+
+    ax.set_title(panel_title, fontsize=10.5, loc="left")
+    ax.set_xlabel(time_label, fontsize=9)
+    ax.set_ylabel(ylabel, fontsize=9)
+    ax.tick_params(labelsize=8.5)
+    ax.grid(True, color="0.88", lw=0.6)
+    ax.set_axisbelow(True)
+    v = np.concatenate([np.ravel(x) for x in values]) if values else np.zeros(0)
+    v = v[np.isfinite(v) & (v > 0)]
+    if allow_log and len(v) and v.max() / v.min() > 20.0:
+        ax.set_yscale("log")
+        ax.yaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f"{y:g}"))
+        ax.yaxis.set_minor_formatter(FuncFormatter(lambda y, _: ""))
+    elif len(v):
+        ax.set_ylim(0.0, headroom * v.max())
+
+
+def _time_legend(ax, ids, colour, has_fbf) -> None:
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color=colour[vid], lw=1.8, marker="o", ms=3.2, label=f"{vid} tracked") for vid in ids]
+    if has_fbf:
+        handles.append(Line2D([], [], color="0.35", lw=1.0, ls=(0, (1.5, 1.5)), marker="o", ms=2.5,
+                              label="frame-by-frame"))
+    ax.legend(handles=handles, fontsize=8, loc="best", framealpha=0.9)
 
 
 # ------------------------------------------------------------------ overlays

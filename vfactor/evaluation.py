@@ -81,7 +81,7 @@ def summarise_methods(rows: dict[str, list[dict]]) -> dict[str, dict]:
             "keypoint_cm": float(np.mean([r["mean_keypoint_cm"] for r in ok])) if ok else float("nan"),
             "median_keypoint_cm": float(np.median([r["mean_keypoint_cm"] for r in ok])) if ok else float("nan"),
             "per_keypoint_cm": np.mean([r["keypoint_cm"] for r in ok], axis=0) if ok else np.full(12, np.nan),
-            "seconds": float(np.median([r["seconds"] for r in rs])),
+            "seconds": float(np.median([r.get("seconds", np.nan) for r in rs])),
         }
     return out
 
@@ -127,3 +127,83 @@ def run_accuracy(scenario: str = "accuracy_2cam", frames: int | None = None, see
         sim = simulate(variant, seed=seed, num_frames=frames)
         out.append((variant, summarise_methods(compare_methods(sim, options))))
     return out
+
+
+#: Tracking methods compared by :func:`compare_tracking`, in table order.
+TRACKING_METHODS = {
+    "frame_by_frame": "every frame solved on its own (vfactor solve)",
+    "isam2_online": "iSAM2, the estimate as each frame arrived (filtered)",
+    "isam2": "iSAM2, final estimates (smoothed by later frames)",
+    "isam2_lag": "iSAM2 with a fixed lag, final estimates",
+    "batch": "batch Levenberg-Marquardt over each whole track",
+}
+
+
+def compare_tracking(sim: Simulation, options=None, lag: float = 0.5) -> dict:
+    """Tracking against frame-by-frame solving on the same frames of a simulated scene.
+
+    Returns:
+        ``{"errors": method -> rows (pose_errors + frame, vehicle), "shape_cm": method ->
+        {track id: mean body-frame keypoint error of the last frame's shape, cm},
+        "isam2_vs_batch": (max translation difference cm, max rotation difference deg),
+        "seconds": method -> wall time}``.
+    """
+    import dataclasses
+
+    from vfactor.solve import solve_scene
+    from vfactor.track import TrackOptions, smooth_scene, track_scene
+
+    options = options or TrackOptions()
+    runs, seconds = {}, {}
+    t0 = time.perf_counter()
+    runs["frame_by_frame"] = solve_scene(sim.scene, options.solve)
+    seconds["frame_by_frame"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    run = track_scene(sim.scene, options)
+    seconds["isam2"] = seconds["isam2_online"] = time.perf_counter() - t0
+    runs["isam2_online"], runs["isam2"] = run.online, run.frames
+    t0 = time.perf_counter()
+    runs["isam2_lag"] = track_scene(sim.scene, dataclasses.replace(options, lag=lag)).frames
+    seconds["isam2_lag"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    runs["batch"] = smooth_scene(sim.scene, options)
+    seconds["batch"] = time.perf_counter() - t0
+    errors, shapes = {}, {}
+    for method, frames in runs.items():
+        rows, last = [], {}
+        for f, frame in enumerate(frames):
+            for v in frame.vehicles:
+                row = {"frame": f, "vehicle": v.id, "status": v.status.value}
+                if v.ok:
+                    truth = sim.truth[f][v.id]
+                    row.update(pose_errors(v.world_T_vehicle, v.keypoints_world, truth.world_T_vehicle,
+                                           truth.keypoints_world))
+                    last[v.id] = 100 * float(np.linalg.norm(v.keypoints_vehicle - truth.keypoints_vehicle, axis=1).mean())
+                rows.append(row)
+        errors[method], shapes[method] = rows, last
+    diffs = [(100 * np.linalg.norm(a.world_T_vehicle.translation() - b.world_T_vehicle.translation()),
+              np.degrees(np.linalg.norm(a.world_T_vehicle.rotation().logmap(b.world_T_vehicle.rotation()))))
+             for fa, fb in zip(runs["isam2"], runs["batch"]) for a, b in zip(fa.vehicles, fb.vehicles) if a.ok and b.ok]
+    worst = tuple(np.max(diffs, axis=0)) if diffs else (float("nan"), float("nan"))
+    return {"errors": errors, "shape_cm": shapes, "isam2_vs_batch": worst, "seconds": seconds}
+
+
+def tracking_table(comparison: dict) -> str:
+    """Markdown tables of :func:`compare_tracking`: errors per method, with ratios to frame-by-frame."""
+    base = summarise_methods({"frame_by_frame": comparison["errors"]["frame_by_frame"]})["frame_by_frame"]
+    lines = [
+        "| method | poses | failed | rotation (deg) | translation (cm) | keypoint (cm) | vs frame-by-frame (rot / trans) | final shape error (cm) | time (s) |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for method, rows in comparison["errors"].items():
+        s = summarise_methods({method: rows})[method]
+        shape = comparison["shape_cm"][method]
+        shape_text = ", ".join(f"{vid} {e:.1f}" for vid, e in sorted(shape.items()))
+        ratio = "-" if method == "frame_by_frame" else (
+            f"{s['rotation_deg'] / base['rotation_deg']:.2f}x / {s['translation_cm'] / base['translation_cm']:.2f}x")
+        lines.append(f"| {method} | {s['count']} | {s['failures']} | {s['rotation_deg']:.2f} | {s['translation_cm']:.2f} | "
+                     f"{s['keypoint_cm']:.2f} | {ratio} | {shape_text} | {comparison['seconds'][method]:.2f} |")
+    cm, deg = comparison["isam2_vs_batch"]
+    lines.append("")
+    lines.append(f"iSAM2 (final) against batch: largest difference {cm:.2f} cm, {deg:.3f} deg.")
+    return "\n".join(lines)

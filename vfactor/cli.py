@@ -100,14 +100,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, help="number of frames (default: the scenario's)")
 
     p = sub.add_parser(
-        "eval", help="accuracy against simulated ground truth, beside triangulation and a known-shape reference",
-        description="Run the factor graph, multi-view triangulation and the known-shape reference (true wireframe "
-        "given, pose solved from the truth) on the same simulated scenes, at paper-like noise and at a harder "
-        "setting (15%% outliers, 8%% left/right swaps), and print the paper's metrics side by side.",
+        "eval", help="accuracy against simulated ground truth: one-frame methods, or tracking",
+        description="frames (default): run the factor graph, multi-view triangulation and the known-shape reference "
+        "(true wireframe given, pose solved from the truth) on the same simulated scenes, at paper-like noise and at "
+        "a harder setting (15%% outliers, 8%% left/right swaps), and print the paper's metrics side by side. "
+        "tracks: track the vehicles of a simulated multi-frame scene with iSAM2 (online, final, fixed lag) and batch "
+        "smoothing, beside frame-by-frame solving of the same frames.",
     )
-    p.add_argument("--scenario", default="accuracy_2cam", help="scenario (default: accuracy_2cam)")
-    p.add_argument("--frames", type=int, help="number of scenes (default: the scenario's)")
+    p.add_argument("experiment", nargs="?", default="frames", choices=("frames", "tracks"),
+                   help="frames (one-frame accuracy) or tracks (tracking); default: frames")
+    p.add_argument("--scenario", help="scenario (default: accuracy_2cam for frames, tracks_3veh for tracks)")
+    p.add_argument("--frames", type=int, help="number of scenes or frames (default: the scenario's)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    p.add_argument("--seeds", type=int, default=1, help="tracks: how many seeds from --seed on (default: 1)")
     p.add_argument("--markdown", help="also write the tables to this Markdown file")
     return parser
 
@@ -323,23 +328,53 @@ def _error_cells(errors: dict | None, widths) -> str:
 
 
 def _eval(args) -> int:
-    from vfactor.evaluation import accuracy_table, keypoint_table, run_accuracy
-
     t0 = time.perf_counter()
-    sections = []
-    for scenario, summary in run_accuracy(args.scenario, _check_positive(args.frames, "--frames"), args.seed):
-        n = scenario.noise
-        title = (f"### {scenario.name}: {n.outlier_rate:.0%} outliers, {n.swap_rate:.0%} left/right swaps, "
-                 f"{n.missing_rate:.0%} missing, sigma {n.relative_sigma:.0%} of the box diagonal "
-                 f"(x{n.occluded_factor:g} when self-occluded), seed {args.seed}")
-        sections.append(f"{title}\n\n{accuracy_table(summary)}\n\nMean error per keypoint (cm):\n\n{keypoint_table(summary)}\n")
-        print(sections[-1])
-    command = "vfactor eval" + (f" --scenario {args.scenario}" if args.scenario != "accuracy_2cam" else "") + \
-        (f" --frames {args.frames}" if args.frames else "") + (f" --seed {args.seed}" if args.seed else "")
+    frames = _check_positive(args.frames, "--frames")
+    _check_positive(args.seeds, "--seeds")
+    if args.experiment == "frames":
+        sections = _eval_frames(args.scenario or "accuracy_2cam", frames, args.seed)
+    else:
+        sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds)
+    default = "accuracy_2cam" if args.experiment == "frames" else "tracks_3veh"
+    command = "vfactor eval" + (" tracks" if args.experiment == "tracks" else "") + \
+        (f" --scenario {args.scenario}" if args.scenario and args.scenario != default else "") + \
+        (f" --frames {args.frames}" if args.frames else "") + (f" --seed {args.seed}" if args.seed else "") + \
+        (f" --seeds {args.seeds}" if args.seeds != 1 else "")
+    for section in sections:
+        print(section)
     print(f"({command}; {time.perf_counter() - t0:.1f} s)")
     if args.markdown:
         Path(args.markdown).write_text(f"<!-- made by: {command} -->\n\n" + "\n".join(sections), encoding="utf-8")
     return EXIT_OK
+
+
+def _eval_frames(scenario_name: str, frames, seed: int) -> list[str]:
+    from vfactor.evaluation import accuracy_table, keypoint_table, run_accuracy
+
+    sections = []
+    for scenario, summary in run_accuracy(scenario_name, frames, seed):
+        n = scenario.noise
+        title = (f"### {scenario.name}: {n.outlier_rate:.0%} outliers, {n.swap_rate:.0%} left/right swaps, "
+                 f"{n.missing_rate:.0%} missing, sigma {n.relative_sigma:.0%} of the box diagonal "
+                 f"(x{n.occluded_factor:g} when self-occluded), seed {seed}")
+        sections.append(f"{title}\n\n{accuracy_table(summary)}\n\nMean error per keypoint (cm):\n\n"
+                        f"{keypoint_table(summary)}\n")
+    return sections
+
+
+def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int) -> list[str]:
+    from vfactor.evaluation import compare_tracking, tracking_table
+    from vfactor.sim import load_scenario, simulate
+
+    scenario = load_scenario(scenario_name)
+    sections = []
+    for s in range(seed, seed + seeds):
+        sim = simulate(scenario, seed=s, num_frames=frames)
+        ids = sorted({vid for f in sim.scene.frames for vid in f.vehicle_ids()})
+        title = (f"### {scenario.name}, seed {s}: {len(sim.scene.frames)} frames, {len(ids)} vehicles, "
+                 f"{len(sim.scene.cameras)} cameras" + (", road plane given" if sim.scene.ground_plane else ""))
+        sections.append(f"{title}\n\n{tracking_table(compare_tracking(sim))}\n")
+    return sections
 
 
 if __name__ == "__main__":

@@ -171,8 +171,12 @@ class Tracker:
                 vehicles.append(VehicleResult(vid, Status.FAILED, message=str(exc)))
         return FrameResult(frame.t, vehicles)
 
-    def estimates(self) -> dict[tuple[int, str], VehicleResult]:
-        """Current estimates of every pose still held by the smoothers: (frame index, id) -> result."""
+    def estimates(self, covariance: bool = False) -> dict[tuple[int, str], VehicleResult]:
+        """Current estimates of every pose still held by the smoothers: (frame index, id) -> result.
+
+        Args:
+            covariance: also compute each pose's marginal covariance (one query per pose).
+        """
         out = {}
         for track in self._tracks.values():
             if track.smoother is None:
@@ -181,7 +185,8 @@ class Tracker:
             wireframe = self._wireframe(estimate, track)
             for frame_index, _, key in track.poses:
                 if estimate.exists(key):
-                    out[(frame_index, track.id)] = self._result(track, estimate, key, wireframe)
+                    cov = track.smoother.marginalCovariance(key) if covariance else None
+                    out[(frame_index, track.id)] = self._result(track, estimate, key, wireframe, cov)
         return out
 
     # ----------------------------------------------------------------- private
@@ -342,15 +347,15 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
         online[i] = tracker.add_frame(scene.frames[i], i)
         for v in online[i].vehicles:
             final[(i, v.id)] = v
-        if options.lag is not None:  # keep the last estimate of poses before they leave the window
-            final.update(_keep_meta(tracker.estimates(), final))
+        if options.lag is not None:  # a pose's final estimate is its last one inside the window
+            _refresh(final, tracker.estimates())
         if progress is not None:
             progress(n + 1, len(order))
-    final.update(_keep_meta(tracker.estimates(), final, with_covariance=options.covariance, tracker=tracker))
-    seen: dict[str, int] = {}
+    _refresh(final, tracker.estimates(covariance=options.covariance))
+    solved: dict[str, int] = {}
     for (_, vid), v in final.items():
-        seen[vid] = seen.get(vid, 0) + (1 if v.ok else 0)
-    for vid, count in seen.items():
+        solved[vid] = solved.get(vid, 0) + int(v.ok)
+    for vid, count in solved.items():
         if count == 1:
             messages.append(f"vehicle '{vid}' was solved in one frame only: no motion information")
     frames = [FrameResult(f.t, [final[(i, vid)] for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
@@ -363,20 +368,13 @@ def _with_plane(options: TrackOptions, plane: GroundPlane) -> TrackOptions:
     return dataclasses.replace(options, ground_plane=plane)
 
 
-def _keep_meta(estimates, previous, with_covariance=False, tracker: Tracker | None = None):
-    """Smoothed estimates, keeping each result's message (and covariance unless recomputed)."""
-    out = {}
+def _refresh(final: dict, estimates: dict) -> None:
+    """Replaces results by the smoothers' current estimates, keeping a covariance that was not recomputed."""
     for key, v in estimates.items():
-        old = previous.get(key)
-        if old is not None:
-            v.message = old.message
+        old = final.get(key)
+        if v.pose_covariance is None and old is not None:
             v.pose_covariance = old.pose_covariance
-        if with_covariance and tracker is not None:
-            track = tracker._tracks[key[1]]
-            pose_key = tracker.keys.pose_key(track.index, key[0])
-            v.pose_covariance = track.smoother.marginalCovariance(pose_key)
-        out[key] = v
-    return out
+        final[key] = v
 
 
 def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: ShapePrior | None = None,

@@ -14,6 +14,9 @@ SIM_NAMES = {
     "Scenario", "Motion", "SCENARIO_FIELDS", "CAMERA_FIELDS", "load_scenario", "scenario_from_dict",
     "scenario_path", "list_scenarios", "noise_from_value",
     "simulate", "Simulation", "VehicleTruth", "DetectionTruth", "vehicle_ids", "keypoints_in_view",
+    "RouteMotion", "RouteSpec", "MOTION_FIELDS", "ROUTE_MOTION_FIELDS", "ROUTE_FIELDS", "REQUIRE_VISIBLE",
+    "ARMS", "TURNS", "Path", "SpeedProfile", "drive_profile", "Trajectory", "TrajectoryStates", "IntersectionRoute",
+    "intersection_path",
     "save_truth", "load_truth", "truth_to_dict", "truth_from_dict", "write_simulation",
 }
 METRICS_NAMES = {

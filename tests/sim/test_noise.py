@@ -126,3 +126,22 @@ def test_shape_checks():
         corrupt_keypoints(np.zeros((11, 2)), np.zeros(12, bool), NoiseModel(), np.random.default_rng(0))
     with pytest.raises(ValueError, match="occluded"):
         corrupt_keypoints(np.zeros((12, 2)), np.zeros(10, bool), NoiseModel(), np.random.default_rng(0))
+
+
+def test_a_keypoint_truly_outside_the_image_stays_missing_whatever_the_noise_or_the_labels():
+    # Large pixel noise and outliers could move a point that lies outside the image into it; the detector
+    # cannot see it, so it stays missing. A swapped label carries its source's visibility with it.
+    rng = np.random.default_rng(5)
+    noise = NoiseModel(relative_sigma=0.5, outlier_rate=0.5, outlier_box_growth=3.0, swap_rate=0.0, missing_rate=0.0)
+    for _ in range(200):
+        uv = _true_uv(rng)
+        uv[0] = [-3.0, 300.0]  # just left of the image
+        out = corrupt_keypoints(uv, np.zeros(12, bool), noise, rng, SIZE)
+        assert out.missing[0] and out.confidence[0] == 0
+    swap_all = NoiseModel(relative_sigma=0.0, outlier_rate=0.0, swap_rate=1.0, missing_rate=0.0)
+    uv = _true_uv(rng)
+    uv[0] = [-30.0, 300.0]  # left_front_wheel outside; its partner (1) inside
+    out = corrupt_keypoints(uv, np.zeros(12, bool), swap_all, rng, SIZE)
+    assert out.swapped[0] and out.swapped[1]
+    assert not out.missing[0] and out.missing[1]  # label 0 now holds keypoint 1's (seen) pixel, label 1 nothing
+    np.testing.assert_allclose(out.keypoints[0], uv[1])

@@ -6,16 +6,39 @@ Typical use::
 
     sim = simulate(load_scenario("intersection_2cam"), seed=1)
     sim.scene        # a vfactor.observations.Scene: cameras and noisy detections
-    sim.truth[0]     # frame 0: vehicle id -> VehicleTruth(world_T_vehicle, wireframe, preset)
+    sim.truth[0]     # frame 0: vehicle id -> VehicleTruth(world_T_vehicle, wireframe, preset, ..., speed, yaw_rate)
     write_simulation(sim, "scene.json", "truth.json")
+
+Tracks (vehicles driving routes through the intersection, entering and leaving the views)::
+
+    sim = simulate("tracks_3veh")
+    sim.truth[f]["v2"].speed, sim.truth[f]["v2"].yaw_rate     # per-frame true motion state
+    sim.trajectories["v2"].states(times)                      # continuous-time truth
 """
 
 from vfactor.sim.noise import NoiseModel, NoisyKeypoints, box_diagonal, corrupt_keypoints
 from vfactor.sim.rig import intersection_rig, intrinsics_from_hfov, look_at, pole_camera
+from vfactor.sim.routes import (
+    ARMS,
+    TURNS,
+    IntersectionRoute,
+    Path,
+    SpeedProfile,
+    Trajectory,
+    TrajectoryStates,
+    drive_profile,
+    intersection_path,
+)
 from vfactor.sim.scenario import (
     CAMERA_FIELDS,
+    MOTION_FIELDS,
+    REQUIRE_VISIBLE,
+    ROUTE_FIELDS,
+    ROUTE_MOTION_FIELDS,
     SCENARIO_FIELDS,
     Motion,
+    RouteMotion,
+    RouteSpec,
     Scenario,
     list_scenarios,
     load_scenario,
@@ -71,11 +94,27 @@ __all__ = [
     "NoisyKeypoints",
     "corrupt_keypoints",
     "box_diagonal",
+    # routes
+    "ARMS",
+    "TURNS",
+    "Path",
+    "SpeedProfile",
+    "drive_profile",
+    "Trajectory",
+    "TrajectoryStates",
+    "IntersectionRoute",
+    "intersection_path",
     # scenarios
     "Scenario",
     "Motion",
+    "RouteMotion",
+    "RouteSpec",
     "SCENARIO_FIELDS",
     "CAMERA_FIELDS",
+    "MOTION_FIELDS",
+    "ROUTE_MOTION_FIELDS",
+    "ROUTE_FIELDS",
+    "REQUIRE_VISIBLE",
     "load_scenario",
     "scenario_from_dict",
     "scenario_path",

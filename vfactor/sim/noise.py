@@ -101,6 +101,12 @@ def box_diagonal(uv: np.ndarray) -> float:
     return float(np.linalg.norm(uv.max(0) - uv.min(0)))
 
 
+def _inside(uv: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """(N,) whether pixels lie inside the image (pixel centres at integers, edges at -0.5)."""
+    w, h = image_size
+    return (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5)
+
+
 def corrupt_keypoints(
     uv_true: np.ndarray,
     occluded: np.ndarray,
@@ -113,8 +119,11 @@ def corrupt_keypoints(
 
     In order: Gaussian pixel noise (``relative_sigma`` times the keypoint box
     diagonal, times ``occluded_factor`` where occluded) and confidences; outliers;
-    left/right swaps; random misses; then every keypoint outside the image (or
-    behind the camera) is missing too. The same number of random draws is made
+    left/right swaps; random misses; then every keypoint whose true projection
+    is outside the image or behind the camera (the detector cannot see it, even
+    as an outlier or under a swapped label), or whose noisy pixel falls outside
+    the image, is missing too. So a vehicle that partly leaves the image keeps
+    only its keypoints inside, and one entirely outside gives nothing. The same number of random draws is made
     whatever the rates, so that changing a rate leaves the other draws alone.
 
     Args:
@@ -122,7 +131,7 @@ def corrupt_keypoints(
         occluded: (12,) which keypoints are hidden from this camera.
         noise: the noise model.
         rng: random generator (the only source of randomness).
-        image_size: ``(width, height)``; keypoints outside are missing. None: no limit.
+        image_size: ``(width, height)``; keypoints outside (truly or after noise) are missing. None: no limit.
         in_front: (12,) whether each true point is in front of the camera; False means missing.
 
     Returns:
@@ -162,19 +171,22 @@ def corrupt_keypoints(
     confidence[outlier] = lo_v + u_conf[outlier] * (hi_v - lo_v)
     sigma = np.where(outlier, np.nan, sigma)
 
+    # Whether the camera can see where each measurement comes from: in front and inside the image.
+    seeable = finite.copy()
+    if image_size is not None:
+        seeable &= _inside(np.where(finite[:, None], uv_true, 0.0), image_size)
+
     swapped = np.zeros(NUM_KEYPOINTS, bool)
     for (left, right), u in zip(LEFT_RIGHT_PAIRS, u_swap):
         if u < noise.swap_rate:
             order = [right, left]
-            for array in (uv, confidence, sigma, outlier):
+            for array in (uv, confidence, sigma, outlier, seeable):
                 array[[left, right]] = array[order]
             swapped[[left, right]] = True
 
-    missing = (u_missing < noise.missing_rate) | ~finite
+    missing = (u_missing < noise.missing_rate) | ~seeable
     if image_size is not None:
-        w, h = image_size
-        inside = (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5)
-        missing |= ~inside
+        missing |= ~_inside(uv, image_size)
     uv[missing] = np.nan
     confidence[missing] = 0.0
     return NoisyKeypoints(uv, confidence, sigma, outlier, swapped, missing)

@@ -20,11 +20,19 @@ from vfactor.errors import CalibrationError, ScenarioError
 from vfactor.sim import _checks as chk
 from vfactor.sim.noise import NoiseModel
 from vfactor.sim.rig import intrinsics_from_hfov, look_at
+from vfactor.sim.routes import ARMS, TURNS
+from vfactor.sim.routes import Path as RoutePath
 from vfactor.sim.vehicles import RANDOM, RandomShape
 from vfactor.wireframe import PRESETS
 
 __all__ = [
     "Motion",
+    "RouteMotion",
+    "RouteSpec",
+    "REQUIRE_VISIBLE",
+    "MOTION_FIELDS",
+    "ROUTE_MOTION_FIELDS",
+    "ROUTE_FIELDS",
     "Scenario",
     "SCENARIO_FIELDS",
     "CAMERA_FIELDS",
@@ -47,14 +55,73 @@ SCENARIO_FIELDS: dict[str, str] = {
     "region": '{"x": [min, max], "y": [min, max]}: world box of vehicle positions, metres (default +-2 m)',
     "yaw_deg": "[min, max] heading range, degrees (default [0, 360])",
     "visible_in": '"all" (default) or a list of camera names whose images must hold all 12 keypoints',
+    "require_visible": '"all" (default: every visible_in camera holds every vehicle in every frame), '
+    '"any" (at least one of them does, in every frame the vehicle exists) or "none" (vehicles may leave the views)',
     "margin_px": "margin inside the image for that check, pixels (default 20)",
     "min_gap": "minimum distance between vehicles' footprints, metres (default 0.5)",
     "noise": 'noise settings (see NoiseModel) or "paper" (default), "noiseless", "gaussian"',
     "num_frames": "integer >= 1 (default 10)",
     "dt": "seconds between frames (default 0.1)",
     "seed": "integer >= 0 (default 0)",
-    "motion": 'null (default: independent frames) or {"speed": [min, max] m/s, "yaw_rate_deg": [min, max] deg/s}',
+    "motion": 'null (default: independent frames), {"speed": [min, max] m/s, "yaw_rate_deg": [min, max] deg/s} '
+    '(constant speed and turn rate) or {"kind": "route", ...} '
+    "(routes through the intersection; see ROUTE_MOTION_FIELDS)",
 }
+
+#: Values of ``require_visible``.
+REQUIRE_VISIBLE = ("all", "any", "none")
+
+#: Keys of ``motion`` with ``"kind": "constant"`` (the default kind).
+MOTION_FIELDS: dict[str, str] = {
+    "kind": '"constant" (default) or "route"',
+    "speed": "[min, max] uniform speed, m/s (default [3, 8])",
+    "yaw_rate_deg": "[min, max] uniform yaw rate, deg/s (default [-11.46, 11.46])",
+}
+
+#: Keys of ``motion`` with ``"kind": "route"``. A range is ``[min, max]`` or one number.
+ROUTE_MOTION_FIELDS: dict[str, str] = {
+    "kind": '"route"',
+    "routes": "list of routes, one per vehicle v1, v2, ... (see ROUTE_FIELDS); missing fields are drawn "
+    "from the ranges below; vehicles beyond the list are drawn entirely",
+    "speed": "cruise speed range, m/s (default [5, 12])",
+    "from": 'arms vehicles come from, drawn uniformly (default ["west", "south", "east", "north"])',
+    "turn": 'manoeuvres, drawn uniformly (default ["straight", "left", "right"])',
+    "radius": "turn radius range of the hub centroid, m (default [6, 15])",
+    "stop_probability": "probability that a vehicle stops before the intersection (default 0.3)",
+    "stop_at": "distance of the stop point before the centre, m (default 7)",
+    "wait": "range of the time at rest at a stop, s (default [1, 3])",
+    "decel": "range of the braking deceleration, m/s^2 (default [2, 3])",
+    "accel": "range of the acceleration when setting off, m/s^2 (default [1.5, 2.5])",
+    "centre_time": "range of the time at the middle of the manoeuvre of a vehicle that does not stop, s "
+    "(default [0, (num_frames - 1) * dt])",
+    "stop_time": "range of the time a stopping vehicle comes to rest, s (default [0, (num_frames - 1) * dt])",
+    "lane_offset": "distance of the lanes from the road axes, m (default 1.75; negative: left-hand traffic)",
+    "scene_radius": "null (default) or metres: a vehicle exists only while within this distance of the origin",
+}
+
+#: Keys of one entry of ``motion.routes``; every one is optional.
+ROUTE_FIELDS: dict[str, str] = {
+    "vehicle": 'preset name or "random" (default: from "vehicles" by "vehicle_order")',
+    "from": '"west", "south", "east" or "north": the arm the vehicle comes from',
+    "turn": '"straight", "left" or "right"',
+    "radius": "turn radius, m",
+    "speed": "cruise speed, m/s",
+    "stop": "true: halt at the stop point, wait, set off again",
+    "stop_at": "distance of the stop point before the centre, m",
+    "wait": "time at rest at each stop, s",
+    "decel": "braking deceleration, m/s^2",
+    "accel": "acceleration when setting off, m/s^2",
+    "centre_time": "time at the middle of the manoeuvre, s (not with stop_time)",
+    "stop_time": "time the vehicle comes to rest at its stop, s (implies stop: true)",
+    "path": '{"start": [x, y, yaw_deg], "segments": [{"straight": m} | {"arc_deg": deg, "radius": m}], '
+    '"loop": false}: an explicit path instead of from/turn/radius',
+    "stops": 'with path: [{"at": m along the path, "wait": s}], in increasing order',
+    "start_speed": "with path: speed at start_time, m/s (default the cruise speed)",
+    "start_time": "with path: time at the path's start, s (default 0); the vehicle exists from then on",
+}
+
+_INTERSECTION_ONLY = ("from", "turn", "radius", "stop", "stop_at", "centre_time", "stop_time")
+_PATH_ONLY = ("stops", "start_speed", "start_time")
 
 CAMERA_FIELDS: dict[str, str] = {
     "name": "unique camera name (required)",
@@ -89,6 +156,95 @@ class Motion:
 
 
 @dataclass(frozen=True)
+class RouteSpec:
+    """One vehicle's route as a scenario gives it; a None field is drawn from :class:`RouteMotion`'s ranges.
+
+    Either an intersection route (``arm``, ``turn``, ``radius``, ``stop``...) or
+    an explicit ``path`` (with ``stops``, ``start_speed``, ``start_time``).
+
+    Attributes:
+        vehicle: preset name or ``"random"``.
+        arm: arm the vehicle comes from (``"west"``, ``"south"``, ``"east"``, ``"north"``; the file's ``from``).
+        turn: ``"straight"``, ``"left"`` or ``"right"``.
+        radius: turn radius, metres.
+        speed: cruise speed, m/s.
+        stop: whether it halts at the stop point.
+        stop_at: distance of the stop point before the centre, metres.
+        wait: time at rest at each stop, s.
+        decel: braking deceleration, m/s^2.
+        accel: acceleration when setting off, m/s^2.
+        centre_time: time at the middle of the manoeuvre, s.
+        stop_time: time it comes to rest at its stop, s (implies ``stop=True``).
+        path: explicit path (instead of an intersection route).
+        stops: with ``path``: ``(arc_length, wait or None)`` pairs.
+        start_speed: with ``path``: speed at ``start_time``.
+        start_time: with ``path``: time at the path's start (the vehicle exists from then on).
+    """
+
+    vehicle: str | None = None
+    arm: str | None = None
+    turn: str | None = None
+    radius: float | None = None
+    speed: float | None = None
+    stop: bool | None = None
+    stop_at: float | None = None
+    wait: float | None = None
+    decel: float | None = None
+    accel: float | None = None
+    centre_time: float | None = None
+    stop_time: float | None = None
+    path: RoutePath | None = None
+    stops: tuple[tuple[float, float | None], ...] = ()
+    start_speed: float | None = None
+    start_time: float | None = None
+
+    def __post_init__(self):
+        if self.stop_time is not None:
+            if self.stop is False:
+                raise ValueError("RouteSpec: a vehicle with stop=False has no stop_time")
+            object.__setattr__(self, "stop", True)
+
+
+@dataclass(frozen=True)
+class RouteMotion:
+    """Vehicles driving routes through the intersection at the origin (``"kind": "route"``).
+
+    Ranges are ``(min, max)`` of uniform draws. See :data:`ROUTE_MOTION_FIELDS`.
+
+    Attributes:
+        routes: one :class:`RouteSpec` per vehicle (``v1``, ``v2``, ...); vehicles beyond them are drawn entirely.
+        speed: cruise speed, m/s.
+        arms: arms the vehicles come from.
+        turns: manoeuvres.
+        radius: turn radius, metres.
+        stop_probability: probability that a vehicle stops before the intersection.
+        stop_at: distance of the stop point before the centre, metres.
+        wait: time at rest at a stop, s.
+        decel: braking deceleration, m/s^2.
+        accel: acceleration when setting off, m/s^2.
+        centre_time: time at the middle of the manoeuvre (None: ``[0, (num_frames - 1) * dt]``).
+        stop_time: time a stopping vehicle comes to rest (None: ``[0, (num_frames - 1) * dt]``).
+        lane_offset: distance of the lanes from the road axes, metres.
+        scene_radius: a vehicle exists only while within this distance of the origin (None: always).
+    """
+
+    routes: tuple[RouteSpec, ...] = ()
+    speed: tuple[float, float] = (5.0, 12.0)
+    arms: tuple[str, ...] = tuple(ARMS)
+    turns: tuple[str, ...] = tuple(TURNS)
+    radius: tuple[float, float] = (6.0, 15.0)
+    stop_probability: float = 0.3
+    stop_at: tuple[float, float] = (7.0, 7.0)
+    wait: tuple[float, float] = (1.0, 3.0)
+    decel: tuple[float, float] = (2.0, 3.0)
+    accel: tuple[float, float] = (1.5, 2.5)
+    centre_time: tuple[float, float] | None = None
+    stop_time: tuple[float, float] | None = None
+    lane_offset: float = 1.75
+    scene_radius: float | None = None
+
+
+@dataclass(frozen=True)
 class Scenario:
     """Everything :func:`vfactor.sim.simulate` needs.
 
@@ -104,6 +260,9 @@ class Scenario:
             (with :attr:`motion`: the positions at the middle frame).
         yaw_range: ``(min, max)`` heading, radians.
         visible_in: cameras whose images must hold all 12 keypoints (with ``margin_px``).
+        require_visible: ``"all"``: every ``visible_in`` camera holds every vehicle in every
+            frame; ``"any"``: at least one of them does in every frame the vehicle exists;
+            ``"none"``: no requirement (vehicles may leave the views).
         margin_px: margin for that check, pixels.
         min_gap: minimum gap between two vehicles' footprints, metres.
         noise: keypoint noise.
@@ -111,7 +270,9 @@ class Scenario:
         dt: time between frames, seconds.
         seed: default random seed.
         motion: None for independent frames (a new vehicle in every frame), or
-            the motion of vehicles that keep their id and shape over the frames.
+            the motion of vehicles that keep their id and shape over the frames:
+            :class:`Motion` (constant speed and turn rate) or :class:`RouteMotion`
+            (routes through the intersection, or explicit paths, with stops).
     """
 
     cameras: dict[str, Camera]
@@ -124,20 +285,21 @@ class Scenario:
     region: tuple[tuple[float, float], tuple[float, float]] = ((-2.0, 2.0), (-2.0, 2.0))
     yaw_range: tuple[float, float] = (0.0, 2.0 * math.pi)
     visible_in: tuple[str, ...] | None = None
+    require_visible: str = "all"
     margin_px: float = 20.0
     min_gap: float = 0.5
     noise: NoiseModel = field(default_factory=NoiseModel)
     num_frames: int = 10
     dt: float = 0.1
     seed: int = 0
-    motion: Motion | None = None
+    motion: Motion | RouteMotion | None = None
 
     def __post_init__(self):
         if self.visible_in is None:
             object.__setattr__(self, "visible_in", tuple(self.cameras))
 
     def required_cameras(self) -> list[Camera]:
-        """The cameras whose images must hold every keypoint of every vehicle."""
+        """The cameras whose images must hold every keypoint of every vehicle (all or one: :attr:`require_visible`)."""
         return [self.cameras[name] for name in self.visible_in]
 
 
@@ -234,6 +396,8 @@ def scenario_from_dict(data: dict, default_name: str = "scenario") -> Scenario:
         kw["yaw_range"] = (math.radians(lo), math.radians(hi))
     if "visible_in" in data:
         kw["visible_in"] = _visible_in(data["visible_in"], kw["cameras"])
+    if "require_visible" in data:
+        kw["require_visible"] = chk.string(data["require_visible"], "require_visible", choices=set(REQUIRE_VISIBLE))
     if "margin_px" in data:
         kw["margin_px"] = chk.number(data["margin_px"], "margin_px", lo=0.0)
     if "min_gap" in data:
@@ -248,6 +412,16 @@ def scenario_from_dict(data: dict, default_name: str = "scenario") -> Scenario:
         kw["seed"] = chk.number(data["seed"], "seed", lo=0, integer=True)
     if data.get("motion") is not None:
         kw["motion"] = _motion(data["motion"], "motion")
+        routes = getattr(kw["motion"], "routes", ())
+        if routes:
+            if "vehicles_per_frame" not in kw:
+                kw["vehicles_per_frame"] = len(routes)
+            elif kw["vehicles_per_frame"] < len(routes):
+                raise ScenarioError(
+                    "motion.routes",
+                    f"{len(routes)} routes for vehicles_per_frame = {kw['vehicles_per_frame']}: "
+                    "give at most one route per vehicle (or leave vehicles_per_frame out)",
+                )
     return Scenario(**kw)
 
 
@@ -355,8 +529,18 @@ def _random_shape(value, field: str) -> RandomShape:
     return RandomShape(**kw)
 
 
-def _motion(value, field: str) -> Motion:
-    chk.check_mapping(value, field, ("speed", "yaw_rate_deg"))
+def _motion(value, field: str) -> Motion | RouteMotion:
+    if isinstance(value, dict) and "kind" in value:
+        kind = chk.string(value["kind"], chk.join(field, "kind"), choices={"constant", "route"})
+        if kind == "route":
+            return _route_motion(value, field)
+    if isinstance(value, dict):
+        for key in value:
+            if key in ROUTE_MOTION_FIELDS and key not in MOTION_FIELDS:
+                raise ScenarioError(
+                    chk.join(field, key), 'unknown key for "kind": "constant"; it needs "kind": "route"'
+                )
+    chk.check_mapping(value, field, MOTION_FIELDS)
     kw = {}
     if "speed" in value:
         kw["speed"] = chk.interval(value["speed"], chk.join(field, "speed"), lo=0.0, hi=70.0)
@@ -365,3 +549,166 @@ def _motion(value, field: str) -> Motion:
         kw["yaw_rate"] = (math.radians(lo), math.radians(hi))
     return Motion(**kw)
 
+
+# Bounds of the route quantities: (lo, hi, lo_open).
+_SPEED = (0.0, 70.0, True)
+_RADIUS = (2.0, 200.0, False)
+_STOP_AT = (0.0, 200.0, False)
+_WAIT = (0.0, 600.0, False)
+_ACCEL = (0.0, 10.0, True)
+_TIME = (-1e6, 1e6, False)
+
+
+def _range(value, field: str, bounds) -> tuple[float, float]:
+    """``[min, max]`` or one number (a fixed value), within ``bounds``."""
+    lo, hi, lo_open = bounds
+    if chk.is_number(value):
+        x = chk.number(value, field, lo=lo, hi=hi, lo_open=lo_open)
+        return (x, x)
+    a, b = chk.interval(value, field, lo=lo, hi=hi)
+    if lo_open and a <= lo:
+        raise ScenarioError(field, f"expected values > {lo}, got {list(value)}")
+    return a, b
+
+
+def _scalar(value, field: str, bounds) -> float:
+    lo, hi, lo_open = bounds
+    return chk.number(value, field, lo=lo, hi=hi, lo_open=lo_open)
+
+
+def _choices(value, field: str, allowed) -> tuple[str, ...]:
+    if not isinstance(value, list) or not value:
+        raise ScenarioError(field, f"expected a non-empty list of {sorted(allowed)}, got {value!r}")
+    names = tuple(chk.string(v, chk.join(field, i), choices=set(allowed)) for i, v in enumerate(value))
+    if len(set(names)) != len(names):
+        raise ScenarioError(field, f"names repeat: {list(names)}")
+    return names
+
+
+def _boolean(value, field: str) -> bool:
+    if not isinstance(value, bool):
+        raise ScenarioError(field, f"expected true or false, got {value!r}")
+    return value
+
+
+def _route_motion(value, field: str) -> RouteMotion:
+    chk.check_mapping(value, field, ROUTE_MOTION_FIELDS)
+    kw: dict = {}
+    where = lambda key: chk.join(field, key)  # noqa: E731
+    for key, bounds in (("speed", _SPEED), ("radius", _RADIUS), ("stop_at", _STOP_AT), ("wait", _WAIT),
+                        ("decel", _ACCEL), ("accel", _ACCEL)):
+        if key in value:
+            kw[key] = _range(value[key], where(key), bounds)
+    for key in ("centre_time", "stop_time"):
+        if value.get(key) is not None:
+            kw[key] = _range(value[key], where(key), _TIME)
+    if "from" in value:
+        kw["arms"] = _choices(value["from"], where("from"), ARMS)
+    if "turn" in value:
+        kw["turns"] = _choices(value["turn"], where("turn"), TURNS)
+    if "stop_probability" in value:
+        kw["stop_probability"] = chk.number(value["stop_probability"], where("stop_probability"), lo=0.0, hi=1.0)
+    if "lane_offset" in value:
+        kw["lane_offset"] = chk.number(value["lane_offset"], where("lane_offset"), lo=-20.0, hi=20.0)
+    if value.get("scene_radius") is not None:
+        kw["scene_radius"] = chk.number(value["scene_radius"], where("scene_radius"), lo=0.0, lo_open=True)
+    if "routes" in value:
+        routes = value["routes"]
+        if not isinstance(routes, list):
+            raise ScenarioError(where("routes"), f"expected a list of routes, got {routes!r}")
+        kw["routes"] = tuple(_route(r, chk.join(where("routes"), i)) for i, r in enumerate(routes))
+    return RouteMotion(**kw)
+
+
+def _route(value, field: str) -> RouteSpec:
+    chk.check_mapping(value, field, ROUTE_FIELDS)
+    where = lambda key: chk.join(field, key)  # noqa: E731
+    kw: dict = {}
+    if "vehicle" in value:
+        kw["vehicle"] = chk.string(value["vehicle"], where("vehicle"), choices=set(PRESETS) | {RANDOM})
+    for key, bounds in (("speed", _SPEED), ("wait", _WAIT), ("decel", _ACCEL), ("accel", _ACCEL)):
+        if key in value:
+            kw[key] = _scalar(value[key], where(key), bounds)
+    if "path" in value:
+        for key in _INTERSECTION_ONLY:
+            if key in value:
+                raise ScenarioError(where(key), 'not with "path" (an explicit path sets its own course and stops)')
+        kw["path"] = _path(value["path"], where("path"))
+        if "stops" in value:
+            kw["stops"] = _stops(value["stops"], where("stops"))
+        if "start_speed" in value:
+            kw["start_speed"] = chk.number(value["start_speed"], where("start_speed"), lo=0.0, hi=70.0)
+            if "speed" in kw and kw["start_speed"] > kw["speed"]:
+                raise ScenarioError(
+                    where("start_speed"), f"expected at most the cruise speed {kw['speed']}, got {kw['start_speed']}"
+                )
+        if "start_time" in value:
+            kw["start_time"] = _scalar(value["start_time"], where("start_time"), _TIME)
+        return RouteSpec(**kw)
+
+    for key in _PATH_ONLY:
+        if key in value:
+            raise ScenarioError(where(key), 'only with "path"')
+    if "from" in value:
+        kw["arm"] = chk.string(value["from"], where("from"), choices=set(ARMS))
+    if "turn" in value:
+        kw["turn"] = chk.string(value["turn"], where("turn"), choices=set(TURNS))
+    if "radius" in value:
+        kw["radius"] = _scalar(value["radius"], where("radius"), _RADIUS)
+    if "stop" in value:
+        kw["stop"] = _boolean(value["stop"], where("stop"))
+    if "stop_at" in value:
+        kw["stop_at"] = _scalar(value["stop_at"], where("stop_at"), _STOP_AT)
+    if "centre_time" in value and "stop_time" in value:
+        raise ScenarioError(where("stop_time"), "give at most one of centre_time and stop_time")
+    if "centre_time" in value:
+        kw["centre_time"] = _scalar(value["centre_time"], where("centre_time"), _TIME)
+    if "stop_time" in value:
+        if kw.get("stop") is False:
+            raise ScenarioError(where("stop_time"), "a vehicle with stop: false has no stop time")
+        kw["stop_time"] = _scalar(value["stop_time"], where("stop_time"), _TIME)
+        kw["stop"] = True
+    return RouteSpec(**kw)
+
+
+def _path(value, field: str) -> RoutePath:
+    chk.check_mapping(value, field, ("start", "segments", "loop"), required=("start", "segments"))
+    x, y, yaw_deg = chk.vector(value["start"], chk.join(field, "start"), 3)
+    segments_value = value["segments"]
+    where = chk.join(field, "segments")
+    if not isinstance(segments_value, list) or not segments_value:
+        raise ScenarioError(where, "expected a non-empty list of segments")
+    segments = []
+    for i, seg in enumerate(segments_value):
+        at = chk.join(where, i)
+        if isinstance(seg, dict) and "straight" in seg:
+            chk.check_mapping(seg, at, ("straight",))
+            segments.append((chk.number(seg["straight"], chk.join(at, "straight"), lo=0.0, lo_open=True), 0.0))
+        else:
+            chk.check_mapping(seg, at, ("arc_deg", "radius"), required=("arc_deg", "radius"))
+            angle = chk.number(seg["arc_deg"], chk.join(at, "arc_deg"), lo=-3600.0, hi=3600.0)
+            if angle == 0.0:
+                raise ScenarioError(chk.join(at, "arc_deg"), "expected a non-zero angle (left positive)")
+            radius = _scalar(seg["radius"], chk.join(at, "radius"), _RADIUS)
+            segments.append((abs(math.radians(angle)) * radius, math.copysign(1.0 / radius, angle)))
+    loop = _boolean(value.get("loop", False), chk.join(field, "loop"))
+    try:
+        return RoutePath((float(x), float(y), math.radians(yaw_deg)), tuple(segments), loop)
+    except ValueError as exc:
+        raise ScenarioError(field, str(exc).removeprefix("Path: ")) from None
+
+
+def _stops(value, field: str) -> tuple[tuple[float, float | None], ...]:
+    if not isinstance(value, list):
+        raise ScenarioError(field, f'expected a list of {{"at": m, "wait": s}}, got {value!r}')
+    stops, last = [], -math.inf
+    for i, stop in enumerate(value):
+        at = chk.join(field, i)
+        chk.check_mapping(stop, at, ("at", "wait"), required=("at",))
+        s = chk.number(stop["at"], chk.join(at, "at"), lo=0.0)
+        if s <= last:
+            raise ScenarioError(chk.join(at, "at"), f"expected stops in increasing order, got {s} after {last}")
+        wait = _scalar(stop["wait"], chk.join(at, "wait"), _WAIT) if "wait" in stop else None
+        stops.append((s, wait))
+        last = s
+    return tuple(stops)

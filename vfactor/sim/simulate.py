@@ -10,6 +10,7 @@ many frames follow it.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +22,8 @@ from vfactor.camera import Camera
 from vfactor.errors import ScenarioError
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.sim.noise import corrupt_keypoints
-from vfactor.sim.scenario import Scenario, load_scenario
+from vfactor.sim.routes import Trajectory, drive_profile, intersection_path
+from vfactor.sim.scenario import RouteMotion, RouteSpec, Scenario, load_scenario
 from vfactor.sim.vehicles import footprint, footprints_overlap, road_pose, vehicle_shape
 from vfactor.sim.visibility import VehicleBody, occluded_keypoints
 from vfactor.wireframe import Wireframe
@@ -31,6 +33,8 @@ __all__ = ["VehicleTruth", "DetectionTruth", "Simulation", "simulate", "vehicle_
 # Random streams: (seed, stream, ...) seeds one generator each.
 _PLACE, _NOISE, _TRACKS = 0, 1, 2
 _MAX_TRIES = 2000
+_ROUTE_TRIES = 500
+_ROUTE_DRAWS = 10  # uniform draws per route try, whatever is given explicitly
 
 
 @dataclass(frozen=True)
@@ -42,12 +46,21 @@ class VehicleTruth:
         wireframe: body-frame keypoints, metres.
         preset: preset name, or ``"random"``.
         wheel_radius: hub height above the road, metres.
+        speed: forward speed along body x, m/s (None for independent frames).
+        yaw_rate: rad/s, counter-clockwise seen from above (None for independent frames).
+        acceleration: longitudinal acceleration, m/s^2 (None for independent frames).
+
+    With motion, the velocity is ``speed`` along the heading (the vehicle never
+    slides sideways): world ``(speed * cos(yaw), speed * sin(yaw), 0)``.
     """
 
     world_T_vehicle: gtsam.Pose3
     wireframe: Wireframe
     preset: str
     wheel_radius: float = 0.33
+    speed: float | None = None
+    yaw_rate: float | None = None
+    acceleration: float | None = None
 
     @property
     def keypoints_world(self) -> np.ndarray:
@@ -93,6 +106,9 @@ class Simulation:
         truth: per frame, vehicle id -> :class:`VehicleTruth`.
         detection_truth: per frame, ``(camera, vehicle)`` -> :class:`DetectionTruth`,
             for every detection in :attr:`scene`.
+        trajectories: with route motion, vehicle id -> :class:`~vfactor.sim.routes.Trajectory`,
+            the continuous-time truth (``trajectories[vid].states(times)``); its ``info``
+            holds the route after the random draws. Empty otherwise.
     """
 
     scenario: Scenario
@@ -100,6 +116,11 @@ class Simulation:
     scene: Scene
     truth: list[dict[str, VehicleTruth]]
     detection_truth: list[dict[tuple[str, str], DetectionTruth]] = field(default_factory=list)
+    trajectories: dict[str, Trajectory] = field(default_factory=dict)
+
+    def vehicle_frames(self, vehicle: str) -> list[int]:
+        """Indices of the frames in which a vehicle exists (is in :attr:`truth`)."""
+        return [f for f, truth in enumerate(self.truth) if vehicle in truth]
 
     def occluded(self, frame: int, camera: str, vehicle: str) -> np.ndarray:
         """(12,) occlusion mask of one detection."""
@@ -133,9 +154,13 @@ def simulate(scenario: Scenario | str | Path, seed: int | None = None, num_frame
     vehicle's keypoints gives no detection.
 
     Without ``scenario.motion``, frames are independent (frame ``f`` at
-    ``t = f * dt`` holds new vehicles ``v1``, ``v2``, ...). With it, each id is
-    one vehicle moving at constant speed and yaw rate, its position at the
-    middle frame drawn in the region.
+    ``t = f * dt`` holds new vehicles ``v1``, ``v2``, ...). With a
+    :class:`~vfactor.sim.scenario.Motion`, each id is one vehicle moving at
+    constant speed and yaw rate, its position at the middle frame drawn in the
+    region. With a :class:`~vfactor.sim.scenario.RouteMotion`, each id drives a
+    route through the intersection (or an explicit path) with stops, and exists
+    in the frames where it is in the scene; vehicles are redrawn until they
+    keep ``min_gap`` from each other and meet ``require_visible``.
 
     Args:
         scenario: a :class:`Scenario`, or a packaged scenario name or file path.
@@ -157,8 +182,11 @@ def simulate(scenario: Scenario | str | Path, seed: int | None = None, num_frame
     if num_frames < 1:
         raise ValueError(f"num_frames: expected >= 1, got {num_frames}")
 
+    trajectories: dict[str, Trajectory] = {}
     if scenario.motion is None:
         truth = [_place_frame(scenario, np.random.default_rng([seed, _PLACE, f]), f) for f in range(num_frames)]
+    elif isinstance(scenario.motion, RouteMotion):
+        truth, trajectories = _place_routes(scenario, np.random.default_rng([seed, _TRACKS]), num_frames)
     else:
         truth = _place_tracks(scenario, np.random.default_rng([seed, _TRACKS]), num_frames)
 
@@ -169,7 +197,10 @@ def simulate(scenario: Scenario | str | Path, seed: int | None = None, num_frame
         frames.append(frame)
         detection_truth.append(labels)
     scene = Scene(cameras=dict(scenario.cameras), frames=frames, base_dir=None)
-    return Simulation(scenario=scenario, seed=seed, scene=scene, truth=truth, detection_truth=detection_truth)
+    return Simulation(
+        scenario=scenario, seed=seed, scene=scene, truth=truth, detection_truth=detection_truth,
+        trajectories=trajectories,
+    )
 
 
 def _pick_presets(scenario: Scenario, rng: np.random.Generator, first_slot: int) -> list[str]:
@@ -179,13 +210,29 @@ def _pick_presets(scenario: Scenario, rng: np.random.Generator, first_slot: int)
     return [names[(first_slot + k) % len(names)] for k in range(n)]
 
 
-def _fits(scenario: Scenario, truth: VehicleTruth, placed: list[VehicleTruth]) -> bool:
-    if not keypoints_in_view(truth.keypoints_world, scenario.required_cameras(), scenario.margin_px):
-        return False
+def _visible(scenario: Scenario, truth: VehicleTruth) -> bool:
+    """Whether a vehicle meets ``scenario.require_visible``."""
+    if scenario.require_visible == "none":
+        return True
+    world_p, cameras = truth.keypoints_world, scenario.required_cameras()
+    if scenario.require_visible == "any":
+        return any(keypoints_in_view(world_p, [camera], scenario.margin_px) for camera in cameras)
+    return keypoints_in_view(world_p, cameras, scenario.margin_px)
+
+
+def _collides(scenario: Scenario, truth: VehicleTruth, placed) -> str | None:
+    """The id of a placed vehicle (id -> truth) closer than ``min_gap``, or None."""
     mine = footprint(truth.wireframe, truth.world_T_vehicle)
-    return not any(
-        footprints_overlap(mine, footprint(o.wireframe, o.world_T_vehicle), scenario.min_gap) for o in placed
-    )
+    for vid, other in placed.items():
+        if footprints_overlap(mine, footprint(other.wireframe, other.world_T_vehicle), scenario.min_gap):
+            return vid
+    return None
+
+
+def _fits(scenario: Scenario, truth: VehicleTruth, placed: list[VehicleTruth]) -> bool:
+    if not _visible(scenario, truth):
+        return False
+    return _collides(scenario, truth, dict(enumerate(placed))) is None
 
 
 def _place_frame(scenario: Scenario, rng: np.random.Generator, frame: int) -> dict[str, VehicleTruth]:
@@ -230,11 +277,10 @@ def _place_tracks(scenario: Scenario, rng: np.random.Generator, num_frames: int)
     for vid, name in zip(vehicle_ids(scenario.vehicles_per_frame), presets):
         wireframe, radius = vehicle_shape(name, rng, scenario.random_shape)
         for _ in range(_MAX_TRIES):
-            poses = _track_poses(
-                rng.uniform(x0, x1), rng.uniform(y0, y1), rng.uniform(*scenario.yaw_range),
-                rng.uniform(*motion.speed), rng.uniform(*motion.yaw_rate), radius, times,
-            )
-            track = [VehicleTruth(pose, wireframe, name, radius) for pose in poses]
+            x, y, yaw = rng.uniform(x0, x1), rng.uniform(y0, y1), rng.uniform(*scenario.yaw_range)
+            speed, yaw_rate = rng.uniform(*motion.speed), rng.uniform(*motion.yaw_rate)
+            poses = _track_poses(x, y, yaw, speed, yaw_rate, radius, times)
+            track = [VehicleTruth(pose, wireframe, name, radius, speed, yaw_rate, 0.0) for pose in poses]
             if all(_fits(scenario, v, list(frame.values())) for v, frame in zip(track, frames)):
                 for v, frame in zip(track, frames):
                     frame[vid] = v
@@ -242,6 +288,131 @@ def _place_tracks(scenario: Scenario, rng: np.random.Generator, num_frames: int)
         else:
             raise _no_placement(scenario, vid)
     return frames
+
+
+def _place_routes(
+    scenario: Scenario, rng: np.random.Generator, num_frames: int
+) -> tuple[list[dict[str, VehicleTruth]], dict[str, Trajectory]]:
+    """Vehicles driving routes; each exists in the frames where it is in the scene."""
+    motion: RouteMotion = scenario.motion
+    times = np.arange(num_frames) * scenario.dt
+    presets = _pick_presets(scenario, rng, first_slot=0)
+    frames: list[dict[str, VehicleTruth]] = [{} for _ in range(num_frames)]
+    trajectories: dict[str, Trajectory] = {}
+    span = (0.0, (scenario.num_frames - 1) * scenario.dt)
+    for k, vid in enumerate(vehicle_ids(scenario.vehicles_per_frame)):
+        explicit = k < len(motion.routes)
+        spec = motion.routes[k] if explicit else RouteSpec()
+        where = f"motion.routes[{k}]" if explicit else "motion"
+        name = spec.vehicle or presets[k]
+        wireframe, radius = vehicle_shape(name, rng, scenario.random_shape)
+        tries = _ROUTE_TRIES if _has_draws(spec, motion) else 1
+        problem = ""
+        for _ in range(tries):
+            draws = rng.random(_ROUTE_DRAWS)
+            try:
+                trajectory = _trajectory(spec, motion, draws, radius, span)
+            except ValueError as exc:  # e.g. a stop behind a path's start
+                raise ScenarioError(where, str(exc)) from None
+            states = trajectory.states(times)
+            track = {}
+            for f in np.flatnonzero(states.exists):
+                pose = road_pose(float(states.x[f]), float(states.y[f]), float(states.yaw[f]), radius)
+                track[int(f)] = VehicleTruth(
+                    pose, wireframe, name, radius,
+                    float(states.speed[f]), float(states.yaw_rate[f]), float(states.acceleration[f]),
+                )
+            problem = _track_problem(scenario, track, frames, times)
+            if problem is None:
+                for f, v in track.items():
+                    frames[f][vid] = v
+                trajectories[vid] = dataclasses.replace(trajectory, info={**trajectory.info, "vehicle": name})
+                break
+        else:
+            draws_note = f" after {tries} draws" if tries > 1 else ""
+            raise ScenarioError(where, f"no route found for vehicle {vid}{draws_note}: {problem}")
+    return frames, trajectories
+
+
+def _has_draws(spec: RouteSpec, motion: RouteMotion) -> bool:
+    """Whether a route leaves something to chance (so that another draw may succeed)."""
+    common = (spec.speed, spec.decel, spec.accel)
+    if spec.path is not None:
+        waits_given = spec.wait is not None or all(w is not None for _, w in spec.stops)
+        return any(v is None for v in common) or not waits_given
+    if any(v is None for v in common + (spec.arm, spec.turn, spec.stop)):
+        return True
+    if spec.turn != "straight" and spec.radius is None:
+        return True
+    if spec.stop and (spec.wait is None or spec.stop_at is None):
+        return True
+    return spec.centre_time is None and spec.stop_time is None
+
+
+def _pick(value, bounds, u: float) -> float:
+    return float(value) if value is not None else float(bounds[0] + u * (bounds[1] - bounds[0]))
+
+
+def _trajectory(spec: RouteSpec, motion: RouteMotion, u: np.ndarray, wheel_radius: float, span) -> Trajectory:
+    """The trajectory of one route, with its missing fields drawn from ``u`` (uniform draws in [0, 1))."""
+    speed = _pick(spec.speed, motion.speed, u[0])
+    decel = _pick(spec.decel, motion.decel, u[1])
+    accel = _pick(spec.accel, motion.accel, u[2])
+    wait = _pick(spec.wait, motion.wait, u[3])
+    common = {"speed": speed, "decel": decel, "accel": accel}
+    if spec.path is not None:
+        stops = tuple((s, wait if w is None else w) for s, w in spec.stops)
+        start_time = 0.0 if spec.start_time is None else spec.start_time
+        v0 = speed if spec.start_speed is None else min(spec.start_speed, speed)
+        profile = drive_profile(speed, accel, decel, stops, s0=0.0, t0=start_time, v0=v0)
+        info = {"kind": "path", **common, "stops": [list(s) for s in stops], "start_time": start_time,
+                "start_speed": v0, "loop": spec.path.loop}
+        return Trajectory(spec.path, profile, wheel_radius, start_time, motion.scene_radius, info)
+
+    arm = spec.arm or motion.arms[min(int(u[4] * len(motion.arms)), len(motion.arms) - 1)]
+    turn = spec.turn or motion.turns[min(int(u[5] * len(motion.turns)), len(motion.turns) - 1)]
+    radius = _pick(spec.radius, motion.radius, u[6])
+    stop = spec.stop if spec.stop is not None else bool(u[7] < motion.stop_probability)
+    stop_at = _pick(spec.stop_at, motion.stop_at, u[8])
+    route = intersection_path(arm, turn, radius, motion.lane_offset, stop_at)
+    stop_s = route.stop_s - route.offset  # path arc lengths
+    middle_s = route.middle_s - route.offset
+    if stop:
+        s0 = stop_s - speed * speed / (2.0 * decel) - 1.0
+        profile = drive_profile(speed, accel, decel, [(stop_s, wait)], s0=s0)
+    else:
+        profile = drive_profile(speed, accel, decel, s0=0.0)
+    if spec.centre_time is not None or not stop:
+        anchor = _pick(spec.centre_time, motion.centre_time or span, u[9])
+        profile = profile.shifted(anchor - profile.time_at(middle_s))
+    else:
+        anchor = _pick(spec.stop_time, motion.stop_time or span, u[9])
+        profile = profile.shifted(anchor - profile.time_at(stop_s))
+    info = {
+        "kind": "intersection", "from": arm, "turn": turn, "radius": None if turn == "straight" else radius,
+        **common, "stop": stop, "stop_at": stop_at if stop else None, "wait": wait if stop else None,
+        "centre_time": profile.time_at(middle_s), "stop_time": profile.time_at(stop_s) if stop else None,
+        "stop_point": [float(v) for v in route.path.at(stop_s)[:2]] if stop else None,
+        "lane_offset": motion.lane_offset,
+    }
+    return Trajectory(route.path, profile, wheel_radius, None, motion.scene_radius, info)
+
+
+def _track_problem(scenario: Scenario, track: dict[int, VehicleTruth], frames, times) -> str | None:
+    """Why a vehicle's track does not fit (None when it does)."""
+    if not track:
+        return "it is never in the scene during the frames (see motion.scene_radius and the times)"
+    for f, truth in track.items():
+        if not _visible(scenario, truth):
+            need = "all" if scenario.require_visible == "all" else "at least one"
+            return (
+                f"at t = {times[f]:g} s it is not inside the images of {need} of {list(scenario.visible_in)} "
+                f"({scenario.margin_px:g} px margin; require_visible = {scenario.require_visible!r})"
+            )
+        other = _collides(scenario, truth, frames[f])
+        if other is not None:
+            return f"at t = {times[f]:g} s it comes closer than min_gap = {scenario.min_gap:g} m to {other}"
+    return None
 
 
 def _observe(

@@ -8,10 +8,13 @@
       {"id": "v1", "preset": "lincoln_mkz", "wheel_radius": 0.34,
        "world_T_vehicle": [[...4x4...]],
        "keypoints_world": [[x, y, z], "... 12 rows ..."],
-       "keypoints_vehicle": [[x, y, z], "... 12 rows ..."]}]}]}
+       "keypoints_vehicle": [[x, y, z], "... 12 rows ..."],
+       "speed": 8.1, "yaw_rate": 0.0, "acceleration": 0.0}]}]}
 ```
 
-``keypoints_world`` is redundant (``world_T_vehicle`` applied to
+``speed`` (m/s along body x), ``yaw_rate`` (rad/s) and ``acceleration``
+(m/s^2, longitudinal) are written for moving vehicles only (scenarios with
+``motion``). ``keypoints_world`` is redundant (``world_T_vehicle`` applied to
 ``keypoints_vehicle``) and is written for readers that only want the points;
 :func:`load_truth` rebuilds the truth from the pose and the body keypoints.
 """
@@ -30,6 +33,9 @@ from vfactor.wireframe import Wireframe
 
 __all__ = ["truth_to_dict", "truth_from_dict", "save_truth", "load_truth", "write_simulation"]
 
+# Optional per-vehicle motion state (written for moving vehicles only).
+_MOTION_KEYS = ("speed", "yaw_rate", "acceleration")
+
 
 def truth_to_dict(sim: Simulation) -> dict:
     """The ground truth of a simulation as a JSON-ready dict (see the module docstring)."""
@@ -47,6 +53,10 @@ def truth_to_dict(sim: Simulation) -> dict:
                     "keypoints_vehicle": v.keypoints_vehicle.tolist(),
                 }
             )
+            for key in _MOTION_KEYS:
+                value = getattr(v, key)
+                if value is not None:
+                    entries[-1][key] = float(value)
         frames.append({"t": float(frame.t), "vehicles": entries})
     return {"scenario": sim.scenario.name, "seed": int(sim.seed), "frames": frames}
 
@@ -91,7 +101,15 @@ def truth_from_dict(data: dict) -> list[dict[str, VehicleTruth]]:
             preset = entry.get("preset", "")
             if not isinstance(preset, str):
                 raise SceneError(f"{at}.preset", f"expected a string, got {preset!r}")
-            vehicles[vid] = VehicleTruth(as_pose3(T), wireframe, preset, float(radius))
+            motion = {}
+            for key in _MOTION_KEYS:
+                value = entry.get(key)
+                if value is None:
+                    continue
+                if not isinstance(value, (int, float)) or isinstance(value, bool) or not np.isfinite(value):
+                    raise SceneError(f"{at}.{key}", f"expected a finite number, got {value!r}")
+                motion[key] = float(value)
+            vehicles[vid] = VehicleTruth(as_pose3(T), wireframe, preset, float(radius), **motion)
         out.append(vehicles)
     return out
 

@@ -63,8 +63,8 @@ class TrackOptions:
         ground_plane: road plane for the ground-plane factor; ``None`` uses the
             scene's plane if it gives one, else no ground factor.
         hub_height, sigma_height, sigma_tilt: ground-plane factor settings (m, m, rad).
-        max_updates: extra iSAM2 ``update()`` calls per frame, until the new pose
-            moves less than ``update_tolerance``.
+        max_updates: at most this many extra iSAM2 ``update()`` calls per frame,
+            until no pose of the track moves more than ``update_tolerance``.
         update_tolerance: metres (and radians) below which extra updates stop.
         relinearize_threshold: iSAM2's relinearisation threshold.
         covariance: compute each pose's marginal covariance.
@@ -77,10 +77,12 @@ class TrackOptions:
     hub_height: float = 0.34
     sigma_height: float = 0.06
     sigma_tilt: float = 0.03
-    max_updates: int = 4
-    update_tolerance: float = 1e-4
+    max_updates: int = 10
+    update_tolerance: float = 1e-3
     relinearize_threshold: float = 0.01
     covariance: bool = True
+    optimizer: str = "dogleg"
+    dogleg_delta: float = 1.0
 
     def __post_init__(self):
         if self.lag is not None and (not np.isfinite(self.lag) or self.lag <= 0):
@@ -99,6 +101,9 @@ class _TrackState:
     poses: list = field(default_factory=list)  # (frame index, t, pose key)
     hwc_added: bool = False
     frames_seen: int = 0
+    # until a frame sees the vehicle from two cameras, the track's factors and stamps are kept, so that
+    # the track can be re-solved by Levenberg-Marquardt then (see Tracker._reanchor)
+    monocular_graph: gtsam.NonlinearFactorGraph | None = None
 
 
 def frame_order(scene: Scene) -> list[int]:
@@ -197,6 +202,10 @@ class Tracker:
 
     def _new_smoother(self) -> gtsam.IncrementalFixedLagSmoother:
         params = gtsam.ISAM2Params()
+        if self.options.optimizer == "dogleg":
+            dogleg = gtsam.ISAM2DoglegParams()
+            dogleg.setInitialDelta(self.options.dogleg_delta)
+            params.setOptimizationParams(dogleg)
         params.setRelinearizeThreshold(self.options.relinearize_threshold)
         params.relinearizeSkip = 1
         lag = self.options.lag if self.options.lag is not None else 1e12
@@ -249,7 +258,28 @@ class Tracker:
         stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}}
         track.smoother.update(graph, values, stamps)
         track.poses.append((frame_index, t, key))
+        track.monocular_graph = _copy_graph(graph) if _camera_count(obs) < 2 else None
         return self._finish(track, key, t)
+
+    def _reanchor(self, track: _TrackState, t: float) -> None:
+        """Re-solves a track seen by one camera so far by LM when a second camera first sees it.
+
+        One camera fixes a vehicle's depth only through the mean shape, so a track
+        started monocularly can be metres off; iSAM2's incremental steps then may
+        settle in a poor minimum once the second camera arrives. Levenberg-Marquardt
+        over the track's whole graph, from the current estimate, and a fresh
+        smoother seeded with its solution avoid that.
+        """
+        graph = track.monocular_graph
+        track.monocular_graph = None
+        estimate = track.smoother.calculateEstimate()
+        if not all(estimate.exists(k) for k in graph.keyVector()):  # poses already marginalised (fixed lag)
+            return
+        solved = gtsam.LevenbergMarquardtOptimizer(graph, estimate, self.options.solve.lm_params()).optimize()
+        track.smoother = self._new_smoother()
+        stamps = {key: stamp for _, stamp, key in track.poses}
+        stamps.update({k: t for k in self.keys.layer_keys(track.index)})
+        track.smoother.update(graph, solved, stamps)
 
     def _add(self, vid: str, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
         track = self._track(vid)
@@ -278,21 +308,37 @@ class Tracker:
         stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}}
         track.smoother.update(graph, values, stamps)
         track.poses.append((frame_index, t, key))
+        if track.monocular_graph is not None:
+            track.monocular_graph.push_back(graph)
+            if _camera_count(obs) >= 2:
+                self._reanchor(track, t)
         if self.options.lag is not None:
             track.poses = [p for p in track.poses if t - p[1] <= self.options.lag]
         return self._finish(track, key, t)
 
-    def _finish(self, track: _TrackState, key: int, t: float) -> VehicleResult:
-        """Extra iSAM2 updates until the new pose settles, lazy HWC, and the frame's result."""
-        smoother = track.smoother
-        previous = smoother.calculateEstimate().atPose3(key)
-        for _ in range(self.options.max_updates):
-            smoother.update()
-            current = smoother.calculateEstimate().atPose3(key)
-            moved = np.linalg.norm(previous.localCoordinates(current))
-            previous = current
+    def _settle(self, track: _TrackState, max_updates: int) -> None:
+        """Extra iSAM2 updates (relinearisation) until no pose of the track moves more than the tolerance."""
+        keys = [key for _, _, key in track.poses]
+        before = track.smoother.calculateEstimate()
+        for _ in range(max_updates):
+            track.smoother.update()
+            after = track.smoother.calculateEstimate()
+            moved = max(np.linalg.norm(before.atPose3(k).localCoordinates(after.atPose3(k)))
+                        for k in keys if after.exists(k))
+            before = after
             if moved < self.options.update_tolerance:
                 break
+
+    def finish(self, max_updates: int = 50) -> None:
+        """Converges every track fully (call at the end of a stream before reading :meth:`estimates`)."""
+        for track in self._tracks.values():
+            if track.smoother is not None and track.poses:
+                self._settle(track, max_updates)
+
+    def _finish(self, track: _TrackState, key: int, t: float) -> VehicleResult:
+        """Extra iSAM2 updates until the track settles, lazy HWC, and the frame's result."""
+        smoother = track.smoother
+        self._settle(track, self.options.max_updates)
         estimate = smoother.calculateEstimate()
         wireframe = self._wireframe(estimate, track)
         config = self.options.solve.graph
@@ -301,11 +347,25 @@ class Tracker:
             graph.add(hwc_factor(self.keys, track.index, terms=self._terms))
             smoother.update(graph, gtsam.Values(), {k: t for k in self.keys.layer_keys(track.index)})
             track.hwc_added = True
+            if track.monocular_graph is not None:
+                track.monocular_graph.push_back(graph)
             estimate = smoother.calculateEstimate()
             wireframe = self._wireframe(estimate, track)
         covariance = smoother.marginalCovariance(key) if self.options.covariance else None
         message = "" if track.frames_seen > 1 else "first frame of the track: no motion factors yet"
         return self._result(track, estimate, key, wireframe, covariance, message)
+
+
+def _camera_count(obs: KeypointObservations) -> int:
+    return len(set(obs.camera_index.tolist()))
+
+
+def _copy_graph(graph: gtsam.NonlinearFactorGraph) -> gtsam.NonlinearFactorGraph:
+    """A new graph holding the same factors (a Python CustomFactor cannot be cloned)."""
+    out = gtsam.NonlinearFactorGraph()
+    for i in range(graph.size()):
+        out.add(graph.at(i))
+    return out
 
 
 @dataclass
@@ -351,6 +411,7 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
             _refresh(final, tracker.estimates())
         if progress is not None:
             progress(n + 1, len(order))
+    tracker.finish()
     _refresh(final, tracker.estimates(covariance=options.covariance))
     solved: dict[str, int] = {}
     for (_, vid), v in final.items():

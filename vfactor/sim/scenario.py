@@ -63,6 +63,8 @@ SCENARIO_FIELDS: dict[str, str] = {
     "num_frames": "integer >= 1 (default 10)",
     "dt": "seconds between frames (default 0.1)",
     "seed": "integer >= 0 (default 0)",
+    "ground_plane": "true to write the road plane z = 0 into the scene (tracking then adds a ground-plane factor); "
+    "default false",
     "motion": 'null (default: independent frames), {"speed": [min, max] m/s, "yaw_rate_deg": [min, max] deg/s} '
     '(constant speed and turn rate) or {"kind": "route", ...} '
     "(routes through the intersection; see ROUTE_MOTION_FIELDS)",
@@ -269,6 +271,7 @@ class Scenario:
         num_frames: number of frames.
         dt: time between frames, seconds.
         seed: default random seed.
+        ground_plane: write the road plane ``z = 0`` into the simulated scene.
         motion: None for independent frames (a new vehicle in every frame), or
             the motion of vehicles that keep their id and shape over the frames:
             :class:`Motion` (constant speed and turn rate) or :class:`RouteMotion`
@@ -293,6 +296,7 @@ class Scenario:
     dt: float = 0.1
     seed: int = 0
     motion: Motion | RouteMotion | None = None
+    ground_plane: bool = False
 
     def __post_init__(self):
         if self.visible_in is None:
@@ -396,6 +400,10 @@ def scenario_from_dict(data: dict, default_name: str = "scenario") -> Scenario:
         kw["yaw_range"] = (math.radians(lo), math.radians(hi))
     if "visible_in" in data:
         kw["visible_in"] = _visible_in(data["visible_in"], kw["cameras"])
+    if "ground_plane" in data:
+        if not isinstance(data["ground_plane"], bool):
+            raise ScenarioError("ground_plane", f"expected true or false, got {data['ground_plane']!r}")
+        kw["ground_plane"] = data["ground_plane"]
     if "require_visible" in data:
         kw["require_visible"] = chk.string(data["require_visible"], "require_visible", choices=set(REQUIRE_VISIBLE))
     if "margin_px" in data:

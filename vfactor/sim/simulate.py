@@ -20,6 +20,7 @@ import numpy as np
 
 from vfactor.camera import Camera
 from vfactor.errors import ScenarioError
+from vfactor.factors.ground_plane import GroundPlane
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.sim.noise import corrupt_keypoints
 from vfactor.sim.routes import Trajectory, drive_profile, intersection_path
@@ -196,7 +197,8 @@ def simulate(scenario: Scenario | str | Path, seed: int | None = None, num_frame
         frame, labels = _observe(scenario, vehicles, rng, t=f * scenario.dt)
         frames.append(frame)
         detection_truth.append(labels)
-    scene = Scene(cameras=dict(scenario.cameras), frames=frames, base_dir=None)
+    scene = Scene(cameras=dict(scenario.cameras), frames=frames, base_dir=None,
+                  ground_plane=GroundPlane() if scenario.ground_plane else None)
     return Simulation(
         scenario=scenario, seed=seed, scene=scene, truth=truth, detection_truth=detection_truth,
         trajectories=trajectories,

@@ -312,19 +312,25 @@ class Tracker:
             track.monocular_graph.push_back(graph)
             if _camera_count(obs) >= 2:
                 self._reanchor(track, t)
-        if self.options.lag is not None:
-            track.poses = [p for p in track.poses if t - p[1] <= self.options.lag]
         return self._finish(track, key, t)
 
-    def _settle(self, track: _TrackState, max_updates: int) -> None:
-        """Extra iSAM2 updates (relinearisation) until no pose of the track moves more than the tolerance."""
-        keys = [key for _, _, key in track.poses]
-        before = track.smoother.calculateEstimate()
+    def _settle(self, track: _TrackState, max_updates: int, recent: int | None = 20) -> None:
+        """Extra iSAM2 updates (relinearisation) until no pose moves more than the tolerance.
+
+        Args:
+            recent: check only the track's last poses (their estimates are read one by
+                one, so the cost does not grow with the track); None checks them all.
+        """
+        smoother = track.smoother
+        if self.options.lag is not None:  # forget poses the smoother has marginalised
+            held = smoother.timestamps()
+            track.poses = [p for p in track.poses if p[2] in held]
+        keys = [key for _, _, key in track.poses[-recent if recent else 0:]]
+        before = [smoother.calculateEstimatePose3(k) for k in keys]
         for _ in range(max_updates):
-            track.smoother.update()
-            after = track.smoother.calculateEstimate()
-            moved = max(np.linalg.norm(before.atPose3(k).localCoordinates(after.atPose3(k)))
-                        for k in keys if after.exists(k))
+            smoother.update()
+            after = [smoother.calculateEstimatePose3(k) for k in keys]
+            moved = max(np.linalg.norm(a.localCoordinates(b)) for a, b in zip(before, after))
             before = after
             if moved < self.options.update_tolerance:
                 break
@@ -333,7 +339,7 @@ class Tracker:
         """Converges every track fully (call at the end of a stream before reading :meth:`estimates`)."""
         for track in self._tracks.values():
             if track.smoother is not None and track.poses:
-                self._settle(track, max_updates)
+                self._settle(track, max_updates, recent=None)
 
     def _finish(self, track: _TrackState, key: int, t: float) -> VehicleResult:
         """Extra iSAM2 updates until the track settles, lazy HWC, and the frame's result."""

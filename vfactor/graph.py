@@ -40,6 +40,7 @@ __all__ = [
     "add_observation_factor",
     "insert_vehicle_values",
     "build_vehicle_graph",
+    "copy_graph",
     "hwc_terms",
     "hwc_factor",
     "hwc_violation",
@@ -222,6 +223,14 @@ def insert_vehicle_values(
     if wireframe is not None:
         for key, vec in zip(keys.layer_keys(vehicle), wireframe.layer_vectors().values()):
             put(key, vec)
+
+
+def copy_graph(graph: gtsam.NonlinearFactorGraph) -> gtsam.NonlinearFactorGraph:
+    """A new graph holding the same factors (``graph.clone()`` fails on a Python ``CustomFactor``)."""
+    out = gtsam.NonlinearFactorGraph()
+    for i in range(graph.size()):
+        out.add(graph.at(i))
+    return out
 
 
 def build_vehicle_graph(

@@ -20,6 +20,7 @@ from vfactor.factors.projection import KeypointObservations, whitened_residuals
 from vfactor.graph import (
     GraphConfig,
     build_vehicle_graph,
+    copy_graph,
     hwc_factor,
     hwc_terms,
     hwc_violation,
@@ -200,9 +201,7 @@ def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc)
     iterations = optimizer.iterations()
     added = False
     if config.hwc == "lazy" and hwc_violation(_wireframe_of(estimate, keys), terms) > config.hwc_tolerance:
-        with_hwc = gtsam.NonlinearFactorGraph()
-        for i in range(graph.size()):  # shares the factors: a Python CustomFactor cannot be cloned
-            with_hwc.add(graph.at(i))
+        with_hwc = copy_graph(graph)
         with_hwc.add(hwc)
         graph, added = with_hwc, True
         optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.lm_params())

@@ -33,6 +33,7 @@ from vfactor.factors.projection import KeypointObservations
 from vfactor.graph import (
     add_observation_factor,
     add_shape_factors,
+    copy_graph,
     hwc_factor,
     hwc_terms,
     hwc_violation,
@@ -258,7 +259,7 @@ class Tracker:
         stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}}
         track.smoother.update(graph, values, stamps)
         track.poses.append((frame_index, t, key))
-        track.monocular_graph = _copy_graph(graph) if _camera_count(obs) < 2 else None
+        track.monocular_graph = copy_graph(graph) if _camera_count(obs) < 2 else None
         return self._finish(track, key, t)
 
     def _reanchor(self, track: _TrackState, t: float) -> None:
@@ -364,14 +365,6 @@ class Tracker:
 
 def _camera_count(obs: KeypointObservations) -> int:
     return len(set(obs.camera_index.tolist()))
-
-
-def _copy_graph(graph: gtsam.NonlinearFactorGraph) -> gtsam.NonlinearFactorGraph:
-    """A new graph holding the same factors (a Python CustomFactor cannot be cloned)."""
-    out = gtsam.NonlinearFactorGraph()
-    for i in range(graph.size()):
-        out.add(graph.at(i))
-    return out
 
 
 @dataclass

@@ -18,6 +18,7 @@ gives a road plane, the ground-plane factor on every pose.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Callable
@@ -92,6 +93,9 @@ class TrackOptions:
             raise ValueError(f"TrackOptions.max_updates: expected an integer >= 0, got {self.max_updates!r}")
 
 
+_REANCHOR_FRAMES = 5  # multi-camera frames over which a monocular-started track is re-solved by LM
+
+
 @dataclass
 class _TrackState:
     """One track's smoother and bookkeeping."""
@@ -105,6 +109,8 @@ class _TrackState:
     # until a frame sees the vehicle from two cameras, the track's factors and stamps are kept, so that
     # the track can be re-solved by Levenberg-Marquardt then (see Tracker._reanchor)
     monocular_graph: gtsam.NonlinearFactorGraph | None = None
+    monocular_obs: list = field(default_factory=list)  # (pose key, observations) of those frames
+    multiview_frames: int = 0  # frames since then that two cameras saw
 
 
 def frame_order(scene: Scene) -> list[int]:
@@ -260,22 +266,34 @@ class Tracker:
         track.smoother.update(graph, values, stamps)
         track.poses.append((frame_index, t, key))
         track.monocular_graph = copy_graph(graph) if _camera_count(obs) < 2 else None
+        track.monocular_obs = [(key, obs)] if track.monocular_graph is not None else []
         return self._finish(track, key, t)
 
     def _reanchor(self, track: _TrackState, t: float) -> None:
-        """Re-solves a track seen by one camera so far by LM when a second camera first sees it.
+        """Re-solves a track seen by one camera so far by LM when a second camera sees it.
 
         One camera fixes a vehicle's depth only through the mean shape, so a track
         started monocularly can be metres off; iSAM2's incremental steps then may
         settle in a poor minimum once the second camera arrives. Levenberg-Marquardt
-        over the track's whole graph, from the current estimate, and a fresh
-        smoother seeded with its solution avoid that.
+        over the track's whole graph, started the first time as :func:`smooth_scene`
+        starts (each pose from its frame's own solve, where that succeeds), and a
+        fresh smoother seeded with its solution avoid that; it is repeated for the
+        first few frames that two cameras see.
         """
-        graph = track.monocular_graph
-        track.monocular_graph = None
+        graph, frames = track.monocular_graph, track.monocular_obs
+        track.multiview_frames += 1
+        if track.multiview_frames >= _REANCHOR_FRAMES:  # well seen now: back to plain incremental updates
+            track.monocular_graph, track.monocular_obs = None, []
         estimate = track.smoother.calculateEstimate()
         if not all(estimate.exists(k) for k in graph.keyVector()):  # poses already marginalised (fixed lag)
+            track.monocular_graph, track.monocular_obs = None, []
             return
+        if track.multiview_frames == 1:  # start as smooth_scene does: each pose from its own frame's solve
+            for key, obs in frames:
+                alone = solve_observations(obs, dataclasses.replace(self.options.solve, covariance=False), track.id,
+                                           self.prior, self.bounds)
+                if alone.ok:
+                    estimate.update(key, alone.world_T_vehicle)
         solved = gtsam.LevenbergMarquardtOptimizer(graph, estimate, self.options.solve.lm_params()).optimize()
         track.smoother = self._new_smoother()
         stamps = {key: stamp for _, stamp, key in track.poses}
@@ -311,6 +329,7 @@ class Tracker:
         track.poses.append((frame_index, t, key))
         if track.monocular_graph is not None:
             track.monocular_graph.push_back(graph)
+            track.monocular_obs.append((key, obs))
             if _camera_count(obs) >= 2:
                 self._reanchor(track, t)
         return self._finish(track, key, t)
@@ -423,8 +442,6 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
 
 
 def _with_plane(options: TrackOptions, plane: GroundPlane) -> TrackOptions:
-    import dataclasses
-
     return dataclasses.replace(options, ground_plane=plane)
 
 

@@ -93,7 +93,7 @@ class TrackOptions:
             raise ValueError(f"TrackOptions.max_updates: expected an integer >= 0, got {self.max_updates!r}")
 
 
-_REANCHOR_FRAMES = 5  # multi-camera frames over which a monocular-started track is re-solved by LM
+_REANCHOR_FRAMES = 5  # frames seen by two cameras over which a young track is re-solved by LM
 
 
 @dataclass
@@ -106,11 +106,12 @@ class _TrackState:
     poses: list = field(default_factory=list)  # (frame index, t, pose key)
     hwc_added: bool = False
     frames_seen: int = 0
-    # until a frame sees the vehicle from two cameras, the track's factors and stamps are kept, so that
-    # the track can be re-solved by Levenberg-Marquardt then (see Tracker._reanchor)
-    monocular_graph: gtsam.NonlinearFactorGraph | None = None
-    monocular_obs: list = field(default_factory=list)  # (pose key, observations) of those frames
-    multiview_frames: int = 0  # frames since then that two cameras saw
+    # while the track is young (fewer than _REANCHOR_FRAMES frames seen by two cameras) its factors and
+    # observations are kept, so that it can be re-solved by Levenberg-Marquardt (see Tracker._reanchor)
+    young_graph: gtsam.NonlinearFactorGraph | None = None
+    young_obs: list = field(default_factory=list)  # (pose key, observations) of those frames
+    multiview_frames: int = 0  # frames two cameras saw
+    reanchored: bool = False
 
 
 def frame_order(scene: Scene) -> list[int]:
@@ -265,30 +266,31 @@ class Tracker:
         stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}}
         track.smoother.update(graph, values, stamps)
         track.poses.append((frame_index, t, key))
-        track.monocular_graph = copy_graph(graph) if _camera_count(obs) < 2 else None
-        track.monocular_obs = [(key, obs)] if track.monocular_graph is not None else []
+        track.young_graph, track.young_obs = copy_graph(graph), [(key, obs)]
+        track.multiview_frames, track.reanchored = int(_camera_count(obs) >= 2), False
         return self._finish(track, key, t)
 
     def _reanchor(self, track: _TrackState, t: float) -> None:
-        """Re-solves a track seen by one camera so far by LM when a second camera sees it.
+        """Re-solves a young track by Levenberg-Marquardt over its whole graph.
 
-        One camera fixes a vehicle's depth only through the mean shape, so a track
-        started monocularly can be metres off; iSAM2's incremental steps then may
-        settle in a poor minimum once the second camera arrives. Levenberg-Marquardt
-        over the track's whole graph, started the first time as :func:`smooth_scene`
-        starts (each pose from its frame's own solve, where that succeeds), and a
-        fresh smoother seeded with its solution avoid that; it is repeated for the
-        first few frames that two cameras see.
+        In its first frames a track is weakly constrained: one camera fixes a
+        vehicle's depth only through the mean shape, and partial views leave the
+        robust cost with several minima; iSAM2's incremental steps then may settle
+        in a poor one (metres off when a second camera first sees a track started
+        by one). So for the first :data:`_REANCHOR_FRAMES` frames that two cameras
+        see, the track's whole graph is re-solved by LM, the first time started as
+        :func:`smooth_scene` starts (each pose from its own frame's solve, where
+        that succeeds), and the smoother restarted from the solution.
         """
-        graph, frames = track.monocular_graph, track.monocular_obs
-        track.multiview_frames += 1
-        if track.multiview_frames >= _REANCHOR_FRAMES:  # well seen now: back to plain incremental updates
-            track.monocular_graph, track.monocular_obs = None, []
+        graph, frames = track.young_graph, track.young_obs
+        if track.multiview_frames >= _REANCHOR_FRAMES:  # well seen now: plain incremental updates from here
+            track.young_graph, track.young_obs = None, []
         estimate = track.smoother.calculateEstimate()
         if not all(estimate.exists(k) for k in graph.keyVector()):  # poses already marginalised (fixed lag)
-            track.monocular_graph, track.monocular_obs = None, []
+            track.young_graph, track.young_obs = None, []
             return
-        if track.multiview_frames == 1:  # start as smooth_scene does: each pose from its own frame's solve
+        if not track.reanchored:
+            track.reanchored = True
             for key, obs in frames:
                 alone = solve_observations(obs, dataclasses.replace(self.options.solve, covariance=False), track.id,
                                            self.prior, self.bounds)
@@ -327,10 +329,11 @@ class Tracker:
         stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}}
         track.smoother.update(graph, values, stamps)
         track.poses.append((frame_index, t, key))
-        if track.monocular_graph is not None:
-            track.monocular_graph.push_back(graph)
-            track.monocular_obs.append((key, obs))
+        if track.young_graph is not None:
+            track.young_graph.push_back(graph)
+            track.young_obs.append((key, obs))
             if _camera_count(obs) >= 2:
+                track.multiview_frames += 1
                 self._reanchor(track, t)
         return self._finish(track, key, t)
 
@@ -373,8 +376,8 @@ class Tracker:
             graph.add(hwc_factor(self.keys, track.index, terms=self._terms))
             smoother.update(graph, gtsam.Values(), {k: t for k in self.keys.layer_keys(track.index)})
             track.hwc_added = True
-            if track.monocular_graph is not None:
-                track.monocular_graph.push_back(graph)
+            if track.young_graph is not None:
+                track.young_graph.push_back(graph)
             estimate = smoother.calculateEstimate()
             wireframe = self._wireframe(estimate, track)
         covariance = smoother.marginalCovariance(key) if self.options.covariance else None

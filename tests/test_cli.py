@@ -135,3 +135,12 @@ def test_track_writes_results_and_plot(tmp_path, capsys):
     assert main(["track", str(scene), "--out", str(out), "--batch"]) == 0
     assert main(["track", str(scene), "--out", str(out), "--lag", "-1"]) == 2
     assert "--lag" in capsys.readouterr().err
+
+
+def test_eval_paper_writes_tables_and_plots(tmp_path, capsys):
+    md, figures = tmp_path / "paper.md", tmp_path / "figures"
+    assert main(["eval", "paper", "--frames", "3", "--sweep-frames", "3", "--markdown", str(md),
+                 "--figures", str(figures)]) == 0
+    text = md.read_text()
+    assert "Table II layout" in text and "Table I layout" in text and "| cpo |" in text
+    assert (figures / "paper_noise.png").stat().st_size > 0 and (figures / "paper_cameras.png").stat().st_size > 0

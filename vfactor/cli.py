@@ -105,10 +105,15 @@ def build_parser() -> argparse.ArgumentParser:
         "(true wireframe given, pose solved from the truth) on the same simulated scenes, at paper-like noise and at "
         "a harder setting (15%% outliers, 8%% left/right swaps), and print the paper's metrics side by side. "
         "tracks: track the vehicles of a simulated multi-frame scene with iSAM2 (online, final, fixed lag) and batch "
-        "smoothing, beside frame-by-frame solving of the same frames.",
+        "smoothing, beside frame-by-frame solving of the same frames. "
+        "paper: the paper's comparison (its Tables I and II) on its three vehicles: the factor graph, CPO + HWC as "
+        "published, the single-view deformable method, PnP and stereo, plus plots of the error against the noise "
+        "and against the number of cameras (--figures).",
     )
-    p.add_argument("experiment", nargs="?", default="frames", choices=("frames", "tracks"),
-                   help="frames (one-frame accuracy) or tracks (tracking); default: frames")
+    p.add_argument("experiment", nargs="?", default="frames", choices=("frames", "tracks", "paper"),
+                   help="frames (one-frame accuracy), tracks (tracking) or paper (the paper's tables); default: frames")
+    p.add_argument("--figures", help="paper: folder for the plots (the Markdown links them as figures/NAME.png)")
+    p.add_argument("--sweep-frames", type=int, default=30, help="paper: vehicles per point of the plots (default: 30)")
     p.add_argument("--scenario", help="scenario (default: accuracy_2cam for frames, tracks_3veh for tracks)")
     p.add_argument("--frames", type=int, help="number of scenes or frames (default: the scenario's)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
@@ -333,13 +338,20 @@ def _eval(args) -> int:
     _check_positive(args.seeds, "--seeds")
     if args.experiment == "frames":
         sections = _eval_frames(args.scenario or "accuracy_2cam", frames, args.seed)
-    else:
+    elif args.experiment == "tracks":
         sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds)
-    default = "accuracy_2cam" if args.experiment == "frames" else "tracks_3veh"
-    command = "vfactor eval" + (" tracks" if args.experiment == "tracks" else "") + \
+    else:
+        if args.scenario:
+            raise InputError("--scenario", "the paper comparison uses its own scenario (paper_webots)")
+        from vfactor.paper_comparison import paper_report
+
+        sections = [paper_report(frames, args.seed, args.figures, _check_positive(args.sweep_frames, "--sweep-frames"))]
+    default = {"frames": "accuracy_2cam", "tracks": "tracks_3veh", "paper": None}[args.experiment]
+    command = "vfactor eval" + (f" {args.experiment}" if args.experiment != "frames" else "") + \
         (f" --scenario {args.scenario}" if args.scenario and args.scenario != default else "") + \
         (f" --frames {args.frames}" if args.frames else "") + (f" --seed {args.seed}" if args.seed else "") + \
-        (f" --seeds {args.seeds}" if args.seeds != 1 else "")
+        (f" --seeds {args.seeds}" if args.seeds != 1 else "") + (f" --figures {args.figures}" if args.figures else "") + \
+        (f" --sweep-frames {args.sweep_frames}" if args.experiment == "paper" and args.sweep_frames != 30 else "")
     for section in sections:
         print(section)
     print(f"({command}; {time.perf_counter() - t0:.1f} s)")

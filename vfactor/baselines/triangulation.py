@@ -33,6 +33,9 @@ def triangulation(obs: KeypointObservations, vehicle_id: str = "vehicle", mean: 
         keypoints triangulate.
     """
     mean = mean or Wireframe(default_shape_prior().mean)
+    finite = np.all(np.isfinite(obs.uv), axis=1)
+    if not finite.all():
+        obs = obs.subset(finite)
     idx, world = triangulate_keypoints(obs)
     if len(idx) < 3:
         return VehicleResult(vehicle_id, Status.DEGENERATE, message=f"only {len(idx)} keypoints seen by two cameras")

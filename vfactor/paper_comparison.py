@@ -219,6 +219,7 @@ def plot_sweep(x, errors: dict[str, list[float]], xlabel: str, title: str, path)
     ax = fig.add_subplot(1, 1, 1)
     for method, ys in errors.items():
         ax.plot(x, ys, marker="o", label=method)
+    ax.set_xticks(list(x))
     ax.set_xlabel(xlabel)
     ax.set_ylabel("mean keypoint error (cm)")
     ax.set_yscale("log")

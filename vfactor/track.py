@@ -70,6 +70,10 @@ class TrackOptions:
         update_tolerance: metres (and radians) below which extra updates stop.
         relinearize_threshold: iSAM2's relinearisation threshold.
         covariance: compute each pose's marginal covariance.
+        optimizer: iSAM2's step: ``"dogleg"`` (Powell's dogleg, a trust region;
+            the default, as Gauss-Newton steps can diverge when a weakly
+            constrained track is suddenly well seen) or ``"gn"`` (Gauss-Newton).
+        dogleg_delta: initial trust-region radius of the dogleg.
     """
 
     solve: SolveOptions = field(default_factory=SolveOptions)
@@ -89,6 +93,8 @@ class TrackOptions:
     def __post_init__(self):
         if self.lag is not None and (not np.isfinite(self.lag) or self.lag <= 0):
             raise ValueError(f"TrackOptions.lag: expected a positive number of seconds or None, got {self.lag!r}")
+        if self.optimizer not in ("dogleg", "gn"):
+            raise ValueError(f"TrackOptions.optimizer: expected 'dogleg' or 'gn', got {self.optimizer!r}")
         if not isinstance(self.max_updates, int) or self.max_updates < 0:
             raise ValueError(f"TrackOptions.max_updates: expected an integer >= 0, got {self.max_updates!r}")
 

@@ -45,8 +45,9 @@ def build_graph(scenario: str = "intersection_2cam_track", seed: int = 2, frames
     graph.add(gtsam.PriorFactorPose3(RSU, RSU_POSE, gtsam.noiseModel.Isotropic.Sigma(6, 0.005)))
     values.insert(RSU, RSU_POSE)
 
-    # vfactor's part: one shape per vehicle, one pose per frame.
-    vfactor.add_shape_factors(graph, KEYS, vehicle=0)
+    # vfactor's part: one shape per vehicle, one pose per frame, with the tracker's settings.
+    config = vfactor.TrackOptions().solve.graph
+    vfactor.add_shape_factors(graph, KEYS, vehicle=0, config=config)
     motion = MotionModel()
     pose_keys = {}
     previous = []
@@ -54,9 +55,9 @@ def build_graph(scenario: str = "intersection_2cam_track", seed: int = 2, frames
         detections = frame.detections_of(vehicle)
         if not detections:
             continue
-        obs = vfactor.observations_from_detections(detections, sim.scene.cameras)
+        obs = vfactor.observations_from_detections(detections, sim.scene.cameras, config)
         key = KEYS.pose_key(0, f)
-        vfactor.add_observation_factor(graph, KEYS, obs, vehicle=0, frame=f)
+        vfactor.add_observation_factor(graph, KEYS, obs, vehicle=0, frame=f, config=config)
         if previous:
             graph.add(nonholonomic_factor(previous[-1][1], key, frame.t - previous[-1][0], motion))
         if len(previous) >= 2:

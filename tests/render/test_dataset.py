@@ -1,0 +1,104 @@
+"""Training samples: deterministic, consistent keypoints/ROI/flags, held-out split, npz round trip."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vfactor.heatmaps import image_to_heatmap
+from vfactor.render.dataset import (
+    HELD_OUT,
+    TRAIN,
+    crop_camera,
+    load_dataset,
+    make_dataset,
+    random_training_sample,
+    roi_from_box,
+    sample_rng,
+)
+
+
+@pytest.fixture(scope="module")
+def samples(gl_context):
+    return [random_training_sample(sample_rng(5, i), 96) for i in range(6)]
+
+
+def test_samples_are_deterministic(gl_context):
+    a = random_training_sample(np.random.default_rng(11), 64)
+    b = random_training_sample(np.random.default_rng(11), 64)
+    assert np.array_equal(a.image, b.image) and np.array_equal(a.keypoints, b.keypoints)
+    assert np.array_equal(a.roi, b.roi) and a.meta == b.meta
+    c = random_training_sample(np.random.default_rng(12), 64)
+    assert not np.array_equal(a.image, c.image)
+
+
+def test_keypoints_roi_and_flags_are_consistent(samples):
+    for s in samples:
+        assert s.image.shape == (96, 96, 3) and s.image.dtype == np.uint8
+        assert s.keypoints.shape == (12, 2) and np.all(np.isfinite(s.keypoints))
+        # Crop pixels are the full-image pixels mapped through the ROI (vfactor.heatmaps' convention).
+        full = s.keypoints_full
+        assert np.allclose(image_to_heatmap(full, s.roi, (96, 96)), s.keypoints, atol=1e-6)
+        assert np.allclose(s.crop.project(s.wireframe.in_world(s.world_T_vehicle))[0], s.keypoints, atol=1e-6)
+        # The ROI holds the whole vehicle box with the margin, so every keypoint is in the crop.
+        box = np.array(s.meta["box"])
+        assert s.roi[0] <= box[0] and s.roi[1] <= box[1] and s.roi[2] >= box[2] and s.roi[3] >= box[3]
+        assert s.in_crop.all()
+        side = s.roi[2] - s.roi[0]
+        assert np.isclose(side, s.roi[3] - s.roi[1])  # square by default
+        assert 1.2 - 1e-9 <= side / max(box[2] - box[0], box[3] - box[1]) <= 1.6 + 1e-9
+        assert not (s.visible & (s.self_occluded | s.occluded_by_other)).any()
+        assert (s.visible | s.self_occluded | s.occluded_by_other | ~s.camera.in_image(full)).all()
+        assert s.self_occluded.sum() >= 2  # a car always hides some of its own keypoints
+        assert s.meta["split"] == "train"
+
+
+def test_held_out_split_draws_other_shapes_colours_and_views(gl_context):
+    for i in range(4):
+        s = random_training_sample(sample_rng(5, i, held_out=True), 64, held_out=True)
+        m = s.meta
+        assert m["split"] == "held_out"
+        source = m["source"]
+        assert source in HELD_OUT.presets or int(source.split(":")[1]) in HELD_OUT.pascal_models
+        assert HELD_OUT.azimuth_ok(m["azimuth_deg"]) and not TRAIN.azimuth_ok(m["azimuth_deg"])
+        assert HELD_OUT.elevation_ok(m["elevation_deg"]) and not TRAIN.elevation_ok(m["elevation_deg"])
+    assert not set(HELD_OUT.presets) & set(TRAIN.presets)
+    assert not set(HELD_OUT.pascal_models) & set(TRAIN.pascal_models)
+    assert TRAIN.hue_ok(5.0) and HELD_OUT.hue_ok(25.0) and not TRAIN.hue_ok(25.0)
+
+
+def test_roi_and_crop_camera_conventions():
+    roi = roi_from_box([100, 50, 180, 90], margin=0.25, square=True, jitter=(0.1, 0.0))
+    assert np.allclose(roi[2] - roi[0], 80 * 1.5) and np.allclose(roi[3] - roi[1], 80 * 1.5)
+    assert np.isclose(0.5 * (roi[0] + roi[2]), 140 + 0.1 * 120)
+    from vfactor.sim.rig import pole_camera
+
+    cam = pole_camera("c", (10, 5), 7.0)
+    crop = crop_camera(cam, roi, 64)
+    pts = np.array([[0.5, 0.2, 0.7], [-1.0, 0.3, 0.2]])
+    assert np.allclose(crop.project(pts)[0], image_to_heatmap(cam.project(pts)[0], roi, (64, 64)))
+
+
+def test_dataset_round_trips_through_npz(gl_context, tmp_path):
+    shards = make_dataset(5, seed=3, size=48, path=tmp_path / "ds", shard_size=2)
+    assert [p.name for p in shards] == ["shard_00000.npz", "shard_00001.npz", "shard_00002.npz"]
+    ds = load_dataset(tmp_path / "ds")
+    assert len(ds) == 5 and ds.images.shape == (5, 48, 48, 3) and ds.keypoints.shape == (5, 12, 2)
+    assert ds.info["seed"] == 3 and ds.info["split"] == "train"
+    again = random_training_sample(sample_rng(3, 3), 48)
+    assert np.array_equal(ds.images[3], again.image)
+    assert np.allclose(ds.keypoints[3], again.keypoints, atol=1e-4)
+    assert np.array_equal(ds.visible[3], again.visible) and np.array_equal(ds.self_occluded[3], again.self_occluded)
+    assert np.allclose(ds.rois[3], again.roi) and ds.meta[3] == again.meta
+    assert np.allclose(ds.wireframes[3], again.wireframe.vehicle_p_keypoints)
+    single = load_dataset(shards[1])
+    assert len(single) == 2 and np.array_equal(single.images[1], ds.images[3])
+
+
+def test_command_line(gl_context, tmp_path, capsys):
+    from vfactor.render.dataset import main
+
+    assert main([str(tmp_path / "cli"), "--n", "2", "--size", "32", "--held-out", "--seed", "9"]) == 0
+    ds = load_dataset(tmp_path / "cli")
+    assert len(ds) == 2 and ds.info["split"] == "held_out" and ds.images.shape[1:] == (32, 32, 3)
+    assert "wrote 1 shard" in capsys.readouterr().err

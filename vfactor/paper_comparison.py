@@ -50,13 +50,19 @@ METHODS = {
 #: CPO variants for ``--ablation``: which of the paper's ingredients the numbers owe to what.
 ABLATIONS = {
     "cpo": CpoOptions(),
+    "cpo_literal": CpoOptions(weighting="model", weight_state="normalised", mu_update=(0.8, -1.0, 0.02), max_step_m=0.05),
+    "cpo_model_weighting": CpoOptions(weighting="model"),
+    "cpo_normalised_state": CpoOptions(weight_state="normalised"),
     "cpo_fixed_weights": CpoOptions(mu_update=(1.0, 0.0, 0.0)),
-    "cpo_mu2_positive": CpoOptions(mu_update=(0.8, 1.0, 0.02)),
-    "cpo_mu3_0": CpoOptions(mu_update=(0.8, -1.0, 0.0)),
-    "cpo_mu3_0.1": CpoOptions(mu_update=(0.8, -1.0, 0.1)),
+    "cpo_mu2_positive": CpoOptions(mu_update=(1.0, 0.1, 0.01)),
+    "cpo_mu2_-1": CpoOptions(mu_update=(1.0, -1.0, 0.01)),
+    "cpo_mu1_0.8": CpoOptions(mu_update=(0.8, -0.1, 0.01)),
+    "cpo_mu3_0": CpoOptions(mu_update=(1.0, -0.1, 0.0)),
+    "cpo_mu3_0.1": CpoOptions(mu_update=(1.0, -0.1, 0.1)),
     "cpo_no_cross_steps": CpoOptions(cross_steps=0),
     "cpo_no_single_camera_steps": CpoOptions(single_camera_steps=0),
-    "cpo_max_step_2cm": CpoOptions(max_step_m=0.02),
+    "cpo_max_step_5cm": CpoOptions(max_step_m=0.05),
+    "cpo_max_step_1cm": CpoOptions(max_step_m=0.01),
     "cpo_100_iterations": CpoOptions(max_iterations=100),
     "cpo_mean_shape": CpoOptions(hwc=False),
 }

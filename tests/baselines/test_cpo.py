@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from vfactor.baselines.cpo import CpoOptions, cpo, hwc_projection, observation_confidence
+from vfactor.factors.projection import KeypointObservations
 from vfactor.graph import observations_from_detections
 from vfactor.keypoints import LAYERS, MIRROR_PERMUTATION
-from vfactor.metrics import pose_errors
+from vfactor.metrics import pose_errors, rotation_error_deg
 from vfactor.result import Status
 from vfactor.shape_model import default_shape_prior
 from vfactor.sim import load_scenario, simulate, within_hwc_bounds
-from vfactor.wireframe import PRESETS
+from vfactor.wireframe import PRESETS, Wireframe
 
 from .conftest import bad_inputs, one_camera
 
@@ -88,6 +91,44 @@ def test_hwc_rules_hold_under_noise(paper_cases):
         assert within_hwc_bounds(result.wireframe), truth.preset
 
 
+def with_outlier(obs: KeypointObservations, camera: int) -> tuple[KeypointObservations, int]:
+    """``obs`` with camera ``camera``'s first keypoint moved by 40 % of that camera's box (and the moved row)."""
+    rows = np.flatnonzero(obs.camera_index == camera)
+    uv = obs.uv.copy()
+    uv[rows[0]] += 0.4 * (uv[rows].max(0) - uv[rows].min(0))
+    return KeypointObservations(obs.cameras, obs.camera_index, obs.keypoint_index, uv, obs.sqrt_information), rows[0]
+
+
+def test_an_outlier_loses_its_weight_and_the_models_agree(noiseless_cases):
+    """Eq. (6)'s weights are the paper's only outlier handling: the bad detection ends at the weight floor."""
+    errors, fixed_errors = [], []
+    for obs, truth in noiseless_cases:
+        options = CpoOptions(hwc=False, mean=Wireframe(truth.keypoints_vehicle))  # the exact shape: only the outlier errs
+        for camera in (0, 1):
+            bad, row = with_outlier(obs, camera)
+            result = cpo(bad, options)
+            assert result.ok
+            weight = result.extras["weights"][obs.cameras[camera].name][obs.keypoint_index[row]]
+            assert weight < 1.1 * options.weight_floor / 12, (truth.preset, camera, weight)
+            a, b = result.extras["poses"].values()  # each detection weighed by its own weight: one energy, one optimum
+            assert rotation_error_deg(a, b) < 1e-3 and np.linalg.norm(a.translation() - b.translation()) < 1e-4
+            e = pose_errors(result.world_T_vehicle, result.keypoints_world, truth.world_T_vehicle, truth.keypoints_world)
+            assert e["rotation_deg"] < 0.5 and e["mean_keypoint_cm"] < 1.5, (truth.preset, camera, e)
+            errors.append(e["rotation_deg"])
+            fixed = cpo(bad, dataclasses.replace(options, mu_update=(1.0, 0.0, 0.0)))
+            fixed_errors.append(rotation_error_deg(fixed.world_T_vehicle, truth.world_T_vehicle))
+    assert np.mean(fixed_errors) > 5 * np.mean(errors), (fixed_errors, errors)
+
+
+def test_the_model_with_the_smaller_weighted_projection_error_wins(paper_cases):
+    for obs, truth in paper_cases[:3]:
+        for weighting in ("image", "model"):
+            result = cpo(obs, CpoOptions(weighting=weighting, max_iterations=10))
+            errors = result.extras["projection_error"]
+            assert result.extras["camera"] == min(errors, key=errors.get)
+            assert set(result.extras["poses"]) == set(errors)
+
+
 @pytest.mark.parametrize("case", ["none", "three_keypoints", "three_keypoints_two_cameras", "one_camera"])
 def test_too_little_is_degenerate(lincoln, case):
     obs, _ = lincoln
@@ -110,7 +151,8 @@ def test_bad_confidence_fails(lincoln):
 
 
 @pytest.mark.parametrize("field, value", [("mu_init", (0.0, 0.5)), ("max_step_m", -1.0), ("max_iterations", 0),
-                                          ("mu_init", (1.0, 2.0, 3.0)), ("min_keypoints_per_camera", 2)])
+                                          ("mu_init", (1.0, 2.0, 3.0)), ("min_keypoints_per_camera", 2),
+                                          ("weighting", "camera"), ("weight_state", None)])
 def test_options_are_checked(field, value):
     with pytest.raises(ValueError, match=f"CpoOptions.{field}"):
         CpoOptions(**{field: value})

@@ -8,7 +8,8 @@ listed in docs/baselines.md. In brief:
 
 1. **Initial weights** (Eq. 2-3): ``psi_i^k = mu1 w_i^k + mu2 (w_i^k - w_j^k)``
    from the keypoints' confidences (the heatmap peaks), floored and normalised
-   over the keypoints camera ``i`` sees: the diagonal ``W_i``.
+   over the keypoints camera ``i`` sees: the diagonal ``W_i``, the weights of
+   camera ``i``'s detections.
 2. **Models.** Each camera ``i`` that sees 4 or more keypoints keeps its own
    model pose ``P_i``, started by PnP (SQPnP) of the mean wireframe in that
    camera alone; the wireframe is shared.
@@ -17,11 +18,18 @@ listed in docs/baselines.md. In brief:
    model point ``P_i p_k``, and ``P_i`` becomes the weighted rigid alignment
    (Umeyama, no scale) of ``p_k`` to ``q_k`` with weights ``W_i`` (the
    object-space iteration of Lu, Hager and Mjolsness). (b) Cross projection
-   (Eq. 5): ``f_i = 1/2 sum_j W_i ||L_ij||^2`` is decreased by
+   (Eq. 5): ``f_i = 1/2 sum_j ||L_ij||^2_W`` is decreased by
    Levenberg-Marquardt steps on ``P_i``; ``L_ij`` is model ``i``'s reprojection
-   error in image ``j`` in units of the vehicle's size in that image.
-   (c) Weight update (Eq. 6): ``w_i^k <- mu1 w_i^k + mu2 ||L_ij^k||^2 +
-   mu3 (w_i,nor^k - w_j,nor^k)``, floored and renormalised.
+   error in image ``j`` in units of the vehicle's size in that image, each
+   detection weighed by its own weight (image ``j``'s rows by ``W_j``; the
+   literal ``W_i`` on all of model ``i``'s rows is ``weighting="model"``).
+   (c) Weight update (Eq. 6), on the weights ``w`` whose normalised values
+   ``w_nor`` fill ``W``: ``w_j^k <- mu1 w_j^k + mu2 ||L_ij^k||^2 +
+   mu3 (w_j,nor^k - w_i,nor^k)`` with ``L_ij^k`` the cross projection error
+   of keypoint ``k`` into image ``j`` (of the other camera's model ``i``),
+   ``mu1 = 1``, ``mu2 < 0``, clipped at 0, normalised and floored: a
+   detection the models keep projecting badly (an outlier, a swapped label)
+   loses its weight, the paper's only outlier handling.
 4. **Pure pose first**, until the energy ``f = sum_i f_i`` changes by less
    than ``smooth_tol`` (relative) between iterations; then an HWC step after
    every iteration.
@@ -39,7 +47,10 @@ listed in docs/baselines.md. In brief:
    is then re-centred on the wheel hubs, hubs level (poses compensated).
 6. **Stop** at ``max_iterations`` or when, in the shape phase, the energy
    changes by less than ``tol`` and no point moved more than ``shape_tol``.
-   The model with the smaller projection error over all images wins.
+   The model with the smaller projection error over all images (each
+   detection weighed by its final weight) wins; with the detections' weights
+   in every model's energy the models agree (the paper: "in most instances,
+   optimized results from two cameras are almost the same").
 """
 
 from __future__ import annotations
@@ -72,8 +83,20 @@ class CpoOptions:
     Attributes:
         mu_init: ``(mu1, mu2)`` of the initial weights, Eq. (2).
         mu_update: ``(mu1, mu2, mu3)`` of the weight update, Eq. (6); ``mu2 < 0``
-            lowers the weight of a keypoint that model ``i`` projects badly into
-            another image (the sign is not given in the paper).
+            lowers the weight of a keypoint that is projected badly (the sign is
+            not given in the paper).
+        weighting: ``"image"``: image ``j``'s residuals are weighed by ``W_j``,
+            the weights of the keypoints detected in image ``j``, in every
+            model's energy (Eq. 5), and ``w_j^k`` is updated from the cross
+            projection error of keypoint ``k`` into image ``j`` (Eq. 6).
+            ``"model"``: Eq. (5)'s subscript taken literally, ``W_i`` weighs all
+            of model ``i``'s residuals and ``w_i^k`` is updated from model
+            ``i``'s errors in the other images (the reading used before; its
+            two models disagree and the worse one is often picked).
+        weight_state: ``"raw"``: Eq. (6) updates the weights ``w`` and ``W`` holds
+            their normalised values ``w_nor`` (the equation names both);
+            ``"normalised"``: the update acts on ``w_nor`` itself, renormalised
+            every iteration (with ``mu2 < 0`` a winner-take-all dynamic).
         weight_floor: no weight drops below this fraction of the uniform weight ``1/K``.
         max_iterations: iteration limit (pose and shape phases together).
         min_pose_iterations, max_pose_iterations: length of the pure-pose phase.
@@ -98,7 +121,9 @@ class CpoOptions:
     """
 
     mu_init: tuple[float, float] = (1.0, 0.5)
-    mu_update: tuple[float, float, float] = (0.8, -1.0, 0.02)
+    mu_update: tuple[float, float, float] = (1.0, -0.1, 0.01)
+    weighting: str = "image"
+    weight_state: str = "raw"
     weight_floor: float = 0.05
     max_iterations: int = 30
     min_pose_iterations: int = 3
@@ -110,7 +135,7 @@ class CpoOptions:
     single_camera_steps: int = 2
     cross_steps: int = 3
     hwc: bool = True
-    max_step_m: float = 0.05
+    max_step_m: float = 0.02
     projection_eps: float = 0.01
     min_keypoints_per_camera: int = 4
     min_observations: int = 6
@@ -135,6 +160,10 @@ class CpoOptions:
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 0:
                 raise ValueError(f"CpoOptions.{name}: expected a non-negative integer, got {value!r}")
+        if self.weighting not in ("image", "model"):
+            raise ValueError(f"CpoOptions.weighting: expected 'image' or 'model', got {self.weighting!r}")
+        if self.weight_state not in ("raw", "normalised"):
+            raise ValueError(f"CpoOptions.weight_state: expected 'raw' or 'normalised', got {self.weight_state!r}")
         if self.max_iterations < 1:
             raise ValueError(f"CpoOptions.max_iterations: expected at least 1, got {self.max_iterations}")
         if self.min_keypoints_per_camera < 3:
@@ -230,13 +259,17 @@ def _normalise(w: np.ndarray, seen: np.ndarray, floor: float) -> np.ndarray:
     return out
 
 
-def _row_weights(problem: _Problem, w_nor: np.ndarray, i: int) -> np.ndarray:
-    """Weight of every observation (camera j, keypoint k) in model i's cross energy: ``W_i[k]``.
+def _row_weights(problem: _Problem, w_nor: np.ndarray, i: int, weighting: str = "image") -> np.ndarray:
+    """Weight of every observation (camera j, keypoint k) in model i's cross energy, Eq. (5).
 
-    A keypoint camera ``i`` does not see has no entry in ``W_i``; its rows take
-    the weight of the camera that observed them (``W_j[k]``).
+    ``"image"``: ``W_j[k]``, the weight of that detection (the same for every
+    model). ``"model"``: ``W_i[k]``; a keypoint camera ``i`` does not see has
+    no entry in ``W_i``, and its rows take the weight of the camera that
+    observed them (``W_j[k]``).
     """
     c, k = problem.obs.camera_index, problem.obs.keypoint_index
+    if weighting == "image":
+        return w_nor[c, k]
     own = w_nor[i, k]
     return np.where(problem.seen[i, k], own, w_nor[c, k])
 
@@ -256,8 +289,53 @@ def _cross_energy(r: np.ndarray, weights: np.ndarray) -> float:
     return 0.5 * float(np.sum(weights * np.sum(r * r, axis=1)))
 
 
+def _projection_error(problem: _Problem, r: np.ndarray, w_nor: np.ndarray) -> float:
+    """A model's projection error over all images: the RMS relative error, each detection weighed by its ``W_j[k]``.
+
+    The weights are those of the detections (the same for every model), so the
+    models' errors are comparable, and a keypoint the weights have given up on
+    (an outlier, a swapped label) does not decide which model wins.
+    """
+    w = w_nor[problem.obs.camera_index, problem.obs.keypoint_index]
+    total = float(w.sum())
+    if not total > 0:
+        return float(np.sqrt(np.mean(np.sum(r * r, axis=1))))
+    return float(np.sqrt(np.sum(w * np.sum(r * r, axis=1)) / total))
+
+
+def _weight_update_errors(problem: _Problem, residuals: dict, model_cams: list[int], weighting: str) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. (6)'s ``||L||^2`` term per (camera, keypoint), and which rows get updated.
+
+    ``"image"``: for camera ``j``'s detection of keypoint ``k``, the squared
+    relative error of the cross projection into image ``j``: the mean over the
+    other cameras' models (over all models where ``j`` has none of the others';
+    with two cameras, ``||L_ij^k||^2`` of the other model ``i``). Every camera's
+    row is updated, with or without a model of its own. ``"model"``: for model
+    ``i``, the mean over the other images ``j`` that see ``k`` of ``||L_ij^k||^2``;
+    only model cameras' rows are updated.
+    """
+    obs = problem.obs
+    C = problem.num_cameras
+    tables = {}
+    for i in model_cams:
+        table = np.zeros((C, NUM_KEYPOINTS))
+        table[obs.camera_index, obs.keypoint_index] = np.sum(residuals[i] ** 2, axis=1)
+        tables[i] = table
+    cross = np.zeros((C, NUM_KEYPOINTS))
+    if weighting == "image":
+        for j in range(C):
+            models = [i for i in model_cams if i != j] or list(model_cams)
+            cross[j] = np.mean([tables[i][j] for i in models], axis=0)
+        return cross, np.ones(C, dtype=bool)
+    for i in model_cams:
+        other = problem.seen & (np.arange(C)[:, None] != i)
+        n_other = other.sum(0)
+        cross[i] = np.where(n_other > 0, (tables[i] * other).sum(0) / np.maximum(n_other, 1), 0.0)
+    return cross, np.isin(np.arange(C), model_cams)
+
+
 def _cross_steps(problem: _Problem, pose: gtsam.Pose3, shape: np.ndarray, weights: np.ndarray, steps: int) -> gtsam.Pose3:
-    """Eq. (5): Levenberg-Marquardt steps on one model's cross energy ``1/2 sum_j W_i ||L_ij||^2``."""
+    """Eq. (5): Levenberg-Marquardt steps on one model's cross energy ``1/2 sum_j ||L_ij||^2_W`` (``weights`` per row)."""
     lam = 1e-3
     r, J = problem.residuals(pose, shape, jacobians=True)
     cost = _cross_energy(r, weights)
@@ -362,7 +440,7 @@ def _hwc_step(problem: _Problem, poses: dict, shape: np.ndarray, w_nor: np.ndarr
               options: CpoOptions, bounds: HwcBounds) -> np.ndarray:
     """One HWC shape adjustment; returns the new (symmetric) shape, not yet re-centred."""
     obs = problem.obs
-    best_model = min(residuals, key=lambda i: float(np.sum(residuals[i] ** 2)))
+    best_model = min(residuals, key=lambda i: _projection_error(problem, residuals[i], w_nor))
     pose = poses[best_model]
     current = _transform(pose, shape)
     # Eq. (4) minimised over each point, the cameras' rays merged with the Eq. (7) weights
@@ -442,7 +520,10 @@ def cpo(
         of the result over all cameras) and ``extras``: ``"camera"`` (whose model
         won), ``"energy"`` (the energy ``f`` after every iteration),
         ``"pose_iterations"``, ``"projection_error"`` (per model camera: RMS
-        relative reprojection error over all images). ``degenerate`` when fewer
+        relative reprojection error over all images, each detection weighed by
+        its final weight), ``"poses"`` (per model camera: its model's pose) and
+        ``"weights"`` (per camera: the final normalised weights ``W``, (12,),
+        0 where unseen). ``degenerate`` when fewer
         than two cameras see the vehicle, too few keypoints are seen, or no
         camera sees 4; ``failed`` when PnP finds no starting pose. Never raises
         on bad observations (bad ``confidence`` gives ``failed``).
@@ -491,6 +572,7 @@ def _run(problem: _Problem, model_cams: list[int], mean: Wireframe, options: Cpo
     mu1, mu2 = options.mu_init
     psi = mu1 * problem.conf + mu2 * (problem.conf - problem.others_mean(problem.conf))
     w_nor = _normalise(psi, problem.seen, options.weight_floor)
+    w = w_nor.copy()  # Eq. (6)'s weights, started at the normalised Eq. (2) values; W holds their normalised values
 
     # Initial poses: per-camera PnP of the mean wireframe (a camera whose PnP fails takes another's);
     # the mean is first put into the hub-centred, level body frame and, with HWC, made to obey its rules
@@ -515,7 +597,7 @@ def _run(problem: _Problem, model_cams: list[int], mean: Wireframe, options: Cpo
         for i in model_cams:
             for _ in range(options.single_camera_steps):
                 poses[i] = _single_camera_step(problem, poses[i], shape, w_nor, i)
-            weights = _row_weights(problem, w_nor, i)
+            weights = _row_weights(problem, w_nor, i, options.weighting)
             if options.cross_steps:
                 poses[i] = _cross_steps(problem, poses[i], shape, weights, options.cross_steps)
             residuals[i] = problem.residuals(poses[i], shape)[0]
@@ -523,19 +605,16 @@ def _run(problem: _Problem, model_cams: list[int], mean: Wireframe, options: Cpo
         energies.append(energy)
 
         # Eq. (6): weight update from the cross projection errors and the visibility term
-        cross = np.zeros_like(w_nor)
-        for i in model_cams:
-            sq = np.sum(residuals[i] ** 2, axis=1)
-            table = np.zeros_like(w_nor)
-            table[obs.camera_index, obs.keypoint_index] = sq
-            other = problem.seen & (np.arange(problem.num_cameras)[:, None] != i)
-            n_other = other.sum(0)
-            cross[i] = np.where(n_other > 0, (table * other).sum(0) / np.maximum(n_other, 1), 0.0)
+        cross, rows = _weight_update_errors(problem, residuals, model_cams, options.weighting)
         m1, m2, m3 = options.mu_update
-        updated = m1 * w_nor + m2 * cross + m3 * (w_nor - problem.others_mean(w_nor))
-        new_w = _normalise(updated, problem.seen, options.weight_floor)
-        model_rows = np.isin(np.arange(problem.num_cameras), model_cams)
-        w_nor = np.where(model_rows[:, None], new_w, w_nor)
+        visibility = w_nor - problem.others_mean(w_nor)
+        if options.weight_state == "raw":
+            w = np.where(rows[:, None], np.maximum(m1 * w + m2 * cross + m3 * visibility, 0.0), w)
+            w = np.where(problem.seen, w, 0.0)
+            new_w = _normalise(w, problem.seen, options.weight_floor)
+        else:
+            new_w = _normalise(m1 * w_nor + m2 * cross + m3 * visibility, problem.seen, options.weight_floor)
+        w_nor = np.where(rows[:, None], new_w, w_nor)
 
         change = abs(energies[-2] - energy) if len(energies) > 1 else np.inf
         small = energy < options.abs_tol or (len(energies) > 1 and change <= options.tol * energies[-2])
@@ -563,8 +642,8 @@ def _run(problem: _Problem, model_cams: list[int], mean: Wireframe, options: Cpo
             status = Status.CONVERGED
             break
 
-    # the model with the smaller projection error over all images wins
-    errors = {i: float(np.sqrt(np.mean(np.sum(problem.residuals(poses[i], shape)[0] ** 2, axis=1)))) for i in model_cams}
+    # the model with the smaller projection error over all images wins (each detection weighed by its final weight)
+    errors = {i: _projection_error(problem, problem.residuals(poses[i], shape)[0], w_nor) for i in model_cams}
     errors = {i: e for i, e in errors.items() if np.isfinite(e)}
     if not errors or not np.all(np.isfinite(shape)):
         return VehicleResult(vehicle_id, Status.FAILED, message="cpo: the iterations left the finite numbers")
@@ -579,6 +658,8 @@ def _run(problem: _Problem, model_cams: list[int], mean: Wireframe, options: Cpo
             "camera": obs.cameras[best].name,
             "energy": energies,
             "pose_iterations": pose_iterations,
-            "projection_error": {obs.cameras[i].name: errors[i] for i in model_cams},
+            "projection_error": {obs.cameras[i].name: e for i, e in errors.items()},
+            "poses": {obs.cameras[i].name: poses[i] for i in model_cams},
+            "weights": {cam.name: w_nor[c].copy() for c, cam in enumerate(obs.cameras)},
         },
     )

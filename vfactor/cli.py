@@ -76,6 +76,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
 
+    for name, text in (
+        ("train", "train the keypoint network (progress bar, checkpoints, resume, PCK per epoch); needs torch"),
+        ("detect", "keypoints, confidences, covariances and heatmaps per vehicle box: IMAGE --roi X0 Y0 X1 Y1; needs torch"),
+    ):
+        p = sub.add_parser(name, help=text, add_help=False)
+        p.add_argument("net_args", nargs=argparse.REMAINDER)
+
     p = sub.add_parser(
         "simulate", help="write a simulated scene (and its ground truth) from a scenario",
         description="Simulate SCENARIO (a packaged name such as intersection_2cam, or a scenario JSON file) and "
@@ -123,6 +130,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in ("train", "detect"):  # the network's own parser; torch is imported only here
+        return _net(argv)
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
@@ -146,6 +156,17 @@ def main(argv=None) -> int:
         print(f"vfactor {args.command}: internal error: {type(exc).__name__}: {exc} (run with --debug for details)",
               file=sys.stderr)
         return EXIT_INTERNAL
+
+
+def _net(argv: list[str]) -> int:
+    """``vfactor train`` and ``vfactor detect``: the keypoint network's commands (vfactor.net.commands)."""
+    try:
+        from vfactor.net.commands import main as net_main
+    except ImportError as exc:
+        print(f"vfactor {argv[0]}: error: the keypoint network needs PyTorch ({exc}); install it with "
+              "pip install -c constraints.txt -e '.[net]'", file=sys.stderr)
+        return EXIT_INPUT
+    return net_main(argv, prog="vfactor")
 
 
 # ---------------------------------------------------------------------------- helpers

@@ -1,0 +1,75 @@
+"""The train and detect commands (python -m vfactor.net ..., forwarded to by vfactor train / vfactor detect)."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from tests.net.synthetic import blob_dataset  # noqa: E402
+from vfactor.net.commands import main  # noqa: E402
+from vfactor.net.data import KeypointDataset  # noqa: E402
+from vfactor.net.model import StackedHourglass, load_weights, save_weights  # noqa: E402
+
+
+def test_train_command_from_shards_with_export(tmp_path, capsys):
+    KeypointDataset(*blob_dataset(24, 32, seed=0)).save_npz(tmp_path / "train" / "shard_00000.npz")
+    KeypointDataset(*blob_dataset(8, 32, seed=1)).save_npz(tmp_path / "val" / "shard_00000.npz")
+    (tmp_path / "tiny.json").write_text(json.dumps(
+        {"num_stacks": 1, "channels": 8, "depth": 2, "input_size": 32, "batch_size": 8, "num_threads": 1}))
+    code = main(["train", "--data", str(tmp_path / "train"), "--val", str(tmp_path / "val"), "--config",
+                 str(tmp_path / "tiny.json"), "--epochs", "2", "--out", str(tmp_path / "run"),
+                 "--export", str(tmp_path / "shipped" / "keypoints.pt")])
+    assert code == 0
+    err = capsys.readouterr().err
+    assert "epoch 2/2" in err and "weights:" in err
+    model, meta = load_weights(tmp_path / "shipped" / "keypoints.pt", with_config=True)
+    assert model.config.channels == 8 and meta["train"]["epochs"] == 2
+    assert len(json.loads((tmp_path / "run" / "history.json").read_text())) == 2
+    # resuming a finished run trains nothing more
+    assert main(["train", "--data", str(tmp_path / "train"), "--config", str(tmp_path / "tiny.json"), "--epochs",
+                 "2", "--out", str(tmp_path / "run"), "--resume", "--quiet"]) == 0
+
+
+def test_train_command_reports_bad_input(tmp_path, capsys):
+    assert main(["train", "--out", str(tmp_path)]) == 2
+    assert "--data" in capsys.readouterr().err
+    assert main(["train", "--data", str(tmp_path / "nothing"), "--out", str(tmp_path)]) == 2
+    assert main(["train", "--data", str(tmp_path), "--epochs", "0", "--out", str(tmp_path)]) == 2
+    assert "epochs" in capsys.readouterr().err
+
+
+def test_detect_command_writes_keypoints_and_heatmaps(tmp_path, capsys):
+    torch.manual_seed(0)
+    save_weights(StackedHourglass(num_stacks=1, channels=8, depth=2, input_size=32).eval(), tmp_path / "w.pt",
+                 {"crop": {"margin": 0.0, "square": False}})
+    image = np.random.default_rng(0).integers(0, 255, (60, 80, 3), dtype=np.uint8)
+    cv2.imwrite(str(tmp_path / "a.png"), image)
+    code = main(["detect", str(tmp_path / "a.png"), "--roi", "10", "5", "42", "37", "--roi", "30", "10", "70", "50",
+                 "--weights", str(tmp_path / "w.pt"), "--heatmaps", str(tmp_path / "h.npz")])
+    assert code == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert len(doc["keypoint_names"]) == 12
+    (entry,) = doc["images"]
+    assert [d["roi"] for d in entry["detections"]] == [[10, 5, 42, 37], [30, 10, 70, 50]]
+    d = entry["detections"][0]
+    assert len(d["keypoints"]) == 12 and len(d["confidence"]) == 12 and np.shape(d["covariance"]) == (12, 2, 2)
+    with np.load(tmp_path / "h.npz") as z:
+        assert z["heatmaps"].shape == (2, 12, 8, 8) and z["image_index"].tolist() == [0, 0]
+
+    (tmp_path / "rois.json").write_text(json.dumps({str(tmp_path / "a.png"): [[0, 0, 32, 32]]}))
+    out = tmp_path / "r.json"
+    assert main(["detect", str(tmp_path / "a.png"), "--rois", str(tmp_path / "rois.json"), "--weights",
+                 str(tmp_path / "w.pt"), "--out", str(out)]) == 0
+    assert len(json.loads(out.read_text())["images"][0]["detections"]) == 1
+
+
+def test_detect_command_reports_bad_input(tmp_path, capsys):
+    assert main(["detect", str(tmp_path / "missing.png"), "--roi", "0", "0", "5", "5",
+                 "--weights", str(tmp_path / "w.pt")]) == 2
+    assert main(["detect", str(tmp_path / "a.png")]) == 2
+    assert "--roi" in capsys.readouterr().err

@@ -1,0 +1,113 @@
+"""Inference: boxes are cropped, and heatmap peaks are mapped back to the right image pixels through the box."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from torch.nn import functional as F  # noqa: E402
+
+from vfactor.heatmaps import heatmap_to_image, render_gaussian_heatmap  # noqa: E402
+from vfactor.net.crop import crop_roi, expand_roi, image_to_crop  # noqa: E402
+from vfactor.net.infer import KeypointDetector, benchmark_inference  # noqa: E402
+from vfactor.net.model import StackedHourglass, save_weights  # noqa: E402
+
+S, H = 64, 16  # input side and heatmap side
+PEAKS = np.array([[2.3 + 1.0 * k, 3.6 + 0.8 * k] for k in range(12)])  # heatmap pixels
+COV = np.array([[1.2, 0.3], [0.3, 0.8]])  # heatmap px^2
+
+
+class FixedHeatmaps(StackedHourglass):
+    """Outputs the same known Gaussians whatever the crop."""
+
+    def forward(self, x):
+        hm = np.stack([render_gaussian_heatmap(p, COV, (H, H), peak=0.9) for p in PEAKS]).astype(np.float32)
+        return [torch.from_numpy(hm).expand(len(x), -1, -1, -1)]
+
+
+class RedChannelPooled(StackedHourglass):
+    """Every heatmap is the crop's red channel averaged over 4x4 blocks: a red blob comes out where it is."""
+
+    def forward(self, x):
+        return [F.avg_pool2d(x[:, :1], 4).expand(-1, 12, -1, -1)]
+
+
+def blob(shape, uv, sigma):
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]]
+    return np.exp(-0.5 * ((cols - uv[0]) ** 2 + (rows - uv[1]) ** 2) / sigma**2)
+
+
+def test_known_heatmaps_decode_to_image_pixels_through_the_roi():
+    det = KeypointDetector(FixedHeatmaps(num_stacks=1, channels=8, depth=2, input_size=S), device="cpu")
+    image = np.zeros((300, 400, 3), np.uint8)
+    roi = (100, 50, 228, 146)  # 128 x 96 px: sx = 8, sy = 6 image px per heatmap px
+    (kp,), heatmaps = det.detect(image, [roi], return_heatmaps=True)
+    assert heatmaps.shape == (1, 12, H, H)
+    np.testing.assert_allclose(kp.uv, heatmap_to_image(PEAKS, roi, (H, H)), atol=1e-6)
+    J = np.diag([8.0, 6.0])
+    np.testing.assert_allclose(kp.covariance, np.broadcast_to(J @ COV @ J.T, (12, 2, 2)), rtol=1e-6)
+    np.testing.assert_allclose(kp.confidence, heatmaps[0].max(axis=(1, 2)), rtol=1e-6)  # the peak pixel
+
+
+def test_a_blob_in_the_image_is_found_at_its_pixel():
+    """Crop, resize, network, decoding and mapping back, end to end (a 'network' that pools the red channel)."""
+    image = np.zeros((240, 320, 3), np.uint8)
+    uv = np.array([181.3, 97.8])
+    image[..., 0] = np.rint(230 * blob(image.shape[:2], uv, 12.0)).astype(np.uint8)
+    det = KeypointDetector(RedChannelPooled(num_stacks=1, channels=8, depth=2, input_size=S), device="cpu")
+    for roi in [(120, 40, 248, 168), (150.2, 60.7, 230.9, 139.1), (100, 20, 300, 220)]:
+        (kp,) = det.detect(image, [roi])
+        np.testing.assert_allclose(kp.uv, np.broadcast_to(uv, (12, 2)), atol=0.35)
+        assert np.all(kp.confidence > 0.5)
+
+
+def test_boxes_are_grown_and_squared_as_the_weights_say(tmp_path):
+    net = FixedHeatmaps(num_stacks=1, channels=8, depth=2, input_size=S)
+    path = save_weights(net, tmp_path / "w.pt", {"crop": {"margin": 0.25, "square": True}})
+    assert (KeypointDetector(path).roi_margin, KeypointDetector(path).roi_square) == (0.25, True)
+    det = KeypointDetector(net, device="cpu", roi_margin=0.25, roi_square=True)
+    box = (100.0, 50.0, 180.0, 90.0)  # 80 x 40 -> 120 x 60 -> square 120 about (140, 70)
+    assert det.crop_box(box) == (80.0, 10.0, 200.0, 130.0)
+    [[d]] = det.detect_batch([np.zeros((200, 300, 3), np.uint8)], [[box]])
+    assert d.roi == (80.0, 10.0, 200.0, 130.0)
+    np.testing.assert_allclose(d.keypoints.uv, heatmap_to_image(PEAKS, d.roi, (H, H)), atol=1e-6)
+
+
+def test_batch_form_keeps_boxes_with_their_images():
+    det = KeypointDetector(FixedHeatmaps(num_stacks=1, channels=8, depth=2, input_size=S), device="cpu", batch_size=2)
+    images = [np.zeros((100, 100, 3), np.uint8), np.zeros((80, 120, 3), np.uint8), np.zeros((50, 50, 3), np.uint8)]
+    rois = [[(0, 0, 50, 50), (10, 10, 90, 90)], [], [(-10, -10, 40, 40)]]
+    out = det.detect_batch(images, rois)
+    assert [len(o) for o in out] == [2, 0, 1]
+    assert out[2][0].roi == (-10.0, -10.0, 40.0, 40.0) and out[0][1].heatmaps.shape == (12, H, H)
+    with pytest.raises(ValueError, match=r"rois\[0\]\[0\]"):
+        det.detect_batch(images[:1], [[(5, 5, 5, 9)]])
+    with pytest.raises(ValueError, match="uint8"):
+        det.detect(np.zeros((10, 10, 3)), [(0, 0, 5, 5)])
+
+
+def test_crop_maps_image_pixels_to_crop_pixels():
+    image = np.zeros((200, 260), np.float32)
+    uv = np.array([131.4, 88.2])
+    image[:] = blob(image.shape, uv, 6.0)
+    for roi, exact in [((80, 40, 208, 168), True), ((80.3, 40.6, 207.2, 131.9), False)]:
+        crop, used = crop_roi(image, roi, 64, integer_roi=exact)
+        assert crop.shape == (64, 64)
+        rows, cols = np.mgrid[0:64, 0:64]
+        centroid = np.array([(crop * cols).sum(), (crop * rows).sum()]) / crop.sum()
+        np.testing.assert_allclose(centroid, image_to_crop(uv, used, 64), atol=0.05)
+
+
+def test_expand_roi():
+    assert expand_roi((0, 0, 10, 20), 0.1) == pytest.approx((-1, -2, 11, 22))
+    assert expand_roi((0, 0, 10, 20), 0.0, square=True) == pytest.approx((-5, 0, 15, 20))
+    with pytest.raises(ValueError, match="roi"):
+        expand_roi((0, 0, -1, 5))
+
+
+def test_benchmark_reports_each_batch_size():
+    net = StackedHourglass(num_stacks=1, channels=8, depth=2, input_size=32)
+    times = benchmark_inference(net, (1, 4), repeats=1, warmup=0)
+    assert set(times) == {1, 4} and all(t > 0 for t in times.values())

@@ -1,0 +1,251 @@
+"""Command-line front ends of the keypoint network: ``train`` and ``detect``.
+
+Run as ``python -m vfactor.net train ...`` / ``python -m vfactor.net detect ...``;
+``vfactor train`` and ``vfactor detect`` forward their arguments to :func:`main`.
+
+Exit codes (those of ``vfactor``): 0 success, 2 bad input (the message names
+the argument or file), 1 an internal error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from vfactor.errors import InputError
+from vfactor.keypoints import KEYPOINT_NAMES
+
+__all__ = ["main", "build_parser", "run_train", "run_detect"]
+
+EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
+
+
+def build_parser(prog: str = "python -m vfactor.net") -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=prog, description="Train the keypoint network or detect keypoints in images.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    add_train_arguments(sub.add_parser(
+        "train", help="train the stacked-hourglass keypoint network (progress bar, checkpoints, resume)",
+        description="Train the keypoint network on rendered crops (--render N, or .npz shards with --data) and/or "
+        "PASCAL3D+ cars (--pascal3d). Writes OUT/checkpoints/epoch_NNN.pt after every epoch, OUT/history.json "
+        "(loss and validation PCK@0.1 per epoch, visible and self-occluded keypoints apart) and OUT/weights.pt. "
+        "Deterministic with --seed; --resume continues from the newest checkpoint. Uses CUDA when available.",
+    ))
+    add_detect_arguments(sub.add_parser(
+        "detect", help="12 keypoints, confidences and covariances per vehicle box of an image",
+        description="Run the keypoint network on vehicle boxes of images and write, per box, the 12 keypoints in "
+        "image pixels, their confidences (heatmap peaks) and 2x2 pixel covariances (heatmap spread); optionally "
+        "the heatmaps (.npz).",
+    ))
+    return parser
+
+
+def add_train_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", default="runs/keypoints", help="run folder (default: runs/keypoints)")
+    p.add_argument("--data", action="append", default=[], metavar="PATH",
+                   help="training .npz shards: a shard or a folder of shards (repeatable)")
+    p.add_argument("--val", action="append", default=[], metavar="PATH", help="validation .npz shards (repeatable)")
+    p.add_argument("--render", type=int, metavar="N", help="render N training crops first (into OUT/data/train)")
+    p.add_argument("--render-val", type=int, metavar="N",
+                   help="render N held-out validation crops first (into OUT/data/val)")
+    p.add_argument("--render-workers", type=int, default=1, metavar="W", help="rendering processes (default 1)")
+    p.add_argument("--pascal3d", metavar="ROOT", help="also train on PASCAL3D+ cars (the PASCAL3D+_release1.1 folder)")
+    p.add_argument("--config", metavar="JSON", help="TrainConfig fields as a JSON file (flags below override it)")
+    for flag, typ, field in [("--epochs", int, "epochs"), ("--batch-size", int, "batch_size"), ("--lr", float, "lr"),
+                             ("--seed", int, "seed"), ("--input-size", int, "input_size"),
+                             ("--stacks", int, "num_stacks"), ("--channels", int, "channels"),
+                             ("--sigma", float, "sigma"), ("--threads", int, "num_threads"),
+                             ("--workers", int, "num_workers")]:
+        p.add_argument(flag, type=typ, dest=f"cfg_{field}", metavar=flag[2:].upper().replace("-", "_"),
+                       help=f"TrainConfig.{field}")
+    p.add_argument("--optimizer", choices=("adam", "rmsprop"), dest="cfg_optimizer", help="TrainConfig.optimizer")
+    p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in OUT")
+    p.add_argument("--export", metavar="PATH", help="also copy the final weights to PATH")
+    p.add_argument("--device", help="cuda, cpu, ... (default: cuda when available)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def add_detect_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("images", nargs="+", metavar="IMAGE", help="image file(s)")
+    p.add_argument("--roi", nargs=4, type=float, action="append", default=[], metavar=("X0", "Y0", "X1", "Y1"),
+                   help="a vehicle box in pixel edges (repeatable; for a single IMAGE)")
+    p.add_argument("--rois", metavar="JSON", help="batch form: a JSON object {image path: [[x0, y0, x1, y1], ...]}")
+    p.add_argument("--weights", help="weights file (default: the shipped weights)")
+    p.add_argument("--out", help="result JSON (default: standard output)")
+    p.add_argument("--heatmaps", metavar="NPZ", help="also write the heatmaps (N x 12 x h x w) with their boxes")
+    p.add_argument("--device", help="cuda, cpu, ... (default: cuda when available)")
+
+
+def main(argv=None, prog: str = "python -m vfactor.net") -> int:
+    """``python -m vfactor.net {train,detect} ...`` (``vfactor`` forwards with ``prog="vfactor"``)."""
+    args = build_parser(prog).parse_args(argv)
+    try:
+        return run_train(args) if args.command == "train" else run_detect(args)
+    except (InputError, ValueError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+
+
+# ------------------------------------------------------------------- train
+def run_train(args: argparse.Namespace) -> int:
+    """The ``train`` command on parsed arguments (see :func:`add_train_arguments`)."""
+    from vfactor.net.data import KeypointDataset, as_dataset  # noqa: PLC0415
+    from vfactor.net.train import TrainConfig, train  # noqa: PLC0415
+
+    config = _train_config(args)
+    out = Path(args.out)
+    S = config.input_size
+    train_paths, val_paths = [Path(p) for p in args.data], [Path(p) for p in args.val]
+    if args.render:
+        train_paths.append(_render(out / "data" / "train", args.render, config.seed, S, False, args.render_workers,
+                                   not args.quiet))
+    if args.render_val:
+        val_paths.append(_render(out / "data" / "val", args.render_val, config.seed, S, True, args.render_workers,
+                                 not args.quiet))
+    parts = [_load(p, "--data", S) for p in train_paths]
+    if args.pascal3d:
+        from vfactor.net.pascal3d import load_pascal3d  # noqa: PLC0415
+
+        parts.append(KeypointDataset.from_samples(load_pascal3d(args.pascal3d, size=S), size=S))
+    if not parts:
+        raise InputError("--data", "no training data: give --data, --render or --pascal3d")
+    data = KeypointDataset.concatenate([p.resized(S) for p in parts])
+    val = KeypointDataset.concatenate([_load(p, "--val", S).resized(S) for p in val_paths]) if val_paths else None
+    result = train(config, as_dataset(data), val, out_dir=out, resume=args.resume, progress=not args.quiet,
+                   device=args.device)
+    if args.export:
+        dest = Path(args.export)
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        dest.write_bytes(result.weights_path.read_bytes())
+    if not args.quiet:
+        last = result.history[-1] if result.history else {}
+        print(f"weights: {result.weights_path}" + (f" (copied to {args.export})" if args.export else "")
+              + (f"; validation PCK@{config.pck_alpha:g} visible {last['pck_visible']:.3f}, self-occluded "
+                 f"{last['pck_self_occluded']:.3f}" if last and math.isfinite(last.get("pck_visible", math.nan))
+                 else ""), file=sys.stderr)
+    return EXIT_OK
+
+
+def _train_config(args):
+    from vfactor.net.train import TrainConfig  # noqa: PLC0415
+
+    base: dict = {}
+    if args.config:
+        try:
+            base = json.loads(Path(args.config).read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise InputError("--config", f"cannot read {args.config}: {exc}") from None
+    for key, value in vars(args).items():
+        if key.startswith("cfg_") and value is not None:
+            base[key[4:]] = value
+    try:
+        return TrainConfig.from_dict(base)
+    except (TypeError, ValueError) as exc:
+        raise InputError("--config", str(exc)) from None
+
+
+def _render(path: Path, n: int, seed: int, size: int, held_out: bool, workers: int, verbose: bool) -> Path:
+    from vfactor.render import make_dataset  # noqa: PLC0415
+
+    if any(path.glob("*.npz")):
+        if verbose:
+            print(f"using the crops already rendered in {path}", file=sys.stderr)
+        return path
+    if verbose:
+        print(f"rendering {n} {'held-out ' if held_out else ''}crops of {size} px into {path}", file=sys.stderr)
+    make_dataset(n, seed=seed, size=size, path=path, held_out=held_out, workers=workers)
+    return path
+
+
+def _load(path: Path, flag: str, size: int):
+    from vfactor.net.data import as_dataset  # noqa: PLC0415
+
+    try:
+        return as_dataset(path, size=size)
+    except (ValueError, OSError, KeyError) as exc:
+        raise InputError(flag, str(exc)) from None
+
+
+# ------------------------------------------------------------------ detect
+def run_detect(args: argparse.Namespace) -> int:
+    """The ``detect`` command on parsed arguments (see :func:`add_detect_arguments`)."""
+    import cv2  # noqa: PLC0415
+
+    from vfactor.net.infer import KeypointDetector  # noqa: PLC0415
+
+    boxes = _boxes(args)
+    images = []
+    for name in args.images:
+        bgr = cv2.imread(name, cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise InputError("IMAGE", f"cannot read {name}")
+        images.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+    detector = KeypointDetector(args.weights, device=args.device)
+    results = detector.detect_batch(images, [boxes[name] for name in args.images])
+    doc = {"keypoint_names": list(KEYPOINT_NAMES), "images": []}
+    heatmaps, rois, crop_rois, owner = [], [], [], []
+    for i, (name, dets) in enumerate(zip(args.images, results)):
+        entry = {"image": name, "detections": []}
+        for roi, d in zip(boxes[name], dets):
+            kp = d.keypoints
+            entry["detections"].append({
+                "roi": [float(v) for v in roi],
+                "crop_roi": [float(v) for v in d.roi],
+                "keypoints": _nan_to_none(kp.uv),
+                "confidence": _nan_to_none(kp.confidence),
+                "covariance": _nan_to_none(kp.covariance),
+            })
+            heatmaps.append(d.heatmaps)
+            rois.append(roi)
+            crop_rois.append(d.roi)
+            owner.append(i)
+        doc["images"].append(entry)
+    text = json.dumps(doc, indent=1)
+    if args.out:
+        Path(args.out).write_text(text + "\n", encoding="utf-8")
+    else:
+        print(text)
+    if args.heatmaps:
+        S4 = detector.input_size // 4
+        np.savez_compressed(
+            args.heatmaps,
+            heatmaps=np.stack(heatmaps) if heatmaps else np.zeros((0, 12, S4, S4), np.float32),
+            rois=np.asarray(rois, float).reshape(-1, 4),
+            crop_rois=np.asarray(crop_rois, float).reshape(-1, 4),
+            image_index=np.asarray(owner, int),
+            images=np.asarray(args.images),
+            keypoint_names=np.asarray(KEYPOINT_NAMES),
+        )
+    return EXIT_OK
+
+
+def _boxes(args) -> dict[str, list]:
+    if args.rois and args.roi:
+        raise InputError("--roi", "give either --roi boxes or a --rois file, not both")
+    if args.rois:
+        try:
+            table = json.loads(Path(args.rois).read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise InputError("--rois", f"cannot read {args.rois}: {exc}") from None
+        if not isinstance(table, dict):
+            raise InputError("--rois", "expected a JSON object {image path: [[x0, y0, x1, y1], ...]}")
+        missing = [name for name in args.images if name not in table]
+        if missing:
+            raise InputError("--rois", f"no boxes for {missing}")
+        return {name: [tuple(map(float, b)) for b in table[name]] for name in args.images}
+    if not args.roi:
+        raise InputError("--roi", "give at least one box: --roi X0 Y0 X1 Y1 (or --rois FILE)")
+    if len(args.images) != 1:
+        raise InputError("--roi", f"--roi boxes go with a single IMAGE, got {len(args.images)}; use --rois FILE")
+    return {args.images[0]: [tuple(b) for b in args.roi]}
+
+
+def _nan_to_none(a):
+    arr = np.asarray(a, float)
+    if arr.ndim == 0:
+        return None if not np.isfinite(arr) else float(arr)
+    return [_nan_to_none(x) for x in arr]

@@ -1,0 +1,299 @@
+"""The stacked-hourglass keypoint network (Newell et al. 2016, as used by the paper).
+
+Architecture (channels ``C``, input ``S x S``, heatmaps ``S/4 x S/4``):
+
+* **Stem** (downsamples by 4): 7x7 convolution, stride 2, to ``C/2`` channels,
+  batch norm, ReLU; a residual module; 2x2 max pooling; two residual modules
+  to ``C`` channels. (Newell's stem widens to 128 channels at half resolution;
+  ours stays at ``C/2`` there, which is most of the saving on a CPU.)
+* **Hourglass** of ``depth`` levels (4 in the paper): at each level a residual
+  branch at the current resolution (``up1``) and, after 2x2 max pooling, a
+  residual module, the next level (or a residual module at the bottom) and a
+  residual module, upsampled (nearest) back to the branch's size and added.
+  Upsampling is to the branch's exact size, so input sizes whose heatmap side is
+  not a power of two (e.g. 96 -> 24 -> 12 -> 6 -> 3 -> 1) work.
+* **Residual modules** are pre-activation bottlenecks: BN-ReLU-1x1 (``C/2``),
+  BN-ReLU-3x3 (``C/2``), BN-ReLU-1x1 (``C``), plus the identity (or a 1x1
+  projection when the channel count changes).
+* **Heads**, per stack: residual module, 1x1 conv-BN-ReLU, 1x1 conv to
+  ``num_keypoints`` heatmaps (no output activation: trained on Gaussian targets
+  in [0, 1]).
+* **Intermediate supervision**: every stack's heatmaps are returned (and
+  supervised); between stacks the features and the heatmaps, each mapped by a
+  1x1 convolution, are added to the stack's input.
+
+``forward`` returns a list of ``num_stacks`` tensors ``(B, num_keypoints, S/4,
+S/4)``; the last one is the prediction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from vfactor.keypoints import NUM_KEYPOINTS
+
+__all__ = [
+    "ModelConfig",
+    "Residual",
+    "Hourglass",
+    "StackedHourglass",
+    "save_weights",
+    "load_weights",
+    "count_parameters",
+    "WEIGHTS_FORMAT",
+]
+
+#: Tag in the header of weight files written by :func:`save_weights`.
+WEIGHTS_FORMAT = "vfactor-stacked-hourglass"
+_WEIGHTS_VERSION = 1
+#: The stem downsamples by this factor: heatmaps are ``input_size / STRIDE`` pixels.
+STRIDE = 4
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Hyper-parameters of :class:`StackedHourglass` (all that is needed to rebuild it).
+
+    Attributes:
+        num_stacks: hourglasses in sequence (>= 1), each supervised.
+        num_keypoints: heatmaps per crop (12 for vehicles, order of :mod:`vfactor.keypoints`).
+        channels: feature channels ``C`` (even, >= 8); 64 runs comfortably on a CPU.
+        depth: levels of each hourglass (4 in the paper).
+        input_size: side ``S`` of the square input crop, pixels; a multiple of 4
+            with ``S / 4 >= 2 ** depth`` (each level halves the resolution).
+    """
+
+    num_stacks: int = 2
+    num_keypoints: int = NUM_KEYPOINTS
+    channels: int = 64
+    depth: int = 4
+    input_size: int = 128
+
+    def __post_init__(self):
+        for name in ("num_stacks", "num_keypoints", "channels", "depth", "input_size"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name}: expected a positive integer, got {value!r}")
+        if self.channels < 8 or self.channels % 2:
+            raise ValueError(f"channels: expected an even integer >= 8, got {self.channels}")
+        if self.input_size % STRIDE:
+            raise ValueError(f"input_size: expected a multiple of {STRIDE}, got {self.input_size}")
+        if self.heatmap_size < 2**self.depth:
+            raise ValueError(
+                f"input_size: {self.input_size} gives {self.heatmap_size}x{self.heatmap_size} heatmaps, too small "
+                f"for an hourglass of depth {self.depth} (needs input_size >= {STRIDE * 2**self.depth})"
+            )
+
+    @property
+    def heatmap_size(self) -> int:
+        """Side of the output heatmaps, ``input_size / 4``."""
+        return self.input_size // STRIDE
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "ModelConfig":
+        """Builds a config from a dict; unknown keys raise ``ValueError`` naming them."""
+        unknown = set(data) - set(cls.__dataclass_fields__)
+        if unknown:
+            raise ValueError(f"model config: unknown keys {sorted(unknown)}; expected {sorted(cls.__dataclass_fields__)}")
+        return cls(**data)
+
+
+class Residual(nn.Module):
+    """Pre-activation bottleneck residual module ``in_ch -> out_ch`` (same resolution)."""
+
+    def __init__(self, in_ch: int, out_ch: int):
+        super().__init__()
+        mid = max(out_ch // 2, 1)
+        self.bn1 = nn.BatchNorm2d(in_ch)
+        self.conv1 = nn.Conv2d(in_ch, mid, 1, bias=False)
+        self.bn2 = nn.BatchNorm2d(mid)
+        self.conv2 = nn.Conv2d(mid, mid, 3, padding=1, bias=False)
+        self.bn3 = nn.BatchNorm2d(mid)
+        self.conv3 = nn.Conv2d(mid, out_ch, 1)
+        self.skip = nn.Identity() if in_ch == out_ch else nn.Conv2d(in_ch, out_ch, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        y = self.conv1(F.relu(self.bn1(x)))
+        y = self.conv2(F.relu(self.bn2(y)))
+        y = self.conv3(F.relu(self.bn3(y)))
+        return y + self.skip(x)
+
+
+class Hourglass(nn.Module):
+    """One hourglass of ``depth`` levels with ``channels`` features throughout (recursive)."""
+
+    def __init__(self, depth: int, channels: int):
+        super().__init__()
+        self.up1 = Residual(channels, channels)
+        self.low1 = Residual(channels, channels)
+        self.low2 = Hourglass(depth - 1, channels) if depth > 1 else Residual(channels, channels)
+        self.low3 = Residual(channels, channels)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        up = self.up1(x)
+        low = self.low3(self.low2(self.low1(F.max_pool2d(x, 2))))
+        return up + F.interpolate(low, size=up.shape[-2:], mode="nearest")
+
+
+class StackedHourglass(nn.Module):
+    """Stacked hourglass: ``(B, 3, S, S)`` float crops -> list of ``(B, K, S/4, S/4)`` heatmaps, one per stack.
+
+    Input: RGB crops scaled to [0, 1] (``uint8 / 255``); the network normalises
+    them itself (subtracts 0.5), so callers need no statistics.
+
+    Args:
+        num_stacks, num_keypoints, channels, depth, input_size: see :class:`ModelConfig`.
+
+    Example:
+        >>> net = StackedHourglass(num_stacks=2, channels=32, input_size=64).eval()
+        >>> [tuple(h.shape) for h in net(torch.zeros(1, 3, 64, 64))]
+        [(1, 12, 16, 16), (1, 12, 16, 16)]
+    """
+
+    def __init__(
+        self,
+        num_stacks: int = 2,
+        num_keypoints: int = NUM_KEYPOINTS,
+        channels: int = 64,
+        depth: int = 4,
+        input_size: int = 128,
+    ):
+        super().__init__()
+        self.config = ModelConfig(num_stacks, num_keypoints, channels, depth, input_size)
+        C, half = channels, channels // 2
+        self.stem = nn.Sequential(
+            nn.Conv2d(3, half, 7, stride=2, padding=3, bias=False),
+            nn.BatchNorm2d(half),
+            nn.ReLU(inplace=True),
+            Residual(half, half),
+            nn.MaxPool2d(2),
+            Residual(half, C),
+            Residual(C, C),
+        )
+        self.hourglasses = nn.ModuleList(Hourglass(depth, C) for _ in range(num_stacks))
+        self.features = nn.ModuleList(
+            nn.Sequential(Residual(C, C), nn.Conv2d(C, C, 1, bias=False), nn.BatchNorm2d(C), nn.ReLU(inplace=True))
+            for _ in range(num_stacks)
+        )
+        self.heads = nn.ModuleList(nn.Conv2d(C, num_keypoints, 1) for _ in range(num_stacks))
+        self.merge_features = nn.ModuleList(nn.Conv2d(C, C, 1) for _ in range(num_stacks - 1))
+        self.merge_heatmaps = nn.ModuleList(nn.Conv2d(num_keypoints, C, 1) for _ in range(num_stacks - 1))
+
+    def forward(self, x: torch.Tensor) -> list[torch.Tensor]:
+        S = self.config.input_size
+        if x.ndim != 4 or x.shape[1] != 3 or x.shape[2] != S or x.shape[3] != S:
+            raise ValueError(f"input: expected shape (B, 3, {S}, {S}), got {tuple(x.shape)}")
+        x = self.stem(x - 0.5)
+        outputs = []
+        for i in range(self.config.num_stacks):
+            feat = self.features[i](self.hourglasses[i](x))
+            heat = self.heads[i](feat)
+            outputs.append(heat)
+            if i < self.config.num_stacks - 1:
+                x = x + self.merge_features[i](feat) + self.merge_heatmaps[i](heat)
+        return outputs
+
+
+def count_parameters(model: nn.Module) -> int:
+    """Number of trainable parameters."""
+    return sum(p.numel() for p in model.parameters() if p.requires_grad)
+
+
+def save_weights(model: StackedHourglass, path, config: dict | None = None) -> Path:
+    """Writes the model's weights with a small header (no pickled code).
+
+    The file is a ``torch.save`` of a dict of plain types and tensors only::
+
+        {"format": "vfactor-stacked-hourglass", "version": 1,
+         "model": ModelConfig as a dict, "config": extra metadata (JSON-like),
+         "state_dict": {name: tensor}}
+
+    so :func:`load_weights` reads it with ``torch.load(..., weights_only=True)``.
+
+    Args:
+        model: the network (its :class:`ModelConfig` is stored).
+        path: file to write (conventionally ``*.pt``); parent folders are created.
+        config: extra metadata, e.g. the training config, the crop convention
+            (``{"crop": {"square": True, "margin": 0.1}}``) or validation
+            scores; must be JSON-like (dicts, lists, str, int, float, bool, None).
+
+    Returns:
+        The path written.
+    """
+    if not isinstance(model, StackedHourglass):
+        raise TypeError(f"model: expected a StackedHourglass, got {type(model).__name__}")
+    extra = dict(config or {})
+    _check_plain(extra, "config")
+    state = {k: v.detach().to("cpu").clone() for k, v in model.state_dict().items()}
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    payload = {
+        "format": WEIGHTS_FORMAT,
+        "version": _WEIGHTS_VERSION,
+        "model": model.config.to_dict(),
+        "config": extra,
+        "state_dict": state,
+    }
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(payload, tmp)
+    tmp.replace(path)
+    return path
+
+
+def load_weights(path, map_location="cpu", with_config: bool = False):
+    """Rebuilds a :class:`StackedHourglass` from a file written by :func:`save_weights`.
+
+    Loaded with ``torch.load(..., weights_only=True)``: no code is unpickled.
+    The model is returned in ``eval()`` mode on ``map_location``.
+
+    Args:
+        path: weights file.
+        map_location: device for the tensors (default CPU).
+        with_config: also return the file's extra metadata dict.
+
+    Returns:
+        The model, or ``(model, config)`` when ``with_config``.
+
+    Raises:
+        ValueError: not a vfactor weights file, an unknown version, or weights
+            that do not fit the stored architecture.
+    """
+    payload = torch.load(Path(path), map_location=map_location, weights_only=True)
+    if not isinstance(payload, dict) or payload.get("format") != WEIGHTS_FORMAT:
+        raise ValueError(f"{path}: not a vfactor keypoint-network weights file (format {WEIGHTS_FORMAT!r} expected)")
+    if payload.get("version") != _WEIGHTS_VERSION:
+        raise ValueError(f"{path}: weights version {payload.get('version')!r}, expected {_WEIGHTS_VERSION}")
+    model = StackedHourglass(**ModelConfig.from_dict(payload["model"]).to_dict())
+    try:
+        model.load_state_dict(payload["state_dict"])
+    except RuntimeError as exc:
+        raise ValueError(f"{path}: weights do not fit the stored architecture: {exc}") from None
+    model.to(map_location).eval()
+    if with_config:
+        return model, dict(payload.get("config", {}))
+    return model
+
+
+def _check_plain(value, where: str) -> None:
+    """Raises ``TypeError`` unless ``value`` is made of JSON-like plain types."""
+    if value is None or isinstance(value, (str, bool, int, float)):
+        return
+    if isinstance(value, (list, tuple)):
+        for i, v in enumerate(value):
+            _check_plain(v, f"{where}[{i}]")
+        return
+    if isinstance(value, dict):
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise TypeError(f"{where}: keys must be strings, got {k!r}")
+            _check_plain(v, f"{where}.{k}")
+        return
+    raise TypeError(f"{where}: expected JSON-like plain values, got {type(value).__name__}")

@@ -23,6 +23,7 @@ from vfactor.baselines.pnp import pnp
 from vfactor.baselines.single_view import single_view
 from vfactor.baselines.stereo import stereo
 from vfactor.baselines.triangulation import triangulation
+from vfactor.evaluation import summarise_methods
 from vfactor.graph import observations_from_detections
 from vfactor.init import umeyama
 from vfactor.keypoints import KEYPOINT_NAMES
@@ -113,23 +114,17 @@ def run(scenario: str | Scenario = "paper_webots", frames: int | None = 10, seed
 
 
 def summarise(rows: dict[str, list[dict]]) -> dict[str, dict]:
-    """Per method: count, failures, mean rotation (deg), translation (cm), keypoint error (cm), per keypoint and per preset."""
-    out = {}
+    """:func:`vfactor.evaluation.summarise_methods` plus the shape-alone error, per-preset errors and median ms."""
+    out = summarise_methods(rows)
     for method, rs in rows.items():
         ok = [r for r in rs if "rotation_deg" in r]
         presets = sorted({r["preset"] for r in ok})
-        out[method] = {
-            "count": len(rs),
-            "failures": len(rs) - len(ok),
-            "rotation_deg": float(np.mean([r["rotation_deg"] for r in ok])) if ok else float("nan"),
-            "translation_cm": float(np.mean([r["translation_cm"] for r in ok])) if ok else float("nan"),
-            "keypoint_cm": float(np.mean([r["mean_keypoint_cm"] for r in ok])) if ok else float("nan"),
-            "median_keypoint_cm": float(np.median([r["mean_keypoint_cm"] for r in ok])) if ok else float("nan"),
-            "shape_cm": float(np.mean([r["shape_cm"] for r in ok])) if ok else float("nan"),
-            "per_keypoint_cm": np.mean([r["keypoint_cm"] for r in ok], axis=0) if ok else np.full(12, np.nan),
-            "per_preset_keypoint_cm": {p: float(np.mean([r["mean_keypoint_cm"] for r in ok if r["preset"] == p])) for p in presets},
-            "ms": 1e3 * float(np.median([r["seconds"] for r in rs])) if rs else float("nan"),
-        }
+        out[method].update(
+            shape_cm=float(np.mean([r["shape_cm"] for r in ok])) if ok else float("nan"),
+            per_preset_keypoint_cm={p: float(np.mean([r["mean_keypoint_cm"] for r in ok if r["preset"] == p]))
+                                    for p in presets},
+            ms=1e3 * out[method]["seconds"],
+        )
     return out
 
 

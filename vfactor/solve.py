@@ -110,7 +110,16 @@ def solve_observations(
     bounds: HwcBounds | None = None,
     initial: tuple[gtsam.Pose3, Wireframe] | None = None,
 ) -> VehicleResult:
-    """Solves one vehicle from stacked observations (see :func:`solve_vehicle`)."""
+    """Solves one vehicle from stacked observations (see :func:`solve_vehicle`).
+
+    Args:
+        obs: the vehicle's observations in all cameras
+            (:func:`vfactor.graph.observations_from_detections`).
+        options, prior, bounds: as for :func:`solve_vehicle`.
+        vehicle_id: id for the result.
+        initial: a (pose, wireframe) to start from instead of the PnP and
+            triangulation candidates (e.g. a tracker's prediction).
+    """
     prior = prior or default_shape_prior()
     bounds = bounds or default_hwc_bounds()
     keys = KeyScheme()

@@ -41,6 +41,7 @@ __all__ = [
     "insert_vehicle_values",
     "build_vehicle_graph",
     "copy_graph",
+    "wireframe_from_values",
     "hwc_terms",
     "hwc_factor",
     "hwc_violation",
@@ -223,6 +224,11 @@ def insert_vehicle_values(
     if wireframe is not None:
         for key, vec in zip(keys.layer_keys(vehicle), wireframe.layer_vectors().values()):
             put(key, vec)
+
+
+def wireframe_from_values(values: gtsam.Values, keys: KeyScheme, vehicle: int = 0) -> Wireframe:
+    """A vehicle's shape read back from its three layer variables (inverse of :func:`insert_vehicle_values`)."""
+    return Wireframe.from_layer_vectors({name: values.atVector(k) for name, k in zip(LAYER_NAMES, keys.layer_keys(vehicle))})
 
 
 def copy_graph(graph: gtsam.NonlinearFactorGraph) -> gtsam.NonlinearFactorGraph:

@@ -26,9 +26,9 @@ from vfactor.graph import (
     hwc_violation,
     insert_vehicle_values,
     observations_from_detections,
+    wireframe_from_values,
 )
 from vfactor.init import best_candidates
-from vfactor.keypoints import LAYER_NAMES
 from vfactor.keys import KeyScheme
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
@@ -165,7 +165,7 @@ def solve_observations(
     estimate, error, iterations, hit_limit, graph = best
     pose_key = keys.pose_key()
     world_T_vehicle = estimate.atPose3(pose_key)
-    wireframe = _wireframe_of(estimate, keys)
+    wireframe = wireframe_from_values(estimate, keys)
     status = Status.MAX_ITERATIONS if hit_limit else Status.CONVERGED
     result = VehicleResult(
         vehicle_id, status, world_T_vehicle=world_T_vehicle, wireframe=wireframe, iterations=int(iterations),
@@ -187,10 +187,6 @@ def solve_observations(
     return result
 
 
-def _wireframe_of(values: gtsam.Values, keys: KeyScheme, vehicle: int = 0) -> Wireframe:
-    return Wireframe.from_layer_vectors({name: values.atVector(k) for name, k in zip(LAYER_NAMES, keys.layer_keys(vehicle))})
-
-
 def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc):
     """LM on ``graph``; with ``hwc="lazy"``, again with the HWC factor when the shape breaks HWC.
 
@@ -209,7 +205,7 @@ def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc)
     hit_limit = optimizer.iterations() >= options.max_iterations
     iterations = optimizer.iterations()
     added = False
-    if config.hwc == "lazy" and hwc_violation(_wireframe_of(estimate, keys), terms) > config.hwc_tolerance:
+    if config.hwc == "lazy" and hwc_violation(wireframe_from_values(estimate, keys), terms) > config.hwc_tolerance:
         with_hwc = copy_graph(graph)
         with_hwc.add(hwc)
         graph, added = with_hwc, True

@@ -41,9 +41,9 @@ from vfactor.graph import (
     hwc_violation,
     insert_vehicle_values,
     observations_from_detections,
+    wireframe_from_values,
 )
 from vfactor.init import best_candidates, cross_projection_cost
-from vfactor.keypoints import LAYER_NAMES
 from vfactor.keys import KeyScheme
 from vfactor.observations import Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
@@ -230,8 +230,7 @@ class Tracker:
         return gtsam.IncrementalFixedLagSmoother(lag, params)
 
     def _wireframe(self, estimate: gtsam.Values, track: _TrackState) -> Wireframe:
-        keys = self.keys.layer_keys(track.index)
-        return Wireframe.from_layer_vectors({n: estimate.atVector(k) for n, k in zip(LAYER_NAMES, keys)})
+        return wireframe_from_values(estimate, self.keys, track.index)
 
     def _result(self, track, estimate, key, wireframe, covariance=None, message="") -> VehicleResult:
         return VehicleResult(track.id, Status.CONVERGED, world_T_vehicle=estimate.atPose3(key), wireframe=wireframe,
@@ -519,8 +518,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
             optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.solve.lm_params())
             estimate = optimizer.optimize()
             terms = hwc_terms(config, bounds)
-            shape = Wireframe.from_layer_vectors(
-                {n: estimate.atVector(k) for n, k in zip(LAYER_NAMES, keys.layer_keys(index))})
+            shape = wireframe_from_values(estimate, keys, index)
             if config.hwc == "lazy" and hwc_violation(shape, terms) > config.hwc_tolerance:
                 graph.add(hwc_factor(keys, index, terms=terms))
                 optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.solve.lm_params())
@@ -530,8 +528,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
             for i, _, _ in posed:
                 results[(i, vid)] = VehicleResult(vid, Status.FAILED, message=f"batch smoothing failed: {exc}")
             continue
-        wireframe = Wireframe.from_layer_vectors(
-            {n: estimate.atVector(k) for n, k in zip(LAYER_NAMES, keys.layer_keys(index))})
+        wireframe = wireframe_from_values(estimate, keys, index)
         hit = optimizer.iterations() >= options.solve.max_iterations
         for i, _, key in posed:
             results[(i, vid)] = VehicleResult(

@@ -24,7 +24,8 @@ from vfactor.result import Status, VehicleResult
 from vfactor.shape_model import default_shape_prior
 from vfactor.wireframe import Wireframe
 
-__all__ = ["pnp", "camera_pnp", "box_diagonals", "relative_residuals", "usable", "clean_observations", "select_camera"]
+__all__ = ["pnp", "camera_pnp", "box_diagonals", "relative_residuals", "usable", "clean_observations", "select_camera",
+           "candidate_cameras"]
 
 _MIN_BOX_PX = 1.0
 
@@ -118,6 +119,30 @@ def select_camera(obs: KeypointObservations, camera) -> int | None:
     return names.index(camera) if camera in names else None
 
 
+def candidate_cameras(obs: KeypointObservations, camera, min_keypoints: int, method: str,
+                      vehicle_id: str) -> tuple[list[int], VehicleResult | None]:
+    """Cameras a one-view method may use: the given one (index or name), or every camera, seeing enough keypoints.
+
+    Returns:
+        (camera indices, None), or ([], a FAILED/DEGENERATE result saying why).
+    """
+    if len(obs) == 0:
+        return [], VehicleResult(vehicle_id, Status.DEGENERATE, message=f"{method}: no observations")
+    if camera is not None:
+        chosen = select_camera(obs, camera)
+        if chosen is None:
+            return [], VehicleResult(vehicle_id, Status.FAILED, message=f"{method}: unknown camera {camera!r}")
+        candidates = [chosen]
+    else:
+        candidates = list(range(len(obs.cameras)))
+    counts = np.bincount(obs.camera_index, minlength=len(obs.cameras))
+    candidates = [c for c in candidates if counts[c] >= min_keypoints]
+    if not candidates:
+        return [], VehicleResult(vehicle_id, Status.DEGENERATE,
+                                 message=f"{method}: no camera sees {min_keypoints} keypoints (most: {int(counts.max())})")
+    return candidates, None
+
+
 def pnp(
     obs: KeypointObservations,
     wireframe: Wireframe | None = None,
@@ -146,21 +171,9 @@ def pnp(
     """
     wireframe = wireframe or Wireframe(default_shape_prior().mean)
     obs, dropped = clean_observations(obs)
-    if len(obs) == 0:
-        return VehicleResult(vehicle_id, Status.DEGENERATE, message="pnp: no observations")
-    if camera is not None:
-        chosen = select_camera(obs, camera)
-        if chosen is None:
-            return VehicleResult(vehicle_id, Status.FAILED, message=f"pnp: unknown camera {camera!r}")
-        candidates = [chosen]
-    else:
-        candidates = list(range(len(obs.cameras)))
-    need = max(4, int(min_keypoints))
-    counts = np.bincount(obs.camera_index, minlength=len(obs.cameras))
-    candidates = [c for c in candidates if counts[c] >= need]
-    if not candidates:
-        return VehicleResult(vehicle_id, Status.DEGENERATE,
-                             message=f"pnp: no camera sees {need} keypoints (most: {int(counts.max())})")
+    candidates, problem = candidate_cameras(obs, camera, max(4, int(min_keypoints)), "pnp", vehicle_id)
+    if problem is not None:
+        return problem
     points = wireframe.vehicle_p_keypoints
     boxes = box_diagonals(obs)
     tried, best = {}, None

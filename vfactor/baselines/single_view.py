@@ -31,7 +31,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.optimize import least_squares
 
-from vfactor.baselines.pnp import box_diagonals, camera_pnp, clean_observations, relative_residuals, select_camera
+from vfactor.baselines.pnp import box_diagonals, camera_pnp, candidate_cameras, clean_observations, relative_residuals
 from vfactor.factors.projection import KeypointObservations, whitened_residuals
 from vfactor.keypoints import MIRROR_PERMUTATION
 from vfactor.result import Status, VehicleResult
@@ -171,20 +171,9 @@ def single_view(
     """
     model = deformable_model(options.num_components)
     obs, dropped = clean_observations(obs)
-    if len(obs) == 0:
-        return VehicleResult(vehicle_id, Status.DEGENERATE, message="single_view: no observations")
-    if camera is not None:
-        chosen = select_camera(obs, camera)
-        if chosen is None:
-            return VehicleResult(vehicle_id, Status.FAILED, message=f"single_view: unknown camera {camera!r}")
-        candidates = [chosen]
-    else:
-        candidates = list(range(len(obs.cameras)))
-    counts = np.bincount(obs.camera_index, minlength=len(obs.cameras))
-    candidates = [c for c in candidates if counts[c] >= options.min_keypoints]
-    if not candidates:
-        return VehicleResult(vehicle_id, Status.DEGENERATE,
-                             message=f"single_view: no camera sees {options.min_keypoints} keypoints (most: {int(counts.max())})")
+    candidates, problem = candidate_cameras(obs, camera, options.min_keypoints, "single_view", vehicle_id)
+    if problem is not None:
+        return problem
     fits, tried = {}, {}
     for c in candidates:
         fit = _fit_camera(obs, c, model, options)

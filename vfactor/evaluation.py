@@ -129,16 +129,6 @@ def run_accuracy(scenario: str = "accuracy_2cam", frames: int | None = None, see
     return out
 
 
-#: Tracking methods compared by :func:`compare_tracking`, in table order.
-TRACKING_METHODS = {
-    "frame_by_frame": "every frame solved on its own (vfactor solve, default settings)",
-    "isam2_online": "iSAM2, the estimate as each frame arrived (filtered)",
-    "isam2": "iSAM2, final estimates (smoothed by later frames)",
-    "isam2_lag": "iSAM2 with a fixed lag, final estimates",
-    "batch": "batch Levenberg-Marquardt over each whole track",
-}
-
-
 def compare_tracking(sim: Simulation, options=None, lag: float = 0.5) -> dict:
     """Tracking against frame-by-frame solving on the same frames of a simulated scene.
 

@@ -428,8 +428,8 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
     if order != sorted(order):
         moved = [i for pos, i in enumerate(order) if i != pos]
         messages.append(f"frames are not in time order (e.g. frames[{moved[0]}]); tracked in time order")
-    if options.ground_plane is None and getattr(scene, "ground_plane", None) is not None:
-        options = _with_plane(options, scene.ground_plane)
+    if options.ground_plane is None and scene.ground_plane is not None:
+        options = dataclasses.replace(options, ground_plane=scene.ground_plane)
     tracker = Tracker(scene.cameras, options, **kwargs)
     online: dict[int, FrameResult] = {}
     final: dict[tuple[int, str], VehicleResult] = {}
@@ -453,10 +453,6 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
     return TrackRun(frames=frames, online=[online[i] for i in range(len(scene.frames))], messages=messages)
 
 
-def _with_plane(options: TrackOptions, plane: GroundPlane) -> TrackOptions:
-    return dataclasses.replace(options, ground_plane=plane)
-
-
 def _refresh(final: dict, estimates: dict) -> None:
     """Replaces results by the smoothers' current estimates, keeping a covariance that was not recomputed."""
     for key, v in estimates.items():
@@ -476,7 +472,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
     prior = prior or default_shape_prior()
     bounds = bounds or default_hwc_bounds()
     order = frame_order(scene)
-    plane = options.ground_plane or getattr(scene, "ground_plane", None)
+    plane = options.ground_plane or scene.ground_plane
     keys = KeyScheme()
     config = options.solve.graph
     per_track: dict[str, list] = {}

@@ -18,7 +18,8 @@ from vfactor.metrics import pose_errors
 from vfactor.sim import Scenario, Simulation, load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations
 
-__all__ = ["METHODS", "compare_methods", "summarise_methods", "accuracy_table", "keypoint_table", "noise_variant", "run_accuracy"]
+__all__ = ["METHODS", "compare_methods", "summarise_methods", "accuracy_table", "keypoint_table", "noise_variant", "run_accuracy",
+           "compare_tracking", "tracking_table"]
 
 #: Method name -> description, in table order.
 METHODS = {

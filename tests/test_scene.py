@@ -11,7 +11,7 @@ import gtsam
 import numpy as np
 import pytest
 
-from vfactor.errors import SceneError
+from vfactor.errors import InputError, SceneError
 from vfactor.heatmaps import image_to_heatmap, render_gaussian_heatmap
 from vfactor.observations import DEFAULT_VEHICLE_ID, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
@@ -346,7 +346,7 @@ BAD_CASES = [
         "frames[0].detections[3]",
         "already has a detection of vehicle 'v1'",
     ),
-    ("neither_keypoints_nor_heatmaps", _delete(["frames", 0, "detections", 0, "keypoints"]), D, "found neither"),
+    ("neither_keypoints_nor_heatmaps", _delete(["frames", 0, "detections", 0, "keypoints"]), D, "found none"),
     ("keypoints_not_list", _set(["frames", 0, "detections", 0, "keypoints"], "none"), f"{D}.keypoints", "12 rows"),
     ("keypoints_eleven", lambda d: d["frames"][0]["detections"][0]["keypoints"].pop(), f"{D}.keypoints", "got 11 rows"),
     ("keypoint_row_short", _kp(5, [100.0, 200.0]), f"{D}.keypoints[5]", "[u, v, confidence], got a list of 2"),
@@ -718,7 +718,7 @@ def test_bad_results_raise_scene_error_naming_the_field(tmp_path, name, edit, fi
 def test_ground_plane_round_trips_and_is_validated(tmp_path):
     from vfactor.factors.ground_plane import GroundPlane
     from vfactor.scene import load_scene, save_scene, scene_from_dict
-    from vfactor.errors import SceneError
+    from vfactor.errors import InputError, SceneError
 
     data = {"cameras": [{"name": "c", "K": [[800, 0, 640], [0, 800, 360], [0, 0, 1]],
                          "world_T_camera": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}],
@@ -733,3 +733,47 @@ def test_ground_plane_round_trips_and_is_validated(tmp_path):
         with pytest.raises(SceneError) as info:
             scene_from_dict(data)
         assert info.value.field == field
+
+
+def image_box_scene(tmp_path: Path) -> dict:
+    """base_scene plus a detection of frame 0 given only as a box in cam0's image."""
+    data = base_scene(tmp_path)
+    data["frames"][0]["detections"].append({"camera": "cam0", "vehicle": "v3", "roi": [500, 300, 700, 420]})
+    return data
+
+
+def test_box_only_detection_waits_for_the_network_and_round_trips(tmp_path):
+    scene = load_scene(write_json(tmp_path / "scene.json", image_box_scene(tmp_path)))
+    det = scene.frames[0].detections[3]
+    assert det.from_image and det.roi == (500.0, 300.0, 700.0, 420.0)
+    assert np.all(np.isnan(det.keypoints)) and np.all(det.confidence == 0) and det.covariance is None
+    assert not any(d.from_image for d in scene.frames[0].detections[:3])
+    assert scene.undetected() == [(0, 3)]
+    with pytest.raises(InputError) as info:
+        scene.require_keypoints()
+    assert info.value.field == "frames[0].detections[3].keypoints" and "keypoint network" in str(info.value)
+    assert scene_to_dict(scene)["frames"][0]["detections"][3] == {
+        "camera": "cam0", "vehicle": "v3", "roi": [500.0, 300.0, 700.0, 420.0]}
+    save_scene(scene, tmp_path / "copy.json")
+    again = load_scene(tmp_path / "copy.json")
+    assert_scenes_equal(scene, again)
+    assert again.frames[0].detections[3].from_image
+
+
+@pytest.mark.parametrize(
+    "edit, field, message",
+    [
+        (_set(["frames", 0, "images"], None), "frames[0].detections[3]", "needs this frame's image of camera 'cam0'"),
+        (_set(["frames", 0, "detections", 3, "camera"], "cam1"), "frames[0].detections[3]", "camera 'cam1'"),
+        (_set(["frames", 0, "detections", 3, "keypoint_covariances"], [None] * 12),
+         "frames[0].detections[3].keypoint_covariances", "without 'keypoints'"),
+        (_delete(["frames", 0, "detections", 3, "roi"]), "frames[0].detections[3]", "found none"),
+    ],
+    ids=["no_images", "camera_without_image", "covariances_without_keypoints", "no_roi"],
+)
+def test_bad_box_only_detection(tmp_path, edit, field, message):
+    data = image_box_scene(tmp_path)
+    edit(data)
+    with pytest.raises(SceneError) as info:
+        scene_from_dict(data, base_dir=tmp_path)
+    assert info.value.field == field and message in str(info.value)

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from vfactor.camera import Camera
+from vfactor.errors import InputError
 from vfactor.factors.ground_plane import GroundPlane
 
 __all__ = ["DEFAULT_VEHICLE_ID", "Detection", "Frame", "Scene"]
@@ -35,6 +36,11 @@ class Detection:
             confidence-derived noise of the projection factor.
         heatmaps: optional path of a (12, H, W) ``.npy`` heatmap stack covering ``roi``.
         roi: optional box ``(x0, y0, x1, y1)`` in pixels.
+        from_image: the keypoints are still to be found by the keypoint network
+            in the frame's image of this camera, inside ``roi`` (a detection given
+            as a box only); until then ``keypoints`` are NaN and ``confidence`` 0.
+            :func:`vfactor.net.pipeline.detect_scene` fills them in; the solvers
+            refuse such a detection with an :class:`~vfactor.errors.InputError`.
     """
 
     camera: str
@@ -44,6 +50,7 @@ class Detection:
     covariance: np.ndarray | None = None
     heatmaps: str | None = None
     roi: tuple[float, float, float, float] | None = None
+    from_image: bool = False
 
     @property
     def seen(self) -> np.ndarray:
@@ -93,3 +100,24 @@ class Scene:
     frames: list[Frame]
     base_dir: Path | None = None
     ground_plane: GroundPlane | None = None
+
+    def undetected(self) -> list[tuple[int, int]]:
+        """``(frame index, detection index)`` of every detection still waiting for the keypoint network."""
+        return [(f, j) for f, frame in enumerate(self.frames) for j, det in enumerate(frame.detections)
+                if det.from_image]
+
+    def require_keypoints(self) -> None:
+        """Raises :class:`~vfactor.errors.InputError` naming the first detection without keypoints yet.
+
+        A detection given as an image box only (``from_image``) needs the keypoint
+        network first: :func:`vfactor.net.pipeline.detect_scene` (``vfactor solve``
+        and ``vfactor track`` run it themselves).
+        """
+        pending = self.undetected()
+        if pending:
+            f, j = pending[0]
+            raise InputError(
+                f"frames[{f}].detections[{j}].keypoints",
+                f"not detected yet: {len(pending)} detection(s) give only an image box ('roi'); run the keypoint "
+                "network first (vfactor.net.pipeline.detect_scene, which needs the 'net' extra)",
+            )

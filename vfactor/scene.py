@@ -17,6 +17,10 @@ otherwise)::
                  "keypoint_covariances"?: 12 x (null | 2x2), "heatmaps"?: "x.npy",
                  "roi"?: [x0, y0, x1, y1]}
 
+A detection gives ``keypoints``, or ``heatmaps`` with ``roi``, or only a
+``roi`` when its frame's ``images`` hold its camera's image (the keypoint
+network then finds the keypoints, see :mod:`vfactor.net.pipeline`).
+
 ``keypoint_covariances`` is a vfactor extension: per keypoint a symmetric
 positive-definite 2x2 pixel covariance (px^2), or null where unknown. Optional
 fields may also be given as null, which means "absent".
@@ -119,7 +123,8 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
     4 or 5 numbers, ``image_size``); each detection's camera exists; a
     detection has ``keypoints`` (exactly 12 rows ``[u, v, confidence]``,
     confidence in [0, 1], ``u`` and ``v`` finite where confidence > 0 and null
-    or finite where it is 0) or ``heatmaps`` with ``roi``; ``roi`` is
+    or finite where it is 0), ``heatmaps`` with ``roi``, or only a ``roi`` in
+    a frame whose ``images`` give that camera's image; ``roi`` is
     ``[x0, y0, x1, y1]`` with ``x1 > x0`` and ``y1 > y0``; a heatmap file exists
     and holds a float ``.npy`` array of shape (12, H, W); no NaN or infinity
     anywhere; ``vehicle`` is omitted by all detections of a frame (which then
@@ -134,6 +139,11 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
     solvers can use it directly. When ``keypoints`` are given as well, they are
     used as given, and the covariance comes from ``keypoint_covariances`` if
     given, else from the heatmaps' spread.
+
+    Images: a detection with only a ``roi`` (a 2D detector's box) in a frame
+    whose ``images`` name that camera's image is kept with ``from_image`` set,
+    NaN keypoints and zero confidences; :func:`vfactor.net.pipeline.detect_scene`
+    runs the keypoint network on it (``vfactor solve`` does so itself).
 
     Args:
         data: the parsed JSON (``json.load``) of a scene file.
@@ -264,7 +274,11 @@ def _frame_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) ->
     frame = _object(data, path, _FRAME_KEYS, required=("t", "detections"))
     t = _number(frame["t"], f"{path}.t", "a finite number of seconds")
     items = _list(frame["detections"], f"{path}.detections")
-    parsed = [_detection_from_dict(item, f"{path}.detections[{j}]", cameras, base) for j, item in enumerate(items)]
+    images = frame.get("images")
+    if images is not None:
+        images = _images_from_dict(images, f"{path}.images", cameras, base)
+    parsed = [_detection_from_dict(item, f"{path}.detections[{j}]", cameras, base, images or {})
+              for j, item in enumerate(items)]
     named = [has_vehicle for _, has_vehicle in parsed]
     if any(named) and not all(named):
         j = named.index(False)
@@ -284,9 +298,6 @@ def _frame_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) ->
                 f"(detections[{seen[key]}]){hint}",
             )
         seen[key] = j
-    images = frame.get("images")
-    if images is not None:
-        images = _images_from_dict(images, f"{path}.images", cameras, base)
     return Frame(t=t, detections=[det for det, _ in parsed], images=images)
 
 
@@ -302,8 +313,10 @@ def _images_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) -
     return images
 
 
-def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) -> tuple[Detection, bool]:
+def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: Path,
+                         images: dict[str, str]) -> tuple[Detection, bool]:
     det = _object(data, path, _DETECTION_KEYS, required=("camera",))
+    from_image = False
     camera = _string(det["camera"], f"{path}.camera")
     if camera not in cameras:
         raise SceneError(f"{path}.camera", f"unknown camera {camera!r}; known: {', '.join(cameras)}")
@@ -337,8 +350,21 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: Path
         keypoints, confidence = decoded.uv, decoded.confidence
         if covariance is None:
             covariance = decoded.covariance
+    elif roi is not None and camera in images:
+        if covariance is not None:
+            raise SceneError(f"{path}.keypoint_covariances",
+                             "given without 'keypoints': covariances of keypoints the network has yet to find")
+        keypoints, confidence = np.full((NUM_KEYPOINTS, 2), np.nan), np.zeros(NUM_KEYPOINTS)
+        from_image = True
+    elif roi is not None:
+        raise SceneError(
+            path,
+            f"has only a 'roi': the keypoint network needs this frame's image of camera {camera!r} in the "
+            "frame's 'images' (or give 'keypoints', or 'heatmaps' with 'roi')",
+        )
     else:
-        raise SceneError(path, "expected 'keypoints', or 'heatmaps' with 'roi'; found neither")
+        raise SceneError(path, "expected 'keypoints', 'heatmaps' with 'roi', or 'roi' with the frame's image of its "
+                               "camera in 'images'; found none")
     detection = Detection(
         camera=camera,
         vehicle=vehicle,
@@ -347,6 +373,7 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: Path
         covariance=covariance,
         heatmaps=heatmaps,
         roi=roi,
+        from_image=from_image,
     )
     return detection, has_vehicle
 
@@ -423,6 +450,8 @@ def _decode(stack: np.ndarray, roi, field: str):
 
 
 def _detection_to_dict(det: Detection, path: str, scene_base: Path | None, out_base: Path | None) -> dict:
+    if det.from_image:
+        return {"camera": det.camera, "vehicle": det.vehicle, "roi": [float(b) for b in det.roi]}
     keypoints = np.asarray(det.keypoints, dtype=float)
     confidence = np.asarray(det.confidence, dtype=float)
     if keypoints.shape != (NUM_KEYPOINTS, 2) or confidence.shape != (NUM_KEYPOINTS,):

@@ -299,7 +299,13 @@ def solve_frame(frame: Frame, cameras: dict[str, Camera], options: SolveOptions 
 def solve_scene(
     scene: Scene, options: SolveOptions = SolveOptions(), progress: Callable[[int, int], None] | None = None, **kwargs
 ) -> list[FrameResult]:
-    """Solves every frame of a scene on its own (``vfactor solve``)."""
+    """Solves every frame of a scene on its own (``vfactor solve``).
+
+    Raises:
+        InputError: a detection still waits for the keypoint network
+            (:meth:`~vfactor.observations.Scene.require_keypoints`).
+    """
+    scene.require_keypoints()
     out = []
     for i, frame in enumerate(scene.frames):
         out.append(solve_frame(frame, scene.cameras, options, **kwargs))

@@ -422,7 +422,12 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
 
     Frames are processed in time order (out-of-order frames are reported in
     ``messages``); results come back in the scene's order.
+
+    Raises:
+        InputError: a detection still waits for the keypoint network
+            (:meth:`~vfactor.observations.Scene.require_keypoints`).
     """
+    scene.require_keypoints()
     messages = []
     order = frame_order(scene)
     if order != sorted(order):
@@ -468,7 +473,11 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
 
     Each track starts from its one-frame solves (the first solvable frame's
     shape, each frame's pose, predicted where a frame cannot be solved alone).
+
+    Raises:
+        InputError: a detection still waits for the keypoint network.
     """
+    scene.require_keypoints()
     prior = prior or default_shape_prior()
     bounds = bounds or default_hwc_bounds()
     order = frame_order(scene)

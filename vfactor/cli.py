@@ -50,13 +50,18 @@ def build_parser() -> argparse.ArgumentParser:
         description="Estimate every vehicle of every frame of SCENE on its own (Levenberg-Marquardt, robust to "
         "outlier keypoints and left/right swaps) and write RESULT with poses, wireframes, covariances and a status "
         "per vehicle. A vehicle that cannot be solved is reported with status 'degenerate' or 'failed' and a "
-        "message; the others are still solved.",
+        "message; the others are still solved. Detections given as boxes in the frames' images go through the "
+        "keypoint network first (needs torch).",
     )
     p.add_argument("scene", help="scene file (JSON, see docs/conventions.md and DESIGN.md)")
     p.add_argument("--out", required=True, help="result file to write (JSON)")
     p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
     p.add_argument("--loss", default="cauchy", choices=("none", "huber", "cauchy", "geman_mcclure"),
                    help="robust loss per keypoint (default: cauchy)")
+    p.add_argument("--weights", help="keypoint-network weights for detections given as image boxes "
+                   "(default: the shipped weights; needs torch)")
+    p.add_argument("--save-detections", metavar="SCENE_OUT",
+                   help="also write the scene with the network's keypoints (and its heatmaps in SCENE_OUT's folder)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
 
     p = sub.add_parser(
@@ -74,6 +79,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--online", action="store_true", help="write the estimates as each frame arrived (filtered)")
     p.add_argument("--plot", help="also write a PNG of the trajectories with covariance ellipses")
     p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
+    p.add_argument("--weights", help="keypoint-network weights for detections given as image boxes "
+                   "(default: the shipped weights; needs torch)")
+    p.add_argument("--save-detections", metavar="SCENE_OUT",
+                   help="also write the scene with the network's keypoints (and its heatmaps in SCENE_OUT's folder)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
 
     for name, text in (
@@ -99,12 +108,16 @@ def build_parser() -> argparse.ArgumentParser:
         "demo", help="simulate, solve, compare with triangulation, write overlays and a 3D plot",
         description="The main job on a packaged scenario: simulate it, solve every frame, print the errors against "
         "ground truth next to a triangulation baseline, and write an overlay image per camera (projected "
-        "wireframe on a drawn view) and a 3D plot with the position covariance ellipse.",
+        "wireframe on a drawn view) and a 3D plot with the position covariance ellipse. With --images the "
+        "cameras' images are rendered, the keypoint network finds the keypoints in the vehicles' boxes, and the "
+        "overlays show the images with the heatmaps, keypoints and the projected wireframe.",
     )
     p.add_argument("scenario", nargs="?", default="intersection_2cam", help="scenario (default: intersection_2cam)")
     p.add_argument("--out", default="vfactor_demo_out", help="output folder (default: ./vfactor_demo_out)")
     p.add_argument("--seed", type=int, help="random seed (default: the scenario's)")
-    p.add_argument("--frames", type=int, help="number of frames (default: the scenario's)")
+    p.add_argument("--frames", type=int, help="number of frames (default: the scenario's; 3 with --images)")
+    p.add_argument("--images", action="store_true",
+                   help="render the cameras' images and find the keypoints with the network (needs torch, moderngl)")
 
     p = sub.add_parser(
         "eval", help="accuracy against simulated ground truth: one-frame methods, or tracking",
@@ -115,10 +128,13 @@ def build_parser() -> argparse.ArgumentParser:
         "smoothing, beside frame-by-frame solving of the same frames. "
         "paper: the paper's comparison (its Tables I and II) on its three vehicles: the factor graph, CPO + HWC as "
         "published, the single-view deformable method, PnP and stereo, plus plots of the error against the noise "
-        "and against the number of cameras (--figures).",
+        "and against the number of cameras (--figures). "
+        "images: render the camera images of a simulated scenario, find the keypoints with the keypoint network in "
+        "the vehicles' boxes and run the methods on them (needs torch and moderngl).",
     )
-    p.add_argument("experiment", nargs="?", default="frames", choices=("frames", "tracks", "paper"),
-                   help="frames (one-frame accuracy), tracks (tracking) or paper (the paper's tables); default: frames")
+    p.add_argument("experiment", nargs="?", default="frames", choices=("frames", "tracks", "paper", "images"),
+                   help="frames (one-frame accuracy), tracks (tracking), paper (the paper's tables) or images "
+                   "(rendered images -> keypoint network -> graph); default: frames")
     p.add_argument("--figures", help="paper: folder for the plots (the Markdown links them as figures/NAME.png)")
     p.add_argument("--sweep-frames", type=int, default=30, help="paper: vehicles per point of the plots (default: 30)")
     p.add_argument("--scenario", help="scenario (default: accuracy_2cam for frames, tracks_3veh for tracks)")
@@ -220,13 +236,50 @@ def _report_unsolved(results, scene, quiet: bool) -> int:
 
 
 # ---------------------------------------------------------------------------- commands
+def _detect(scene, args):
+    """Runs the keypoint network on the scene's box-only detections (if any); optionally saves the result."""
+    pending = scene.undetected()
+    if not pending:
+        if args.weights and not args.quiet:
+            print("note: every detection gives keypoints; --weights is not used", file=sys.stderr)
+        if args.save_detections:
+            raise InputError("--save-detections", "no detection of the scene needs the keypoint network")
+        return scene
+    try:
+        from vfactor.net.infer import KeypointDetector
+        from vfactor.net.pipeline import detect_scene
+    except ImportError as exc:
+        f, j = pending[0]
+        raise InputError(f"frames[{f}].detections[{j}]",
+                         f"given as an image box: the keypoint network needs PyTorch ({exc}); install it with "
+                         "pip install -c constraints.txt -e '.[net]'") from None
+    try:
+        detector = KeypointDetector(args.weights)
+    except Exception as exc:  # noqa: BLE001 - any failure to read the weights file is bad input
+        raise InputError("--weights", str(exc)) from None
+    t0 = time.perf_counter()
+    heatmaps_dir = None
+    if args.save_detections:
+        out = Path(args.save_detections)
+        heatmaps_dir = out.with_name(out.stem + "_heatmaps")
+    scene = detect_scene(scene, detector, heatmaps_dir=heatmaps_dir, progress=_Progress("keypoints", not args.quiet))
+    if args.save_detections:
+        from vfactor.scene import save_scene
+
+        save_scene(scene, args.save_detections)
+    if not args.quiet:
+        print(f"keypoint network: {len(pending)} boxes ({time.perf_counter() - t0:.2f} s)"
+              + (f"; wrote {args.save_detections} and {heatmaps_dir}/" if args.save_detections else ""))
+    return scene
+
+
 def _solve(args) -> int:
     from vfactor.factors.robust import RobustLoss
     from vfactor.graph import GraphConfig
     from vfactor.scene import load_scene, save_results
     from vfactor.solve import SolveOptions, solve_scene
 
-    scene = load_scene(args.scene)
+    scene = _detect(load_scene(args.scene), args)
     options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
     t0 = time.perf_counter()
     results = solve_scene(scene, options, progress=_Progress("solving", not args.quiet))
@@ -249,7 +302,7 @@ def _track(args) -> int:
         raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
     if args.batch and (args.lag is not None or args.online):
         raise InputError("--batch", "batch smoothing uses every frame: it takes neither --lag nor --online")
-    scene = load_scene(args.scene)
+    scene = _detect(load_scene(args.scene), args)
     options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance)
     t0 = time.perf_counter()
     if args.batch:
@@ -303,26 +356,33 @@ def _demo(args) -> int:
     from vfactor.metrics import pose_errors
     from vfactor.result import FrameResult
     from vfactor.scene import save_results
-    from vfactor.sim import load_scenario, simulate, write_simulation
+    from vfactor.sim import load_scenario, save_truth, simulate, write_simulation
     from vfactor.solve import SolveOptions, solve_observations
     from vfactor.viz import plot_estimates, write_overlays
 
     out = _check_out_dir(Path(args.out))
     scenario = load_scenario(args.scenario)
-    sim = simulate(scenario, seed=args.seed, num_frames=_check_positive(args.frames, "--frames"))
-    write_simulation(sim, out / "scene.json", out / "truth.json")
+    frames = _check_positive(args.frames, "--frames")
+    if args.images and frames is None:
+        frames = min(scenario.num_frames, 3)  # rendering takes about a second per image
+    sim = simulate(scenario, seed=args.seed, num_frames=frames)
+    if args.images:  # the scene file is the rendered one (images and boxes), written by _demo_images
+        save_truth(sim, out / "truth.json")
+    else:
+        write_simulation(sim, out / "scene.json", out / "truth.json")
     print(f"scenario {scenario.name}: {len(sim.scene.cameras)} cameras, {len(sim.scene.frames)} frames "
-          f"(seed {sim.seed}); scene and truth in {out}/")
+          f"(seed {sim.seed}); " + (f"truth in {out}/" if args.images else f"scene and truth in {out}/"))
+    scene = _demo_images(sim, out) if args.images else sim.scene
     options = SolveOptions()
     results, rows = [], []
     header = f"{'frame':>5} {'vehicle':<8} {'body':<13} {'status':<10} | {'vfactor: rot deg':>16} {'trans cm':>9} {'kp cm':>7} | {'triangulation: rot':>18} {'trans':>7} {'kp':>7}"
     print(header)
     print("-" * len(header))
-    for f, frame in enumerate(sim.scene.frames):
+    for f, frame in enumerate(scene.frames):
         vehicles = []
         for vid in frame.vehicle_ids():
             truth = sim.truth[f][vid]
-            obs = observations_from_detections(frame.detections_of(vid), sim.scene.cameras, options.graph)
+            obs = observations_from_detections(frame.detections_of(vid), scene.cameras, options.graph)
             ours, tri = solve_observations(obs, options, vid), triangulation(obs, vid)
             vehicles.append(ours)
             errs = [pose_errors(r.world_T_vehicle, r.keypoints_world, truth.world_T_vehicle, truth.keypoints_world)
@@ -339,11 +399,38 @@ def _demo(args) -> int:
                   f"translation {np.mean([e['translation_cm'] for e in ok]):6.1f} cm   "
                   f"keypoints {np.mean([e['mean_keypoint_cm'] for e in ok]):6.1f} cm   ({len(ok)}/{len(rows)} solved)")
     truth0 = {vid: (t.world_T_vehicle, t.wireframe) for vid, t in sim.truth[0].items()}
-    overlays = write_overlays(out, sim.scene.cameras, sim.scene.frames[0], results[0], truth=truth0)
-    plot = plot_estimates(sim.scene.cameras, results[0].vehicles, truth0, out / "estimate_3d.png",
+    overlays = write_overlays(out, scene.cameras, scene.frames[0], results[0], truth=truth0, base_dir=scene.base_dir)
+    plot = plot_estimates(scene.cameras, results[0].vehicles, truth0, out / "estimate_3d.png",
                           title=f"{scenario.name}, frame 0: estimate (solid) and truth (dashed), 3-sigma position")
     print("wrote " + ", ".join(str(p) for p in [out / "result.json", *overlays, plot]))
-    return _report_unsolved(results, sim.scene, quiet=False)
+    return _report_unsolved(results, scene, quiet=False)
+
+
+def _demo_images(sim, out: Path):
+    """``vfactor demo --images``: renders the simulation's camera images and finds the keypoints with the network."""
+    try:
+        from vfactor.net.infer import KeypointDetector
+        from vfactor.net.pipeline import detect_scene
+        from vfactor.render import RenderingUnavailable
+        from vfactor.render.scenes import render_simulation
+        from vfactor.scene import save_scene
+    except ImportError as exc:
+        raise InputError("--images", f"needs PyTorch and moderngl ({exc}); install them with "
+                         "pip install -c constraints.txt -e '.[net,render]'") from None
+    t0 = time.perf_counter()
+    try:
+        rendered = render_simulation(sim, out, seed=sim.seed, progress=_Progress("rendering"))
+    except RenderingUnavailable as exc:
+        raise InputError("--images", f"cannot render: {exc}") from None
+    print(f"rendered {sum(len(f.images) for f in rendered.scene.frames)} camera images into {out / 'images'}/ "
+          f"({time.perf_counter() - t0:.1f} s); boxes only in {rendered.path}")
+    t0 = time.perf_counter()
+    scene = detect_scene(rendered.scene, KeypointDetector(), heatmaps_dir=out / "heatmaps")
+    save_scene(scene, out / "scene_keypoints.json")
+    boxes = sum(len(f.detections) for f in scene.frames)
+    print(f"keypoint network: {boxes} boxes ({time.perf_counter() - t0:.1f} s); keypoints in "
+          f"{out / 'scene_keypoints.json'}, heatmaps in {out / 'heatmaps'}/")
+    return scene
 
 
 def _error_cells(errors: dict | None, widths) -> str:
@@ -361,13 +448,16 @@ def _eval(args) -> int:
         sections = _eval_frames(args.scenario or "accuracy_2cam", frames, args.seed)
     elif args.experiment == "tracks":
         sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds)
+    elif args.experiment == "images":
+        sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed)
     else:
         if args.scenario:
             raise InputError("--scenario", "the paper comparison uses its own scenario (paper_webots)")
         from vfactor.paper_comparison import paper_report
 
         sections = [paper_report(frames, args.seed, args.figures, _check_positive(args.sweep_frames, "--sweep-frames"))]
-    default = {"frames": "accuracy_2cam", "tracks": "tracks_3veh", "paper": None}[args.experiment]
+    default = {"frames": "accuracy_2cam", "tracks": "tracks_3veh", "paper": None, "images": "accuracy_2cam"}[
+        args.experiment]
     command = "vfactor eval" + (f" {args.experiment}" if args.experiment != "frames" else "") + \
         (f" --scenario {args.scenario}" if args.scenario and args.scenario != default else "") + \
         (f" --frames {args.frames}" if args.frames else "") + (f" --seed {args.seed}" if args.seed else "") + \
@@ -393,6 +483,15 @@ def _eval_frames(scenario_name: str, frames, seed: int) -> list[str]:
         sections.append(f"{title}\n\n{accuracy_table(summary)}\n\nMean error per keypoint (cm):\n\n"
                         f"{keypoint_table(summary)}\n")
     return sections
+
+
+def _eval_images(scenario_name: str, frames, seed: int) -> list[str]:
+    try:
+        from vfactor.net.end_to_end import evaluate_images, images_report
+    except ImportError as exc:
+        raise InputError("images", f"needs PyTorch and moderngl ({exc}); install them with "
+                         "pip install -c constraints.txt -e '.[net,render]'") from None
+    return [images_report(evaluate_images(scenario_name, frames, seed, progress=_Progress("rendering")))]
 
 
 def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int) -> list[str]:

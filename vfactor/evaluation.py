@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from vfactor.baselines import known_shape, triangulation
+from vfactor.baselines import known_shape, pnp, triangulation
 from vfactor.graph import observations_from_detections
 from vfactor.metrics import pose_errors
 from vfactor.sim import Scenario, Simulation, load_scenario, simulate
@@ -25,6 +25,7 @@ __all__ = ["METHODS", "compare_methods", "summarise_methods", "accuracy_table", 
 METHODS = {
     "factor_graph": "vfactor factor graph (LM, robust, shape + HWC)",
     "triangulation": "multi-view triangulation + mean-shape alignment",
+    "pnp": "PnP of the mean shape in the best single camera",
     "known_shape": "reference: true shape given, pose from the truth",
 }
 
@@ -58,6 +59,8 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
                     result = solve_observations(obs, options, vid)
                 elif method == "triangulation":
                     result = triangulation(obs, vid)
+                elif method == "pnp":
+                    result = pnp(obs, vehicle_id=vid)
                 else:
                     result = known_shape(obs, truth.world_T_vehicle, truth.wireframe, options.graph, vid)
                 seconds = time.perf_counter() - t0

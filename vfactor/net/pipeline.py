@@ -1,0 +1,141 @@
+"""Images and boxes to keypoints for a whole scene: the network stage of the image-to-pose pipeline.
+
+A scene file may give, per frame, an image per camera (``"images"``) and per
+vehicle only its box in that image (a detection with ``"roi"`` and no
+keypoints; see :mod:`vfactor.scene`). :func:`detect_scene` runs the keypoint
+network (:class:`~vfactor.net.infer.KeypointDetector`) on every such box and
+returns the scene with the detections' keypoints, confidences and
+(calibrated) 2x2 pixel covariances filled in, ready for
+:func:`vfactor.solve.solve_scene` or :func:`vfactor.track.track_scene`.
+``vfactor solve`` and ``vfactor track`` call it themselves.
+
+Example::
+
+    from vfactor.scene import load_scene
+    from vfactor.net.pipeline import detect_scene
+    from vfactor.solve import solve_scene
+
+    scene = detect_scene(load_scene("scene_with_images.json"), heatmaps_dir="heatmaps")
+    results = solve_scene(scene)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Callable
+
+import cv2
+import numpy as np
+
+from vfactor.errors import SceneError
+from vfactor.observations import Scene
+
+__all__ = ["detect_scene", "read_image"]
+
+
+def read_image(path: str | Path, field: str, image_size: tuple[int, int] | None = None) -> np.ndarray:
+    """Reads an image file as (H, W, 3) uint8 RGB.
+
+    Args:
+        path: image file (any format OpenCV reads: PNG, JPEG, ...).
+        field: the scene field that names it (for error messages).
+        image_size: the camera's ``(width, height)``, checked when given.
+
+    Raises:
+        SceneError: unreadable file, or a size other than the camera's.
+    """
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise SceneError(field, f"cannot read an image from {path}")
+    height, width = image.shape[:2]
+    if image_size is not None and (width, height) != tuple(image_size):
+        raise SceneError(field, f"the image is {width}x{height} pixels but the camera's image_size is "
+                                f"{image_size[0]}x{image_size[1]}")
+    return np.ascontiguousarray(image[..., ::-1])
+
+
+def detect_scene(
+    scene: Scene,
+    detector=None,
+    heatmaps_dir: str | Path | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Scene:
+    """Finds the keypoints of every box-only detection of a scene with the keypoint network.
+
+    Per frame, the images of the cameras with box-only detections
+    (``Detection.from_image``) are read and all their boxes go through the
+    network in batches. Each such detection gets the decoded ``keypoints``
+    (image pixels), ``confidence`` (0 where the network found nothing) and
+    ``covariance`` (px^2, the detector's calibrated heatmap covariances);
+    ``from_image`` is cleared. Other detections are kept as they are.
+
+    Args:
+        scene: the scene (from :func:`vfactor.scene.load_scene`, or made in code).
+        detector: a :class:`~vfactor.net.infer.KeypointDetector`; None: the shipped weights.
+        heatmaps_dir: when given, each detection's heatmaps are saved there as
+            ``f<frame>_<camera>_<vehicle>.npy`` and the detection names the file,
+            with ``roi`` set to the box the heatmaps cover (the given box grown
+            and squared as the detector crops it), so that
+            :func:`vfactor.scene.save_scene` writes a scene that reloads to the
+            same keypoints and overlays can show the heatmaps. Otherwise ``roi``
+            stays the given box.
+        progress: called with ``(frames done, frames total)``.
+
+    Returns:
+        A new :class:`Scene` (the input is not changed).
+
+    Raises:
+        SceneError: a frame's image cannot be read or is not its camera's
+            ``image_size`` (the field names the image, e.g. ``frames[3].images.cam0``).
+    """
+    if detector is None:
+        from vfactor.net.infer import KeypointDetector
+
+        detector = KeypointDetector()
+    out_dir = Path(heatmaps_dir) if heatmaps_dir is not None else None
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    frames = []
+    for f, frame in enumerate(scene.frames):
+        pending = [j for j, det in enumerate(frame.detections) if det.from_image]
+        detections = list(frame.detections)
+        if pending:
+            cams = list(dict.fromkeys(frame.detections[j].camera for j in pending))
+            images = []
+            for name in cams:
+                path = _image_path((frame.images or {}).get(name), scene.base_dir)
+                if path is None:
+                    raise SceneError(f"frames[{f}].images.{name}",
+                                     "missing: detections of this camera give only a box")
+                images.append(read_image(path, f"frames[{f}].images.{name}", scene.cameras[name].image_size))
+            rois = [[frame.detections[j].roi for j in pending if frame.detections[j].camera == name] for name in cams]
+            found = detector.detect_batch(images, rois)
+            queue = {name: list(dets) for name, dets in zip(cams, found)}
+            for j in pending:
+                det = frame.detections[j]
+                result = queue[det.camera].pop(0)
+                kp = result.keypoints
+                changes = dict(keypoints=np.asarray(kp.uv, float), confidence=np.asarray(kp.confidence, float),
+                               covariance=np.asarray(kp.covariance, float), from_image=False)
+                if out_dir is not None:
+                    path = out_dir / f"f{f:04d}_{det.camera}_{_safe(det.vehicle)}.npy"
+                    np.save(path, np.asarray(result.heatmaps, np.float32))
+                    changes.update(heatmaps=str(path.resolve()), roi=tuple(float(b) for b in result.roi))
+                detections[j] = dataclasses.replace(det, **changes)
+        frames.append(dataclasses.replace(frame, detections=detections))
+        if progress is not None:
+            progress(f + 1, len(scene.frames))
+    return dataclasses.replace(scene, frames=frames)
+
+
+def _image_path(path: str | None, base_dir: Path | None) -> Path | None:
+    if path is None:
+        return None
+    p = Path(path)
+    return p if p.is_absolute() or base_dir is None else Path(base_dir) / p
+
+
+def _safe(name: str) -> str:
+    """A track id as a file-name part (letters, digits, '-', '_'; others become '_')."""
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in name) or "_"

@@ -7,6 +7,7 @@ Needs the ``net`` extra (``pip install -c constraints.txt -e ".[net]"``).
 * :func:`heatmap_targets`, :func:`keypoint_weights` (:mod:`vfactor.net.targets`)
 * :class:`TrainConfig`, :func:`train` (:mod:`vfactor.net.train`)
 * :class:`KeypointDetector` (:mod:`vfactor.net.infer`)
+* :class:`CovarianceCalibration`, :func:`calibrate`, :func:`write_calibration` (:mod:`vfactor.net.calibrate`)
 * :class:`KeypointDataset`, :class:`AugmentConfig` (:mod:`vfactor.net.data`)
 * :func:`load_pascal3d` (:mod:`vfactor.net.pascal3d`)
 
@@ -15,6 +16,14 @@ See ``docs/network.md``.
 
 from __future__ import annotations
 
+from vfactor.net.calibrate import (
+    CovarianceCalibration,
+    KeypointErrors,
+    calibrate,
+    fit_calibration,
+    measure_errors,
+    write_calibration,
+)
 from vfactor.net.crop import crop_roi, expand_roi
 from vfactor.net.data import AugmentConfig, KeypointDataset, Sample
 from vfactor.net.evaluate import PCKResult, score_predictions
@@ -40,6 +49,12 @@ __all__ = [
     "Detection",
     "default_weights_path",
     "benchmark_inference",
+    "CovarianceCalibration",
+    "KeypointErrors",
+    "calibrate",
+    "fit_calibration",
+    "measure_errors",
+    "write_calibration",
     "KeypointDataset",
     "AugmentConfig",
     "Sample",

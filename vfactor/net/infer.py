@@ -6,6 +6,10 @@ grown and squared as the weights' training crops were, see
 the network on the crops in batches, and decodes the last stack's heatmaps with
 :func:`vfactor.heatmaps.decode_heatmaps` over the box actually cropped, so
 ``uv`` and the covariances come out in image pixels (OpenCV convention).
+The decoded covariances (the heatmap blobs' spread) are then calibrated to the
+network's measured errors with a :class:`vfactor.net.calibrate.CovarianceCalibration`
+(by default the one stored in the weights' metadata, see
+:mod:`vfactor.net.calibrate`).
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ import numpy as np
 import torch
 
 from vfactor.heatmaps import DecodedKeypoints, decode_heatmaps
+from vfactor.net.calibrate import CovarianceCalibration
 from vfactor.net.crop import crop_roi, expand_roi
 from vfactor.net.model import StackedHourglass, load_weights
 
@@ -35,7 +40,8 @@ class Detection:
     """Keypoints of one box, with what they were decoded from.
 
     Attributes:
-        keypoints: :class:`vfactor.heatmaps.DecodedKeypoints` in image pixels.
+        keypoints: :class:`vfactor.heatmaps.DecodedKeypoints` in image pixels
+            (covariances calibrated, see :attr:`KeypointDetector.calibration`).
         heatmaps: (12, h, w) float32 heatmaps of the last stack.
         roi: ``(x0, y0, x1, y1)`` box the heatmaps cover (the given box, grown,
             squared and rounded as the detector crops).
@@ -58,6 +64,14 @@ class KeypointDetector:
             training crops' framing), else 0 and False.
         min_confidence: heatmap peaks below it count as "not found".
         batch_size: crops per forward pass.
+        calibration: maps every decoded covariance to a calibrated one
+            (:class:`vfactor.net.calibrate.CovarianceCalibration`, or its dict);
+            None: the calibration in the weights' metadata when there is one,
+            else the identity (the heatmaps' raw spread). Pass
+            ``CovarianceCalibration()`` for the raw covariances.
+
+    Attributes:
+        calibration: the :class:`vfactor.net.calibrate.CovarianceCalibration` applied.
 
     Example:
         >>> net = StackedHourglass(num_stacks=1, channels=16, input_size=64)
@@ -68,7 +82,8 @@ class KeypointDetector:
     """
 
     def __init__(self, weights=None, device=None, roi_margin: float | None = None, roi_square: bool | None = None,
-                 min_confidence: float | None = None, batch_size: int = 16):
+                 min_confidence: float | None = None, batch_size: int = 16,
+                 calibration: CovarianceCalibration | dict | None = None):
         device = torch.device(device if device is not None else ("cuda" if torch.cuda.is_available() else "cpu"))
         meta: dict = {}
         if isinstance(weights, StackedHourglass):
@@ -88,6 +103,14 @@ class KeypointDetector:
             raise ValueError(f"batch_size: expected a positive integer, got {batch_size!r}")
         self.batch_size = batch_size
         self.metadata = meta
+        if calibration is None:
+            calibration = CovarianceCalibration.from_metadata(meta) or CovarianceCalibration()
+        elif isinstance(calibration, dict):
+            calibration = CovarianceCalibration.from_dict(calibration)
+        elif not isinstance(calibration, CovarianceCalibration):
+            raise TypeError(f"calibration: expected a CovarianceCalibration, a dict or None, got "
+                            f"{type(calibration).__name__}")
+        self.calibration = calibration
 
     @property
     def input_size(self) -> int:
@@ -109,7 +132,8 @@ class KeypointDetector:
 
         Returns:
             A list of :class:`vfactor.heatmaps.DecodedKeypoints` (``uv`` (12, 2)
-            image pixels, ``confidence`` (12,), ``covariance`` (12, 2, 2) px^2),
+            image pixels, ``confidence`` (12,), ``covariance`` (12, 2, 2) px^2,
+            calibrated),
             one per box; with ``return_heatmaps``, ``(keypoints, heatmaps)``
             with heatmaps (N, 12, h, w) float32.
         """
@@ -153,6 +177,9 @@ class KeypointDetector:
         out: list[list[Detection]] = [[] for _ in images]
         for hm, box, i in zip(heatmaps, boxes, owner):
             kp = decode_heatmaps(hm, roi=box, min_confidence=self.min_confidence)
+            if not self.calibration.is_identity:
+                size = (box[2] - box[0], box[3] - box[1])
+                kp = DecodedKeypoints(kp.uv, kp.confidence, self.calibration.apply(kp.covariance, kp.confidence, size))
             out[i].append(Detection(kp, hm, box))
         return out
 

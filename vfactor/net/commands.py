@@ -1,7 +1,7 @@
-"""Command-line front ends of the keypoint network: ``train``, ``detect`` and ``calibrate``.
+"""Command-line front ends of the keypoint network: ``train``, ``detect``, ``calibrate`` and ``score``.
 
 Run as ``python -m vfactor.net train ...`` / ``python -m vfactor.net detect ...`` /
-``python -m vfactor.net calibrate ...``; ``vfactor train`` and ``vfactor detect``
+``python -m vfactor.net calibrate ...`` / ``python -m vfactor.net score ...``; ``vfactor train`` and ``vfactor detect``
 forward their arguments to :func:`main`.
 
 Exit codes (those of ``vfactor``): 0 success, 2 bad input (the message names
@@ -21,7 +21,7 @@ import numpy as np
 from vfactor.errors import InputError
 from vfactor.keypoints import KEYPOINT_NAMES
 
-__all__ = ["main", "build_parser", "run_train", "run_detect", "run_calibrate"]
+__all__ = ["main", "build_parser", "run_train", "run_detect", "run_calibrate", "run_score"]
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
 
@@ -53,7 +53,23 @@ def build_parser(prog: str = "python -m vfactor.net") -> argparse.ArgumentParser
         "self-occluded keypoints apart. --write stores the calibration in the weights file's metadata (the "
         "weights are unchanged); KeypointDetector then applies it.",
     ))
+    add_score_arguments(sub.add_parser(
+        "score", help="PCK@0.1 of weights on crops with known keypoints (e.g. a held-out test set)",
+        description="Score weights on rendered crops: PCK@0.1 of the crop side for visible and self-occluded "
+        "keypoints, and the heatmap loss. --render-test N renders N held-out crops with --seed into --out first "
+        "(a test set apart from the training run's validation crops when the seed differs).",
+    ))
     return parser
+
+
+def add_score_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--weights", help="weights file (default: the shipped weights)")
+    p.add_argument("--data", nargs="+", action="extend", default=[], metavar="SHARD",
+                   help=".npz shards or folders of shards")
+    p.add_argument("--render-test", type=int, metavar="N", help="render N held-out crops first (into --out)")
+    p.add_argument("--seed", type=int, default=1, help="seed of the rendered crops (default 1; training uses 0)")
+    p.add_argument("--out", default="runs/test", help="folder for the rendered crops (default: runs/test)")
+    p.add_argument("--device", help="cuda, cpu, ... (default: cuda when available)")
 
 
 def add_train_arguments(p: argparse.ArgumentParser) -> None:
@@ -76,7 +92,9 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
                        help=f"TrainConfig.{field}")
     p.add_argument("--optimizer", choices=("adam", "rmsprop"), dest="cfg_optimizer", help="TrainConfig.optimizer")
     p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in OUT")
-    p.add_argument("--export", metavar="PATH", help="also copy the final weights to PATH")
+    p.add_argument("--export", metavar="PATH",
+                   help="also copy the weights to PATH: those of the epoch with the best validation PCK when there "
+                   "are validation crops (OUT/weights_best.pt), else the final ones")
     p.add_argument("--device", help="cuda, cpu, ... (default: cuda when available)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -102,9 +120,9 @@ def add_calibrate_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def main(argv=None, prog: str = "python -m vfactor.net") -> int:
-    """``python -m vfactor.net {train,detect,calibrate} ...`` (``vfactor`` forwards with ``prog="vfactor"``)."""
+    """``python -m vfactor.net {train,detect,calibrate,score} ...`` (``vfactor`` forwards with ``prog="vfactor"``)."""
     args = build_parser(prog).parse_args(argv)
-    run = {"train": run_train, "detect": run_detect, "calibrate": run_calibrate}[args.command]
+    run = {"train": run_train, "detect": run_detect, "calibrate": run_calibrate, "score": run_score}[args.command]
     try:
         return run(args)
     except (InputError, ValueError, FileNotFoundError) as exc:
@@ -139,13 +157,14 @@ def run_train(args: argparse.Namespace) -> int:
     val = KeypointDataset.concatenate([_load(p, "--val", S).resized(S) for p in val_paths]) if val_paths else None
     result = train(config, as_dataset(data), val, out_dir=out, resume=args.resume, progress=not args.quiet,
                    device=args.device)
+    exported = result.best_weights_path or result.weights_path
     if args.export:
         dest = Path(args.export)
         dest.parent.mkdir(parents=True, exist_ok=True)
-        dest.write_bytes(result.weights_path.read_bytes())
+        dest.write_bytes(exported.read_bytes())
     if not args.quiet:
         last = result.history[-1] if result.history else {}
-        print(f"weights: {result.weights_path}" + (f" (copied to {args.export})" if args.export else "")
+        print(f"weights: {result.weights_path}" + (f" ({exported.name} copied to {args.export})" if args.export else "")
               + (f"; validation PCK@{config.pck_alpha:g} visible {last['pck_visible']:.3f}, self-occluded "
                  f"{last['pck_self_occluded']:.3f}" if last and math.isfinite(last.get("pck_visible", math.nan))
                  else ""), file=sys.stderr)
@@ -379,3 +398,31 @@ def _table(header: list[str], rows: list[list[str]]) -> None:
     print("| " + " | ".join("---" for _ in header) + " |")
     for row in rows:
         print("| " + " | ".join(row) + " |")
+
+
+# ------------------------------------------------------------------- score
+def run_score(args: argparse.Namespace) -> int:
+    """The ``score`` command: PCK of weights on crops with known keypoints (see :func:`add_score_arguments`)."""
+    from vfactor.net.infer import default_weights_path  # noqa: PLC0415
+    from vfactor.net.model import load_weights  # noqa: PLC0415
+    from vfactor.net.train import evaluate_model  # noqa: PLC0415
+
+    weights = Path(args.weights) if args.weights else default_weights_path()
+    if not weights.exists():
+        raise InputError("--weights", f"no such file {weights}")
+    model = load_weights(weights)
+    size = model.config.input_size
+    paths = [Path(p) for p in args.data]
+    if args.render_test:
+        paths.append(_render(Path(args.out), args.render_test, args.seed, size, True, 1, True))
+    if not paths:
+        raise InputError("--data", "give crops to score: --data SHARD_OR_FOLDER ... or --render-test N")
+    from vfactor.net.data import KeypointDataset  # noqa: PLC0415
+
+    data = KeypointDataset.concatenate([_load(p, "--data", size).resized(size) for p in paths])
+    scores = evaluate_model(model.to(args.device or "cpu"), data, device=args.device)
+    print(f"weights {weights} on {len(data)} crops ({', '.join(str(p) for p in paths)}): PCK@0.1 visible "
+          f"{scores['pck_visible']:.3f} ({scores['n_visible']} keypoints), self-occluded "
+          f"{scores['pck_self_occluded']:.3f} ({scores['n_self_occluded']}), all {scores['pck_all']:.3f}; "
+          f"heatmap loss {scores['val_loss']:.5f}")
+    return EXIT_OK

@@ -1,0 +1,148 @@
+"""The image-to-pose pipeline: rendered camera images and boxes -> keypoint network -> factor graph.
+
+Uses the shipped weights on images rendered from a simulated two-camera scene
+(skipped where torch or an OpenGL context is missing).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+
+from vfactor.cli import main  # noqa: E402
+from vfactor.errors import InputError, SceneError  # noqa: E402
+from vfactor.metrics import pose_errors  # noqa: E402
+from vfactor.net.infer import KeypointDetector  # noqa: E402
+from vfactor.net.pipeline import detect_scene  # noqa: E402
+from vfactor.render.renderer import RenderingUnavailable, get_context  # noqa: E402
+from vfactor.scene import load_results, load_scene  # noqa: E402
+from vfactor.sim import simulate  # noqa: E402
+from vfactor.solve import solve_scene  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    """Two frames of intersection_2cam rendered (images + boxes), with the simulation."""
+    try:
+        get_context()
+    except RenderingUnavailable as exc:
+        pytest.skip(f"no OpenGL rendering here: {exc}")
+    from vfactor.render.scenes import render_simulation
+
+    sim = simulate("intersection_2cam", seed=3, num_frames=2)
+    return sim, render_simulation(sim, tmp_path_factory.mktemp("rendered"), seed=3)
+
+
+@pytest.fixture(scope="module")
+def detector():
+    return KeypointDetector()
+
+
+def test_rendered_scene_gives_boxes_only_and_reloads(rendered):
+    sim, r = rendered
+    scene = load_scene(r.path)
+    assert len(scene.frames) == 2 and set(scene.frames[0].images) == set(sim.scene.cameras)
+    assert scene.undetected() == [(f, j) for f, fr in enumerate(sim.scene.frames) for j in range(len(fr.detections))]
+    for f, frame in enumerate(scene.frames):
+        for det in frame.detections:
+            x0, y0, x1, y1 = r.boxes_true[f][(det.camera, det.vehicle)]
+            side = max(x1 - x0, y1 - y0)
+            assert np.allclose(det.roi, (x0, y0, x1, y1), atol=0.15 * side)  # a detector's box: noisy, not wild
+            image = cv2.imread(frame.images[det.camera])
+            assert image.shape == (720, 1280, 3)
+    with pytest.raises(InputError, match="keypoint network"):
+        solve_scene(scene)
+
+
+def test_network_keypoints_and_graph_recover_the_vehicles(rendered, detector, tmp_path):
+    sim, r = rendered
+    detected = detect_scene(load_scene(r.path), detector, heatmaps_dir=tmp_path / "hm")
+    assert detected.undetected() == []
+    errors = []
+    for f, frame in enumerate(detected.frames):
+        for det in frame.detections:
+            key = (det.camera, det.vehicle)
+            visible = r.visible[f][key] & (det.confidence > 0)
+            assert visible.sum() >= 4
+            px = np.linalg.norm(det.keypoints[visible] - r.keypoints_true[f][key][visible], axis=1)
+            x0, y0, x1, y1 = detector.crop_box(r.boxes_true[f][key])
+            assert np.mean(px <= 0.1 * (x1 - x0)) >= 0.75  # PCK@0.1 of the crop side
+            assert det.covariance.shape == (12, 2, 2) and np.isfinite(det.covariance[visible]).all()
+            assert det.heatmaps is not None and np.load(det.heatmaps).shape[0] == 12
+    for f, frame_result in enumerate(solve_scene(detected)):
+        for v in frame_result.vehicles:
+            assert v.ok, v.message
+            truth = sim.truth[f][v.id]
+            errors.append(pose_errors(v.world_T_vehicle, v.keypoints_world, truth.world_T_vehicle,
+                                      truth.keypoints_world))
+    assert np.mean([e["rotation_deg"] for e in errors]) < 5.0
+    assert np.mean([e["translation_cm"] for e in errors]) < 30.0
+
+
+def test_images_of_the_wrong_size_or_unreadable_are_named(rendered, detector, tmp_path):
+    _, r = rendered
+    data = json.loads(r.path.read_text())
+    for frame in data["frames"]:  # absolute paths: the edited scene is written elsewhere
+        frame["images"] = {name: str(r.path.parent / path) for name, path in frame["images"].items()}
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), np.zeros((100, 200, 3), np.uint8))
+    broken = tmp_path / "broken.png"
+    broken.write_bytes(b"not an image")
+    for path, message in ((small, "200x100 pixels but the camera's image_size is 1280x720"),
+                          (broken, "cannot read an image")):
+        edited = json.loads(json.dumps(data))
+        edited["frames"][1]["images"]["cam1"] = str(path)
+        scene_path = tmp_path / "scene.json"
+        scene_path.write_text(json.dumps(edited))
+        scene = load_scene(scene_path)
+        with pytest.raises(SceneError) as info:
+            detect_scene(scene, detector)
+        assert info.value.field == "frames[1].images.cam1" and message in str(info.value)
+
+
+def test_cli_solve_runs_the_network_and_saves_the_detections(rendered, tmp_path, capsys):
+    _, r = rendered
+    folder = tmp_path / "scene"
+    shutil.copytree(r.path.parent, folder)
+    out, saved = tmp_path / "result.json", tmp_path / "detected.json"
+    assert main(["solve", str(folder / "scene.json"), "--out", str(out), "--save-detections", str(saved)]) == 0
+    assert "keypoint network: 4 boxes" in capsys.readouterr().out
+    results = load_results(out)
+    assert [len(f.vehicles) for f in results] == [1, 1] and all(v.ok for f in results for v in f.vehicles)
+    detected = load_scene(saved)  # reloads with the network's keypoints; the heatmaps beside it
+    assert detected.undetected() == [] and (tmp_path / "detected_heatmaps").is_dir()
+    # Solving the saved detections again gives the same estimate.
+    assert main(["solve", str(saved), "--out", str(tmp_path / "again.json"), "--quiet"]) == 0
+    again = load_results(tmp_path / "again.json")
+    for a, b in zip(results, again):
+        np.testing.assert_allclose(a.vehicles[0].keypoints_world, b.vehicles[0].keypoints_world, atol=1e-6)
+
+
+def test_cli_bad_weights_is_input_error(rendered, tmp_path, capsys):
+    _, r = rendered
+    bad = tmp_path / "w.pt"
+    bad.write_bytes(b"junk")
+    assert main(["solve", str(r.path), "--out", str(tmp_path / "r.json"), "--weights", str(bad)]) == 2
+    assert "--weights" in capsys.readouterr().err
+    assert main(["solve", str(r.path), "--out", str(tmp_path / "r.json"), "--weights", str(tmp_path / "none.pt")]) == 2
+
+
+def test_demo_images_writes_overlays_with_heatmaps(rendered, tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--images", "--frames", "1", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "keypoint network: 2 boxes" in text and "mean vfactor" in text
+    for name in ("scene.json", "scene_keypoints.json", "truth.json", "result.json", "overlay_cam0.png",
+                 "overlay_cam1.png", "estimate_3d.png", "images/f0000_cam0.png"):
+        assert (out / name).is_file(), name
+    assert load_scene(out / "scene.json").undetected() == [(0, 0), (0, 1)]
+    assert len(list((out / "heatmaps").glob("*.npy"))) == 2
+    overlay = cv2.imread(str(out / "overlay_cam0.png"))
+    image = cv2.imread(str(out / "images" / "f0000_cam0.png"))
+    assert overlay.shape == image.shape and np.abs(overlay.astype(int) - image).mean() > 1.0

@@ -250,6 +250,12 @@ class Tracker:
             graph.add(ground_plane_factor(key, self.ground_plane, self.options.hub_height,
                                           self.options.sigma_height, self.options.sigma_tilt))
 
+    def _motion_fixes_pose(self, track: _TrackState, t: float) -> bool:
+        """Whether a new pose at ``t`` gets both motion factors (it has two earlier poses inside the lag)."""
+        if len(track.poses) < 2:
+            return False
+        return self.options.lag is None or t - track.poses[-2][1] < self.options.lag
+
     def _predict(self, track: _TrackState, estimate: gtsam.Values, t: float) -> gtsam.Pose3:
         """Constant-twist prediction of the pose at ``t`` from the last two poses."""
         _, t1, k1 = track.poses[-1]
@@ -319,7 +325,10 @@ class Tracker:
         if track.smoother is None:
             return self._start(track, frame_index, t, obs)
         options = self.options.solve
-        if len(obs) < options.min_observations and len(obs) < 3:
+        # from its third pose on, the motion factors alone fix a pose (lateral, vertical, tilt by the
+        # non-holonomic factor; speed and yaw rate by the acceleration factor), so any keypoint helps,
+        # as in smooth_scene; a younger track needs three
+        if len(obs) < options.min_observations and len(obs) < 3 and not self._motion_fixes_pose(track, t):
             return VehicleResult(vid, Status.DEGENERATE, message=f"only {len(obs)} keypoints seen in this frame")
         estimate = track.smoother.calculateEstimate()
         wireframe = self._wireframe(estimate, track)

@@ -487,8 +487,10 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
                  bounds: HwcBounds | None = None) -> list[FrameResult]:
     """Batch smoothing: every track's whole graph solved at once by Levenberg-Marquardt.
 
-    Each track starts from its one-frame solves (the first solvable frame's
-    shape, each frame's pose, predicted where a frame cannot be solved alone).
+    Each track starts from its one-frame solves (each frame's pose, the previous
+    pose where a frame cannot be solved alone, and the shape of the solved frame
+    with the most keypoints: a first frame seen partly can start LM in a worse
+    minimum, as on tracks_3cam seed 0).
 
     Raises:
         InputError: a detection still waits for the keypoint network.
@@ -510,7 +512,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
     for index, (vid, items) in enumerate(per_track.items()):
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         add_shape_factors(graph, keys, index, config, prior, bounds)
-        posed = []
+        posed, best = [], -1
         for i, t, obs in items:
             first = solve_observations(obs, options.solve, vid, prior, bounds) if len(obs) else None
             if first is None or not first.ok:
@@ -520,7 +522,8 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
                 guess = values.atPose3(posed[-1][2])
             else:
                 guess = first.world_T_vehicle
-                if not values.exists(keys.layer_key("wheel", index)):
+                if len(obs) > best:
+                    best = len(obs)
                     insert_vehicle_values(values, keys, None, first.wireframe, index)
             key = keys.pose_key(index, i)
             add_observation_factor(graph, keys, obs, index, i, config)

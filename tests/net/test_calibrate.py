@@ -93,11 +93,11 @@ def test_detector_applies_a_given_calibration():
     cal = CovarianceCalibration(scale=0.2, floor=0.02, confidence_rate=1.5)
     image = np.zeros((300, 400, 3), np.uint8)
     roi = (100, 50, 228, 146)  # 128 x 96 px: sx = 8, sy = 6 image px per heatmap px
-    (raw,) = KeypointDetector(fixed_net(), device="cpu").detect(image, [roi])  # no metadata: the identity
+    (raw,) = KeypointDetector(fixed_net(), device="cpu", flip_test=False).detect(image, [roi])  # no metadata: the identity
     J = np.diag([8.0, 6.0])
     np.testing.assert_allclose(raw.covariance, np.broadcast_to(J @ COV @ J.T, (12, 2, 2)), rtol=1e-6)
     for given in (cal, cal.to_dict()):
-        det = KeypointDetector(fixed_net(), device="cpu", calibration=given)
+        det = KeypointDetector(fixed_net(), device="cpu", calibration=given, flip_test=False)
         assert det.calibration == cal
         (kp,) = det.detect(image, [roi])
         gain = np.exp(1.5 * (1 - raw.confidence))[:, None, None]
@@ -155,7 +155,7 @@ def test_errors_are_measured_in_image_pixels_through_the_crop_boxes():
     occ[:, :3] = True
     ds = KeypointDataset(np.zeros((2, S, S, 3), np.uint8), np.stack([crop_kp] * 2), ~occ, occ)
     rois = np.array([[0.0, 0.0, 64.0, 64.0], [100.0, 50.0, 356.0, 306.0]])  # scales 1 and 4
-    err = measure_errors(KeypointDetector(fixed_net(), device="cpu"), ds, rois)
+    err = measure_errors(KeypointDetector(fixed_net(), device="cpu", flip_test=False), ds, rois)
     assert len(err) == 22 and err.crop.tolist() == [0] * 11 + [1] * 11
     offset = (PEAKS - truth_hm)[:11] * (S / H)  # crop px
     np.testing.assert_allclose(err.error, np.concatenate([offset, 4 * offset]), atol=1e-4)  # float32 heatmaps

@@ -27,6 +27,15 @@ class FixedHeatmaps(StackedHourglass):
         return [torch.from_numpy(hm).expand(len(x), -1, -1, -1)]
 
 
+class RedInFirstChannel(StackedHourglass):
+    """Heatmap 0 (left front wheel) is the crop's red channel pooled over 4x4 blocks; the others are empty."""
+
+    def forward(self, x):
+        out = torch.zeros(len(x), 12, x.shape[2] // 4, x.shape[3] // 4)
+        out[:, 0] = F.avg_pool2d(x[:, :1], 4)[:, 0]
+        return [out]
+
+
 class RedChannelPooled(StackedHourglass):
     """Every heatmap is the crop's red channel averaged over 4x4 blocks: a red blob comes out where it is."""
 
@@ -40,7 +49,8 @@ def blob(shape, uv, sigma):
 
 
 def test_known_heatmaps_decode_to_image_pixels_through_the_roi():
-    det = KeypointDetector(FixedHeatmaps(num_stacks=1, channels=8, depth=2, input_size=S), device="cpu")
+    det = KeypointDetector(FixedHeatmaps(num_stacks=1, channels=8, depth=2, input_size=S), device="cpu",
+                           flip_test=False)
     image = np.zeros((300, 400, 3), np.uint8)
     roi = (100, 50, 228, 146)  # 128 x 96 px: sx = 8, sy = 6 image px per heatmap px
     (kp,), heatmaps = det.detect(image, [roi], return_heatmaps=True)
@@ -63,11 +73,29 @@ def test_a_blob_in_the_image_is_found_at_its_pixel():
         assert np.all(kp.confidence > 0.5)
 
 
+def test_flip_test_mirrors_back_and_swaps_left_and_right():
+    """A blob seen as the left front wheel: the mirrored crop sees it as the right front wheel, at the same pixel."""
+    image = np.zeros((240, 320, 3), np.uint8)
+    uv = np.array([171.6, 103.2])
+    image[..., 0] = np.rint(230 * blob(image.shape[:2], uv, 12.0)).astype(np.uint8)
+    net = RedInFirstChannel(num_stacks=1, channels=8, depth=2, input_size=S)
+    roi = (120.0, 40.0, 248.0, 168.0)
+    (plain,), hm_plain = KeypointDetector(net, device="cpu", flip_test=False).detect(image, [roi], True)
+    (flipped,), hm_flip = KeypointDetector(net, device="cpu").detect(image, [roi], True)
+    assert np.isnan(plain.uv[1]).all() and np.isfinite(plain.uv[0]).all()
+    np.testing.assert_allclose(hm_flip[0, 0], 0.5 * hm_plain[0, 0], atol=0.02 * hm_plain.max())
+    np.testing.assert_allclose(hm_flip[0, 1], 0.5 * hm_plain[0, 0], atol=0.02 * hm_plain.max())
+    for k in (0, 1):  # both at the blob, to the accuracy of the un-flipped decoding
+        np.testing.assert_allclose(flipped.uv[k], uv, atol=0.35)
+    np.testing.assert_allclose(plain.uv[0], uv, atol=0.35)
+    assert np.isnan(flipped.uv[2:]).all()
+
+
 def test_boxes_are_grown_and_squared_as_the_weights_say(tmp_path):
     net = FixedHeatmaps(num_stacks=1, channels=8, depth=2, input_size=S)
     path = save_weights(net, tmp_path / "w.pt", {"crop": {"margin": 0.25, "square": True}})
     assert (KeypointDetector(path).roi_margin, KeypointDetector(path).roi_square) == (0.25, True)
-    det = KeypointDetector(net, device="cpu", roi_margin=0.25, roi_square=True)
+    det = KeypointDetector(net, device="cpu", roi_margin=0.25, roi_square=True, flip_test=False)
     box = (100.0, 50.0, 180.0, 90.0)  # 80 x 40 -> 120 x 60 -> square 120 about (140, 70)
     assert det.crop_box(box) == (80.0, 10.0, 200.0, 130.0)
     [[d]] = det.detect_batch([np.zeros((200, 300, 3), np.uint8)], [[box]])

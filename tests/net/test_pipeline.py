@@ -146,3 +146,20 @@ def test_demo_images_writes_overlays_with_heatmaps(rendered, tmp_path, capsys):
     overlay = cv2.imread(str(out / "overlay_cam0.png"))
     image = cv2.imread(str(out / "images" / "f0000_cam0.png"))
     assert overlay.shape == image.shape and np.abs(overlay.astype(int) - image).mean() > 1.0
+
+
+def test_cli_track_runs_the_network_too(rendered, tmp_path, capsys):
+    _, r = rendered
+    out = tmp_path / "track.json"
+    assert main(["track", str(r.path), "--out", str(out), "--no-covariance"]) == 0
+    assert "keypoint network: 4 boxes" in capsys.readouterr().out
+    assert all(v.ok for f in load_results(out) for v in f.vehicles)
+
+
+def test_cli_eval_images(rendered, tmp_path, capsys):
+    md = tmp_path / "images.md"
+    assert main(["eval", "images", "--frames", "2", "--seed", "4", "--markdown", str(md)]) == 0
+    text = md.read_text()
+    assert "vfactor eval images --frames 2 --seed 4" in text
+    for method in ("factor_graph", "triangulation", "pnp", "known_shape", "factor_graph_simulated_noise"):
+        assert f"| {method} | 2 |" in text

@@ -7,8 +7,9 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from tests.net.fakes import COV, H, PEAKS, S, fixed_net  # noqa: E402
 from tests.net.synthetic import blob_dataset  # noqa: E402
-from vfactor.heatmaps import heatmap_to_image, render_gaussian_heatmap  # noqa: E402
+from vfactor.heatmaps import heatmap_to_image  # noqa: E402
 from vfactor.net.calibrate import (  # noqa: E402
     METADATA_KEY,
     CovarianceCalibration,
@@ -22,22 +23,6 @@ from vfactor.net.commands import main  # noqa: E402
 from vfactor.net.data import KeypointDataset  # noqa: E402
 from vfactor.net.infer import KeypointDetector  # noqa: E402
 from vfactor.net.model import StackedHourglass, load_weights, save_weights  # noqa: E402
-
-S, H = 64, 16  # input side and heatmap side
-PEAKS = np.array([[2.3 + 1.0 * k, 3.6 + 0.8 * k] for k in range(12)])  # heatmap pixels
-COV = np.array([[1.2, 0.3], [0.3, 0.8]])  # heatmap px^2
-
-
-class FixedHeatmaps(StackedHourglass):
-    """Outputs the same known Gaussians whatever the crop."""
-
-    def forward(self, x):
-        hm = np.stack([render_gaussian_heatmap(p, COV, (H, H), peak=0.9) for p in PEAKS]).astype(np.float32)
-        return [torch.from_numpy(hm).expand(len(x), -1, -1, -1)]
-
-
-def fixed_net():
-    return FixedHeatmaps(num_stacks=1, channels=8, depth=2, input_size=S)
 
 
 def synthetic_errors(truth: CovarianceCalibration, n: int = 3000, outliers: float = 0.05, seed: int = 0):

@@ -9,22 +9,11 @@ torch = pytest.importorskip("torch")
 
 from torch.nn import functional as F  # noqa: E402
 
-from vfactor.heatmaps import heatmap_to_image, render_gaussian_heatmap  # noqa: E402
+from tests.net.fakes import COV, H, PEAKS, S, FixedHeatmaps  # noqa: E402
+from vfactor.heatmaps import heatmap_to_image  # noqa: E402
 from vfactor.net.crop import crop_roi, expand_roi, image_to_crop  # noqa: E402
 from vfactor.net.infer import KeypointDetector, benchmark_inference  # noqa: E402
 from vfactor.net.model import StackedHourglass, save_weights  # noqa: E402
-
-S, H = 64, 16  # input side and heatmap side
-PEAKS = np.array([[2.3 + 1.0 * k, 3.6 + 0.8 * k] for k in range(12)])  # heatmap pixels
-COV = np.array([[1.2, 0.3], [0.3, 0.8]])  # heatmap px^2
-
-
-class FixedHeatmaps(StackedHourglass):
-    """Outputs the same known Gaussians whatever the crop."""
-
-    def forward(self, x):
-        hm = np.stack([render_gaussian_heatmap(p, COV, (H, H), peak=0.9) for p in PEAKS]).astype(np.float32)
-        return [torch.from_numpy(hm).expand(len(x), -1, -1, -1)]
 
 
 class RedInFirstChannel(StackedHourglass):

@@ -9,7 +9,9 @@ exit code 2.
 
 from __future__ import annotations
 
-__all__ = ["InputError", "SceneError", "CalibrationError", "ScenarioError"]
+import math
+
+__all__ = ["InputError", "SceneError", "CalibrationError", "ScenarioError", "check_numbers"]
 
 
 class InputError(ValueError):
@@ -44,3 +46,27 @@ class CalibrationError(InputError):
 
 class ScenarioError(InputError):
     """A simulation scenario file (``vfactor/graphs/*.json`` or the user's own) is malformed."""
+
+
+def check_numbers(owner: str, obj, names, minimum: float = 0.0, strict: bool = True) -> None:
+    """Checks that attributes of a settings object are finite real numbers above a bound.
+
+    The one validation that the settings dataclasses (``GraphConfig``,
+    ``CpoOptions``, the network's ``TrainConfig`` ...) share.
+
+    Args:
+        owner: the object's name in messages (e.g. ``"GraphConfig"``).
+        obj: the object whose attributes are checked.
+        names: attribute names.
+        minimum: the bound.
+        strict: the value must exceed ``minimum`` (else it may equal it).
+
+    Raises:
+        ValueError: ``"<owner>.<name>: expected a number > <minimum>, got <value>"`` for the
+            first attribute that is not a finite int or float (bools are refused) above the bound.
+    """
+    for name in names:
+        value = getattr(obj, name)
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        if not ok or (value <= minimum if strict else value < minimum):
+            raise ValueError(f"{owner}.{name}: expected a number {'>' if strict else '>='} {minimum:g}, got {value!r}")

@@ -15,7 +15,7 @@ import gtsam
 import numpy as np
 
 from vfactor.camera import Camera
-from vfactor.errors import InputError
+from vfactor.errors import InputError, check_numbers
 from vfactor.factors.body_frame import body_frame_factor
 from vfactor.factors.distance_bounds import distance_bounds_term
 from vfactor.factors.layer_offset import layer_offset_term
@@ -90,14 +90,11 @@ class GraphConfig:
     hinge_sigma: float = 0.01
 
     def __post_init__(self):
-        for name in (
+        check_numbers("GraphConfig", self, (
             "relative_pixel_sigma", "min_pixel_sigma", "symmetry_sigma", "body_frame_sigma", "shape_prior_weight",
             "plane_sigma_m", "plane_sigma_rad", "rectangle_sigma", "trapezoid_sigma_rad", "width_ratio_sigma",
             "hinge_sigma", "hwc_tolerance",
-        ):
-            value = getattr(self, name)
-            if not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
-                raise ValueError(f"GraphConfig.{name}: expected a positive number, got {value!r}")
+        ))
         if self.hwc not in ("always", "lazy", "off"):
             raise ValueError(f"GraphConfig.hwc: expected 'always', 'lazy' or 'off', got {self.hwc!r}")
 

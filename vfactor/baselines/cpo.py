@@ -61,6 +61,7 @@ import gtsam
 import numpy as np
 
 from vfactor.baselines.pnp import box_diagonals, camera_pnp, clean_observations, usable
+from vfactor.errors import check_numbers
 from vfactor.factors.projection import KeypointObservations, project_keypoints, whitened_residuals
 from vfactor.graph import GraphConfig
 from vfactor.init import umeyama
@@ -151,10 +152,8 @@ class CpoOptions:
         if self.mu_init[0] <= 0 or self.mu_update[0] < 0:
             raise ValueError(f"CpoOptions.mu_init / mu_update: mu1 must be positive (mu_update's may be 0), "
                              f"got mu_init={self.mu_init!r}, mu_update={self.mu_update!r}")
-        for name in ("weight_floor", "smooth_tol", "tol", "abs_tol", "shape_tol", "max_step_m", "projection_eps"):
-            value = getattr(self, name)
-            if not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
-                raise ValueError(f"CpoOptions.{name}: expected a positive number, got {value!r}")
+        check_numbers("CpoOptions", self,
+                      ("weight_floor", "smooth_tol", "tol", "abs_tol", "shape_tol", "max_step_m", "projection_eps"))
         for name in ("max_iterations", "min_pose_iterations", "max_pose_iterations", "single_camera_steps", "cross_steps",
                      "min_keypoints_per_camera", "min_observations"):
             value = getattr(self, name)

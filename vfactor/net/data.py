@@ -22,6 +22,7 @@ from typing import Any, Iterable, Sequence
 import cv2
 import numpy as np
 
+from vfactor.errors import check_numbers
 from vfactor.keypoints import MIRROR_PERMUTATION, NUM_KEYPOINTS
 from vfactor.net.crop import crop_roi, image_to_crop
 
@@ -267,10 +268,7 @@ class AugmentConfig:
     noise: float = 0.02
 
     def __post_init__(self):
-        for name in self.__dataclass_fields__:
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-                raise ValueError(f"augment.{name}: expected a number >= 0, got {value!r}")
+        check_numbers("augment", self, self.__dataclass_fields__, strict=False)
         if self.flip > 1:
             raise ValueError(f"augment.flip: expected a probability in [0, 1], got {self.flip}")
         if self.scale >= 1:

@@ -36,6 +36,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
+from vfactor.errors import check_numbers
 from vfactor.net._progress import Progress
 from vfactor.net.data import AugmentConfig, KeypointDataset, as_dataset, augment, sample_rng
 from vfactor.net.evaluate import decode_batch, score_predictions
@@ -114,14 +115,10 @@ class TrainConfig:
             _check_int(name, getattr(self, name), 1)
         if self.num_threads is not None:
             _check_int("num_threads", self.num_threads, 1)
-        for name in ("lr", "sigma", "pck_alpha"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v <= 0:
-                raise ValueError(f"{name}: expected a number > 0, got {v!r}")
-        for name in ("weight_decay", "self_occluded_weight", "min_confidence", "roi_margin", "min_lr_factor"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v < 0:
-                raise ValueError(f"{name}: expected a number >= 0, got {v!r}")
+        check_numbers("TrainConfig", self, ("lr", "sigma", "pck_alpha"))
+        check_numbers("TrainConfig", self,
+                      ("weight_decay", "self_occluded_weight", "min_confidence", "roi_margin", "min_lr_factor"),
+                      strict=False)
         if self.optimizer not in ("adam", "rmsprop"):
             raise ValueError(f"optimizer: expected 'adam' or 'rmsprop', got {self.optimizer!r}")
         if self.lr_schedule not in ("cosine", "constant"):

@@ -1,0 +1,37 @@
+"""Error types and the shared settings validator."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import pytest
+
+from vfactor.errors import InputError, SceneError, check_numbers
+from vfactor.graph import GraphConfig
+
+
+def test_check_numbers_bounds_and_types():
+    ok = SimpleNamespace(a=1, b=0.5, c=0.0)
+    check_numbers("S", ok, ("a", "b"))
+    check_numbers("S", ok, ("c",), strict=False)
+    with pytest.raises(ValueError, match=r"^S\.c: expected a number > 0, got 0\.0$"):
+        check_numbers("S", ok, ("a", "c"))
+    for bad in (math.nan, math.inf, True, "1", None, -1.0):
+        with pytest.raises(ValueError, match=r"S\.x: expected a number >= 0"):
+            check_numbers("S", SimpleNamespace(x=bad), ("x",), strict=False)
+    check_numbers("S", SimpleNamespace(x=2.5), ("x",), minimum=2.5, strict=False)
+    with pytest.raises(ValueError, match="> 2.5"):
+        check_numbers("S", SimpleNamespace(x=2.5), ("x",), minimum=2.5)
+
+
+def test_settings_name_the_field():
+    with pytest.raises(ValueError, match=r"GraphConfig\.hinge_sigma: expected a number > 0, got -1"):
+        GraphConfig(hinge_sigma=-1)
+
+
+def test_input_error_field_and_prefix():
+    err = SceneError("K", "singular")
+    assert isinstance(err, InputError) and isinstance(err, ValueError)
+    moved = err.within("cameras[1]")
+    assert moved.field == "cameras[1].K" and str(moved) == "cameras[1].K: singular"

@@ -132,3 +132,38 @@ def test_tracker_rejects_time_going_backwards(sim):
     tracker.add_frame(sim.scene.frames[1])
     with pytest.raises(InputError, match="does not follow"):
         tracker.add_frame(sim.scene.frames[0])
+
+
+def test_running_track_takes_frames_with_two_keypoints(sim):
+    """From a track's third pose on the motion factors fix the pose, so two keypoints are used, as batch uses them."""
+
+    def two_keypoints(frame):
+        d = frame.detections[0]
+        kept = np.flatnonzero(d.confidence > 0)[:2]
+        confidence = np.zeros_like(d.confidence)
+        confidence[kept] = d.confidence[kept]
+        return Frame(frame.t, [Detection(d.camera, d.vehicle, d.keypoints, confidence)])
+
+    scene = copy.copy(sim.scene)
+    scene.frames = [two_keypoints(f) if i in (1, 10) else f for i, f in enumerate(sim.scene.frames)]
+    run = track_scene(scene)
+    assert run.online[1].vehicles[0].status == Status.DEGENERATE  # second pose: only the non-holonomic factor
+    assert run.online[10].vehicles[0].ok
+    mine, batch = run.frames[10].vehicles[0], smooth_scene(scene)[10].vehicles[0]
+    assert np.linalg.norm(mine.world_T_vehicle.translation() - batch.world_T_vehicle.translation()) < 0.01
+    truth = sim.truth[10][mine.id].world_T_vehicle
+    assert np.linalg.norm(mine.world_T_vehicle.translation() - truth.translation()) < 0.15
+
+
+def test_motion_model_allows_a_fast_intersection_turn():
+    """A left turn of radius 6.6 m at 11.6 m/s (1.76 rad/s, tracks_3veh seed 2) is inside the yaw-rate bound."""
+    import gtsam
+
+    from vfactor.factors.motion import MotionModel, nonholonomic_factor
+
+    dt, speed, yaw_rate = 0.1, 11.6, 1.76
+    values = gtsam.Values()
+    values.insert(0, gtsam.Pose3())
+    step = gtsam.Pose3.Expmap(np.array([0, 0, yaw_rate * dt, speed * dt, 0, 0]))
+    values.insert(1, step)
+    assert nonholonomic_factor(0, 1, dt, MotionModel()).unwhitenedError(values)[4] == 0.0

@@ -31,6 +31,8 @@ from functools import partial
 import gtsam
 import numpy as np
 
+from vfactor.errors import check_numbers
+
 __all__ = ["MotionModel", "nonholonomic_factor", "acceleration_factor", "step_twist"]
 
 
@@ -60,9 +62,7 @@ class MotionModel:
     sigma_yaw_acceleration: float = 1.0
 
     def __post_init__(self):
-        for name, value in self.__dict__.items():
-            if not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
-                raise ValueError(f"MotionModel.{name}: expected a positive number, got {value!r}")
+        check_numbers("MotionModel", self, self.__dataclass_fields__)
 
 
 def step_twist(T1: gtsam.Pose3, T2: gtsam.Pose3, jacobians: bool = False):

@@ -130,3 +130,30 @@ def test_vehicle_behind_a_camera_fails_with_its_name(prius, world_T_vehicle):
     result = solve_vehicle(dets, {"front": front, "back": wrong})
     assert result.status == Status.FAILED
     assert "lies behind camera 'back'" in result.message
+
+
+def test_ground_plane_holds_the_vehicle_on_the_road():
+    """A scene's road plane: solve_scene adds the ground factor; hubs at the wheel radius, roll and pitch ~0."""
+    import dataclasses
+
+    from vfactor.metrics import pose_errors
+    from vfactor.sim import load_scenario, simulate
+    from vfactor.solve import solve_scene
+
+    sim = simulate(dataclasses.replace(load_scenario("accuracy_2cam"), ground_plane=True), seed=2, num_frames=14)
+    assert sim.scene.ground_plane is not None
+    free = dataclasses.replace(sim.scene, ground_plane=None)
+    tilt, height, rotation = {}, {}, {}
+    for name, scene in (("plane", sim.scene), ("free", free)):
+        tilt[name], height[name], rotation[name] = [], [], []
+        for f, frame in enumerate(solve_scene(scene, SolveOptions(covariance=False))):
+            for v in frame.vehicles:
+                truth = sim.truth[f][v.id]
+                R = v.world_T_vehicle.rotation()
+                tilt[name].append(np.degrees(np.hypot(R.roll(), R.pitch())))
+                height[name].append(abs(v.world_T_vehicle.translation()[2] - truth.wheel_radius))
+                rotation[name].append(pose_errors(v.world_T_vehicle, v.keypoints_world, truth.world_T_vehicle,
+                                                  truth.keypoints_world)["rotation_deg"])
+    assert np.mean(tilt["plane"]) < 1.0 < np.mean(tilt["free"])
+    assert np.mean(height["plane"]) < 0.06 and np.mean(height["plane"]) < np.mean(height["free"])
+    assert np.mean(rotation["plane"]) < 0.8 * np.mean(rotation["free"])

@@ -18,6 +18,7 @@ from vfactor.camera import Camera
 from vfactor.errors import InputError, check_numbers
 from vfactor.factors.body_frame import body_frame_factor
 from vfactor.factors.distance_bounds import distance_bounds_term
+from vfactor.factors.ground_plane import GroundPlane, ground_plane_factor
 from vfactor.factors.layer_offset import layer_offset_term
 from vfactor.factors.planarity import layer_plane_term
 from vfactor.factors.projection import KeypointObservations, projection_factor
@@ -38,6 +39,8 @@ __all__ = [
     "observations_from_detections",
     "add_shape_factors",
     "add_observation_factor",
+    "add_ground_factor",
+    "ground_factor",
     "insert_vehicle_values",
     "build_vehicle_graph",
     "copy_graph",
@@ -72,6 +75,10 @@ class GraphConfig:
         rectangle_sigma: wheel-layer rectangle (parallelogram residual), metres.
         trapezoid_sigma_rad, width_ratio_sigma: trapezoid parallel sides and width-ratio hinge.
         hinge_sigma: distance and layer-offset hinges beyond their bounds, metres.
+        hub_height: height of the wheel hubs above the road (the ground-plane
+            factor, when a road plane is given), metres.
+        ground_sigma_height: that height's sigma (it also covers the unknown wheel radius), metres.
+        ground_sigma_tilt: roll and pitch against the road plane's, radians.
     """
 
     relative_pixel_sigma: float = 0.03
@@ -88,12 +95,15 @@ class GraphConfig:
     trapezoid_sigma_rad: float = 0.05
     width_ratio_sigma: float = 0.02
     hinge_sigma: float = 0.01
+    hub_height: float = 0.34
+    ground_sigma_height: float = 0.06
+    ground_sigma_tilt: float = 0.03
 
     def __post_init__(self):
         check_numbers("GraphConfig", self, (
             "relative_pixel_sigma", "min_pixel_sigma", "symmetry_sigma", "body_frame_sigma", "shape_prior_weight",
             "plane_sigma_m", "plane_sigma_rad", "rectangle_sigma", "trapezoid_sigma_rad", "width_ratio_sigma",
-            "hinge_sigma", "hwc_tolerance",
+            "hinge_sigma", "hwc_tolerance", "hub_height", "ground_sigma_height", "ground_sigma_tilt",
         ))
         if self.hwc not in ("always", "lazy", "off"):
             raise ValueError(f"GraphConfig.hwc: expected 'always', 'lazy' or 'off', got {self.hwc!r}")
@@ -201,6 +211,24 @@ def add_observation_factor(
         graph.add(projection_factor(keys.pose_key(vehicle, frame), keys.layer_keys(vehicle), observations, config.loss))
 
 
+def add_ground_factor(
+    graph: gtsam.NonlinearFactorGraph,
+    keys: KeyScheme,
+    plane: GroundPlane | None,
+    vehicle: int = 0,
+    frame: int = 0,
+    config: GraphConfig = GraphConfig(),
+) -> None:
+    """Adds the ground-plane factor of one pose (hubs at ``config.hub_height`` above ``plane``); no-op without a plane."""
+    if plane is not None:
+        graph.add(ground_factor(keys.pose_key(vehicle, frame), plane, config))
+
+
+def ground_factor(pose_key: int, plane: GroundPlane, config: GraphConfig = GraphConfig()) -> gtsam.NonlinearFactor:
+    """The ground-plane factor of the pose ``pose_key`` with ``config``'s hub height and sigmas."""
+    return ground_plane_factor(pose_key, plane, config.hub_height, config.ground_sigma_height, config.ground_sigma_tilt)
+
+
 def insert_vehicle_values(
     values: gtsam.Values,
     keys: KeyScheme,
@@ -244,9 +272,11 @@ def build_vehicle_graph(
     config: GraphConfig = GraphConfig(),
     prior: ShapePrior | None = None,
     bounds: HwcBounds | None = None,
+    ground_plane: GroundPlane | None = None,
 ) -> gtsam.NonlinearFactorGraph:
-    """The one-frame graph of one vehicle: projection factor plus shape factors."""
+    """The one-frame graph of one vehicle: projection factor, shape factors and, given a road plane, the ground factor."""
     graph = gtsam.NonlinearFactorGraph()
     add_observation_factor(graph, keys, observations, vehicle, frame, config)
     add_shape_factors(graph, keys, vehicle, config, prior, bounds)
+    add_ground_factor(graph, keys, ground_plane, vehicle, frame, config)
     return graph

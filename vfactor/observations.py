@@ -92,8 +92,8 @@ class Scene:
         cameras: camera name -> :class:`Camera`, in file order.
         frames: frames in file order.
         base_dir: folder that relative paths in the scene (heatmaps, images) start from.
-        ground_plane: the road plane when the scene gives one (tracking then adds
-            a ground-plane factor per pose); ``None`` otherwise.
+        ground_plane: the road plane when the scene gives one (``solve_scene`` and
+            ``track_scene`` then add a ground-plane factor per pose); ``None`` otherwise.
     """
 
     cameras: dict[str, Camera]

@@ -8,6 +8,7 @@ still solved; :func:`solve_scene` does every frame.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -16,6 +17,7 @@ import numpy as np
 
 from vfactor.camera import Camera
 from vfactor.errors import InputError
+from vfactor.factors.ground_plane import GroundPlane
 from vfactor.factors.projection import KeypointObservations, whitened_residuals
 from vfactor.graph import (
     GraphConfig,
@@ -54,6 +56,10 @@ class SolveOptions:
             vehicle ``degenerate``.
         min_keypoints_in_one_view: at least one camera must see this many
             keypoints (or enough must triangulate) to start without a pose guess.
+        ground_plane: the road plane (world frame): the ground-plane factor
+            holds the hubs at ``graph.hub_height`` above it and roll and pitch
+            near its (docs/factors.md). ``None``: no ground factor; ``solve_scene``
+            then uses the scene's plane when it gives one.
     """
 
     graph: GraphConfig = field(default_factory=GraphConfig)
@@ -64,6 +70,7 @@ class SolveOptions:
     covariance: bool = True
     min_observations: int = 6
     min_keypoints_in_one_view: int = 4
+    ground_plane: GroundPlane | None = None
 
     def lm_params(self) -> gtsam.LevenbergMarquardtParams:
         params = gtsam.LevenbergMarquardtParams()
@@ -145,7 +152,8 @@ def solve_observations(
                 ),
             )
         starts = [(c.world_T_vehicle, c.wireframe) for c in candidates]
-    graph = build_vehicle_graph(obs, keys, config=options.graph, prior=prior, bounds=bounds)
+    graph = build_vehicle_graph(obs, keys, config=options.graph, prior=prior, bounds=bounds,
+                                ground_plane=options.ground_plane)
     terms = hwc_terms(options.graph, bounds)
     hwc = hwc_factor(keys, 0, terms=terms)
     best = None
@@ -301,11 +309,16 @@ def solve_scene(
 ) -> list[FrameResult]:
     """Solves every frame of a scene on its own (``vfactor solve``).
 
+    When the scene gives a road plane and ``options.ground_plane`` is None, the
+    scene's plane is used (the ground-plane factor on every vehicle).
+
     Raises:
         InputError: a detection still waits for the keypoint network
             (:meth:`~vfactor.observations.Scene.require_keypoints`).
     """
     scene.require_keypoints()
+    if options.ground_plane is None and scene.ground_plane is not None:
+        options = dataclasses.replace(options, ground_plane=scene.ground_plane)
     out = []
     for i, frame in enumerate(scene.frames):
         out.append(solve_frame(frame, scene.cameras, options, **kwargs))

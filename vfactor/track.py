@@ -28,7 +28,6 @@ import numpy as np
 
 from vfactor.camera import Camera
 from vfactor.errors import InputError
-from vfactor.factors.ground_plane import GroundPlane, ground_plane_factor
 from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomic_factor
 from vfactor.factors.projection import KeypointObservations
 from vfactor.graph import (
@@ -36,6 +35,7 @@ from vfactor.graph import (
     add_observation_factor,
     add_shape_factors,
     copy_graph,
+    ground_factor,
     hwc_factor,
     hwc_terms,
     hwc_violation,
@@ -66,9 +66,10 @@ class TrackOptions:
         motion: the vehicle motion model.
         lag: fixed lag in seconds (poses older than this are marginalised out,
             so memory and time per frame stay flat); ``None`` keeps every pose.
-        ground_plane: road plane for the ground-plane factor; ``None`` uses the
-            scene's plane if it gives one, else no ground factor.
-        hub_height, sigma_height, sigma_tilt: ground-plane factor settings (m, m, rad).
+        The road plane of the ground-plane factor is ``solve.ground_plane``
+        (``track_scene`` and ``smooth_scene`` fill it from the scene when it gives
+        one); its settings are ``solve.graph``'s ``hub_height``,
+        ``ground_sigma_height`` and ``ground_sigma_tilt``.
         max_updates: at most this many extra iSAM2 ``update()`` calls per frame,
             until no pose of the track moves more than ``update_tolerance``.
         update_tolerance: metres (and radians) below which extra updates stop.
@@ -90,10 +91,6 @@ class TrackOptions:
     solve: SolveOptions = field(default_factory=lambda: SolveOptions(graph=GraphConfig(shape_prior_weight=0.3)))
     motion: MotionModel = field(default_factory=MotionModel)
     lag: float | None = None
-    ground_plane: GroundPlane | None = None
-    hub_height: float = 0.34
-    sigma_height: float = 0.06
-    sigma_tilt: float = 0.03
     max_updates: int = 10
     update_tolerance: float = 1e-4
     relinearize_threshold: float = 1e-4
@@ -163,7 +160,6 @@ class Tracker:
         self.prior = prior or default_shape_prior()
         self.bounds = bounds or default_hwc_bounds()
         self.keys = keys
-        self.ground_plane = options.ground_plane
         self._terms = hwc_terms(options.solve.graph, self.bounds)
         self._tracks: dict[str, _TrackState] = {}
         self._frame_counter = 0
@@ -253,9 +249,8 @@ class Tracker:
                 _, t0, k0 = track.poses[-2]
                 if self.options.lag is None or t - t0 < self.options.lag:
                     graph.add(acceleration_factor(k0, k1, key, t1 - t0, t - t1, motion))
-        if self.ground_plane is not None:
-            graph.add(ground_plane_factor(key, self.ground_plane, self.options.hub_height,
-                                          self.options.sigma_height, self.options.sigma_tilt))
+        if self.options.solve.ground_plane is not None:
+            graph.add(ground_factor(key, self.options.solve.ground_plane, self.options.solve.graph))
 
     def _motion_fixes_pose(self, track: _TrackState, t: float) -> bool:
         """Whether a new pose at ``t`` gets both motion factors (it has two earlier poses inside the lag)."""
@@ -449,8 +444,7 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
     if order != sorted(order):
         moved = [i for pos, i in enumerate(order) if i != pos]
         messages.append(f"frames are not in time order (e.g. frames[{moved[0]}]); tracked in time order")
-    if options.ground_plane is None and scene.ground_plane is not None:
-        options = dataclasses.replace(options, ground_plane=scene.ground_plane)
+    options = _with_scene_plane(options, scene)
     tracker = Tracker(scene.cameras, options, **kwargs)
     online: dict[int, FrameResult] = {}
     final: dict[tuple[int, str], VehicleResult] = {}
@@ -483,6 +477,13 @@ def _refresh(final: dict, estimates: dict) -> None:
         final[key] = v
 
 
+def _with_scene_plane(options: TrackOptions, scene: Scene) -> TrackOptions:
+    """The options with the scene's road plane when they name none and the scene gives one."""
+    if options.solve.ground_plane is None and scene.ground_plane is not None:
+        return dataclasses.replace(options, solve=dataclasses.replace(options.solve, ground_plane=scene.ground_plane))
+    return options
+
+
 def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: ShapePrior | None = None,
                  bounds: HwcBounds | None = None) -> list[FrameResult]:
     """Batch smoothing: every track's whole graph solved at once by Levenberg-Marquardt.
@@ -499,7 +500,8 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
     prior = prior or default_shape_prior()
     bounds = bounds or default_hwc_bounds()
     order = frame_order(scene)
-    plane = options.ground_plane or scene.ground_plane
+    options = _with_scene_plane(options, scene)
+    plane = options.solve.ground_plane
     keys = KeyScheme()
     config = options.solve.graph
     per_track: dict[str, list] = {}
@@ -533,7 +535,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
                     graph.add(acceleration_factor(posed[-2][2], posed[-1][2], key, posed[-1][1] - posed[-2][1],
                                                   t - posed[-1][1], options.motion))
             if plane is not None:
-                graph.add(ground_plane_factor(key, plane, options.hub_height, options.sigma_height, options.sigma_tilt))
+                graph.add(ground_factor(key, plane, config))
             values.insert(key, guess)
             posed.append((i, t, key))
         if not posed:

@@ -63,7 +63,8 @@ SCENARIO_FIELDS: dict[str, str] = {
     "num_frames": "integer >= 1 (default 10)",
     "dt": "seconds between frames (default 0.1)",
     "seed": "integer >= 0 (default 0)",
-    "ground_plane": "true to write the road plane z = 0 into the scene (tracking then adds a ground-plane factor); "
+    "ground_plane": "true to write the road plane z = 0 into the scene (solving and tracking then add a ground-plane "
+    "factor); "
     "default false",
     "motion": 'null (default: independent frames), {"speed": [min, max] m/s, "yaw_rate_deg": [min, max] deg/s} '
     '(constant speed and turn rate) or {"kind": "route", ...} '

@@ -422,6 +422,8 @@ def _demo_images(sim, out: Path):
         rendered = render_simulation(sim, out, seed=sim.seed, progress=_Progress("rendering"))
     except RenderingUnavailable as exc:
         raise InputError("--images", f"cannot render: {exc}") from None
+    except ValueError as exc:  # e.g. a scenario camera without image_size
+        raise InputError("--images", str(exc)) from None
     print(f"rendered {sum(len(f.images) for f in rendered.scene.frames)} camera images into {out / 'images'}/ "
           f"({time.perf_counter() - t0:.1f} s); boxes only in {rendered.path}")
     t0 = time.perf_counter()

@@ -74,7 +74,7 @@ def detect_scene(
         scene: the scene (from :func:`vfactor.scene.load_scene`, or made in code).
         detector: a :class:`~vfactor.net.infer.KeypointDetector`; None: the shipped weights.
         heatmaps_dir: when given, each detection's heatmaps are saved there as
-            ``f<frame>_<camera>_<vehicle>.npy`` and the detection names the file,
+            ``f<frame>_d<detection index>_<camera>_<vehicle>.npy`` and the detection names the file,
             with ``roi`` set to the box the heatmaps cover (the given box grown
             and squared as the detector crops it), so that
             :func:`vfactor.scene.save_scene` writes a scene that reloads to the
@@ -119,7 +119,7 @@ def detect_scene(
                 changes = dict(keypoints=np.asarray(kp.uv, float), confidence=np.asarray(kp.confidence, float),
                                covariance=np.asarray(kp.covariance, float), from_image=False)
                 if out_dir is not None:
-                    path = out_dir / f"f{f:04d}_{det.camera}_{_safe(det.vehicle)}.npy"
+                    path = out_dir / f"f{f:04d}_d{j:02d}_{_safe(det.camera)}_{_safe(det.vehicle)}.npy"
                     np.save(path, np.asarray(result.heatmaps, np.float32))
                     changes.update(heatmaps=str(path.resolve()), roi=tuple(float(b) for b in result.roi))
                 detections[j] = dataclasses.replace(det, **changes)
@@ -137,5 +137,5 @@ def _image_path(path: str | None, base_dir: Path | None) -> Path | None:
 
 
 def _safe(name: str) -> str:
-    """A track id as a file-name part (letters, digits, '-', '_'; others become '_')."""
+    """A name as a file-name part (letters, digits, '-', '_'; others become '_')."""
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in name) or "_"

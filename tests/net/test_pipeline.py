@@ -163,3 +163,33 @@ def test_cli_eval_images(rendered, tmp_path, capsys):
     assert "vfactor eval images --frames 2 --seed 4" in text
     for method in ("factor_graph", "triangulation", "pnp", "known_shape", "factor_graph_simulated_noise"):
         assert f"| {method} | 2 |" in text
+
+
+def test_lens_distortion_end_to_end(rendered, detector, tmp_path):
+    """Barrel-distorted cameras: rendered with the distortion, keypoints found in the distorted image, the
+    projection factors undo it."""
+    import dataclasses
+
+    from vfactor.render.scenes import render_simulation
+
+    sim = simulate("intersection_2cam", seed=6, num_frames=2)
+    cameras = {name: dataclasses.replace(cam, dist=np.array([-0.25, 0.08, 0.0, 0.0, 0.0]))
+               for name, cam in sim.scene.cameras.items()}
+    sim = dataclasses.replace(sim, scene=dataclasses.replace(sim.scene, cameras=cameras))
+    r = render_simulation(sim, tmp_path, seed=6)
+    detected = detect_scene(r.scene, detector)
+    for f, frame in enumerate(detected.frames):
+        for det in frame.detections:
+            key = (det.camera, det.vehicle)
+            # The true keypoints are projected with the distortion: the network finds them there.
+            np.testing.assert_allclose(r.keypoints_true[f][key],
+                                       cameras[det.camera].project(sim.truth[f][det.vehicle].keypoints_world)[0])
+            visible = r.visible[f][key] & (det.confidence > 0)
+            x0, y0, x1, y1 = detector.crop_box(r.boxes_true[f][key])
+            px = np.linalg.norm(det.keypoints[visible] - r.keypoints_true[f][key][visible], axis=1)
+            assert np.mean(px <= 0.1 * (x1 - x0)) >= 0.75
+    for f, frame_result in enumerate(solve_scene(detected)):
+        for v in frame_result.vehicles:
+            truth = sim.truth[f][v.id]
+            e = pose_errors(v.world_T_vehicle, v.keypoints_world, truth.world_T_vehicle, truth.keypoints_world)
+            assert v.ok and e["rotation_deg"] < 6.0 and e["translation_cm"] < 40.0, (f, e)

@@ -193,3 +193,14 @@ def test_lens_distortion_end_to_end(rendered, detector, tmp_path):
             truth = sim.truth[f][v.id]
             e = pose_errors(v.world_T_vehicle, v.keypoints_world, truth.world_T_vehicle, truth.keypoints_world)
             assert v.ok and e["rotation_deg"] < 6.0 and e["translation_cm"] < 40.0, (f, e)
+
+
+def test_eval_images_tracks_a_multi_frame_scenario(rendered):
+    from vfactor.net.end_to_end import evaluate_images, images_report
+
+    evaluation = evaluate_images("intersection_2cam_track", frames=3, seed=1)
+    assert evaluation["tracking"] is not None
+    assert set(evaluation["tracking"]["errors"]) == {"frame_by_frame", "isam2_online", "isam2", "isam2_lag", "batch"}
+    isam2 = [r for r in evaluation["tracking"]["errors"]["isam2"] if "rotation_deg" in r]
+    assert len(isam2) == 3 and np.mean([r["rotation_deg"] for r in isam2]) < 5.0
+    assert "Tracking from the network's keypoints" in images_report(evaluation)

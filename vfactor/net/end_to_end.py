@@ -9,6 +9,9 @@ methods of :mod:`vfactor.evaluation` (factor graph, triangulation, PnP, the
 known-shape reference) on the network's keypoints. Beside them, the factor
 graph on the simulator's own keypoints (paper-like noise on the true
 projections) shows how the network's errors compare with that noise model.
+A scenario with tracks (vehicles seen over several frames) is also tracked
+from the network's keypoints (:func:`vfactor.evaluation.compare_tracking`:
+iSAM2, fixed lag and batch smoothing beside frame-by-frame solving).
 ``vfactor eval images`` is the command; it needs torch and moderngl.
 """
 
@@ -20,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vfactor.evaluation import accuracy_table, compare_methods, summarise_methods
+from vfactor.evaluation import accuracy_table, compare_methods, compare_tracking, summarise_methods, tracking_table
 from vfactor.net.evaluate import pck
 from vfactor.net.pipeline import detect_scene
 from vfactor.sim import load_scenario, simulate
@@ -92,9 +95,10 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
 
     Returns:
         ``{"scenario", "seed", "frames", "keypoints": keypoint_accuracy(...),
-        "summary": method -> summarise_methods row}``; the methods are
-        ``factor_graph``, ``triangulation``, ``pnp``, ``known_shape`` on the network's
-        keypoints and ``factor_graph_simulated_noise`` on the simulator's keypoints.
+        "summary": method -> summarise_methods row, "tracking": compare_tracking(...) or None}``;
+        the methods are ``factor_graph``, ``triangulation``, ``pnp``, ``known_shape`` on the
+        network's keypoints and ``factor_graph_simulated_noise`` on the simulator's keypoints;
+        ``tracking`` is given when some vehicle is seen in more than one frame.
     """
     from vfactor.net.infer import KeypointDetector
     from vfactor.render.scenes import render_simulation
@@ -108,8 +112,10 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
     keypoints = keypoint_accuracy(detected, rendered, detector.crop_box)
     rows = compare_methods(dataclasses.replace(sim, scene=detected), options)
     rows["factor_graph_simulated_noise"] = compare_methods(sim, options, methods=("factor_graph",))["factor_graph"]
+    tracked = any(len(sim.vehicle_frames(vid)) > 1 for vid in {v for truth in sim.truth for v in truth})
+    tracking = compare_tracking(dataclasses.replace(sim, scene=detected)) if tracked else None
     return {"scenario": sim.scenario.name, "seed": seed, "frames": len(sim.scene.frames), "keypoints": keypoints,
-            "summary": summarise_methods(rows)}
+            "summary": summarise_methods(rows), "tracking": tracking}
 
 
 def images_report(evaluation: dict) -> str:
@@ -125,4 +131,6 @@ def images_report(evaluation: dict) -> str:
         f"{accuracy_table(evaluation['summary'])}\n\n"
         "factor_graph_simulated_noise: the factor graph on the simulator's keypoints (paper-like noise) of the "
         "same vehicles, for comparison with the network's keypoints.\n"
+        + (f"\nTracking from the network's keypoints:\n\n{tracking_table(evaluation['tracking'])}\n"
+           if evaluation.get("tracking") else "")
     )

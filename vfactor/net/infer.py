@@ -77,7 +77,7 @@ class KeypointDetector:
             heatmaps, flipped back with left and right keypoints swapped
             (:data:`vfactor.keypoints.MIRROR_PERMUTATION`), with the crop's own:
             twice the network time for less noisy keypoints (on rendered
-            two-camera scenes the pose error falls by about 9 %, see
+            two-camera scenes the pose error falls by about 8 %, see
             docs/results.md). The shipped calibration was fitted with it on.
 
     Attributes:

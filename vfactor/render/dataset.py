@@ -131,6 +131,10 @@ class SampleOptions:
         distance: horizontal camera-to-vehicle distance range.
         margin: range of the fraction added to the vehicle box (per side, of the box's larger side).
         jitter: ROI centre jitter, fraction of the ROI side (kept so the box stays inside the ROI).
+        edge_probability: chance that the vehicle's centre is put at an image border (within 8 % of the
+            image's side outside or inside one of the four edges), so that the image cuts the vehicle: the crop's part
+            outside the full image is black, as a zero-padded crop of a real image (vehicles entering
+            or leaving a camera's view). Otherwise the centre lands in the middle 70 % x 60 % of the image.
         square: square ROIs (the box's larger side); else the box's own aspect, resized anisotropically.
         other_vehicles: probabilities of 0, 1, 2, 3 other vehicles near the target.
         occluder_probability: chance of a prop between the camera and the target.
@@ -150,6 +154,7 @@ class SampleOptions:
     distance: tuple = (10.0, 40.0)
     margin: tuple = (0.10, 0.30)
     jitter: float = 0.05
+    edge_probability: float = 0.2
     square: bool = True
     other_vehicles: tuple = (0.35, 0.3, 0.2, 0.15)
     occluder_probability: float = 0.35
@@ -481,9 +486,16 @@ def random_training_sample(
     eye = np.array([centre[0] + distance * math.cos(direction), centre[1] + distance * math.sin(direction), height])
     hfov = float(rng.uniform(*o.hfov_deg))
     K = intrinsics_from_hfov(hfov, o.image_size)
-    # Aim so that the vehicle lands at a random place of the image (pan/tilt), then a little roll.
+    # Aim so that the vehicle lands at a random place of the image (pan/tilt), then a little roll;
+    # sometimes at a border, cut by the image.
     u_t = rng.uniform(0.15, 0.85) * o.image_size[0]
     v_t = rng.uniform(0.2, 0.8) * o.image_size[1]
+    at_edge, edge, depth = rng.uniform() < o.edge_probability, int(rng.integers(4)), float(rng.uniform(-0.08, 0.08))
+    if at_edge:
+        if edge < 2:  # left or right
+            u_t = (depth if edge == 0 else 1.0 - depth) * o.image_size[0]
+        else:  # top or bottom
+            v_t = (depth if edge == 2 else 1.0 - depth) * o.image_size[1]
     pan = math.atan2(u_t - K[0, 2], K[0, 0])
     tilt = math.atan2(v_t - K[1, 2], K[1, 1])
     to_vehicle = centre - eye
@@ -575,6 +587,7 @@ def random_training_sample(
         "hfov_deg": hfov,
         "margin": margin,
         "jitter": jitter.tolist(),
+        "at_edge": bool(at_edge),
         "box": box.tolist(),
         "other_vehicles": len(others),
         "props": len(props),

@@ -58,6 +58,9 @@ __all__ = [
     "RenderedDataset",
     "random_training_sample",
     "random_vehicle",
+    "random_appearance",
+    "random_light",
+    "random_ground",
     "roi_from_box",
     "crop_camera",
     "make_dataset",
@@ -281,12 +284,14 @@ def random_vehicle(rng: np.random.Generator, split: SplitSpec = TRAIN, max_tries
     raise RuntimeError(f"random_vehicle: no valid shape in {max_tries} draws for split {split.name!r}")
 
 
-def _random_appearance(rng, split: SplitSpec) -> Appearance:
+def random_appearance(rng, split: SplitSpec) -> Appearance:
+    """A random paint (in the split's colour bins) and details."""
     paint = random_paint(rng, hue_ok=split.hue_ok, grey_ok=split.grey_ok)
     return Appearance.random(rng, paint=paint)
 
 
-def _random_light(rng) -> Light:
+def random_light(rng) -> Light:
+    """A random sun (15-75 deg elevation) and sky, or an overcast sky (30 %)."""
     overcast = rng.uniform() < 0.3
     elev = np.radians(rng.uniform(15.0, 75.0))
     az = rng.uniform(0.0, 2 * np.pi)
@@ -310,7 +315,8 @@ def _road_bank() -> tuple:
     return tuple(road_texture(np.random.default_rng(10_000 + i), 256, lanes=i % 4 != 3) for i in range(_ROAD_BANK_SIZE))
 
 
-def _random_ground(rng) -> Ground:
+def random_ground(rng) -> Ground:
+    """A road texture from the fixed bank, randomly tiled, placed, turned and tinted."""
     tex = _road_bank()[int(rng.integers(_ROAD_BANK_SIZE))]
     tint = rng.uniform(0.75, 1.25) * rng.uniform(0.92, 1.08, 3)
     return Ground(texture=tex, tile=float(rng.uniform(6.0, 16.0)), origin=tuple(rng.uniform(-50, 50, 2)),
@@ -423,7 +429,7 @@ def _place_others(rng, split, target_fp, target_xy, yaw, camera_xy, count):
             if any(footprints_overlap(fp, q, gap=0.2) for q in placed):
                 continue
             placed.append(fp)
-            others.append(VehicleInstance(wf, pose, _random_appearance(rng, split), radius))
+            others.append(VehicleInstance(wf, pose, random_appearance(rng, split), radius))
             break
     return others
 
@@ -465,7 +471,7 @@ def random_training_sample(
     o = options
     # --- the target vehicle
     wf, radius, source = random_vehicle(rng, split)
-    appearance = _random_appearance(rng, split)
+    appearance = random_appearance(rng, split)
     yaw = float(rng.uniform(0.0, 2 * np.pi))
     target_xy = rng.uniform(-3.0, 3.0, 2)
     pose = road_pose(target_xy[0], target_xy[1], yaw, radius)
@@ -530,8 +536,8 @@ def random_training_sample(
         length = float(np.ptp(wf.vehicle_p_keypoints[:, 0]))
         props += _random_prop(rng, eye[:2], centre[:2], length)
     scenery = _road_decals(rng, centre[:2], yaw) + _kerb(rng, centre[:2], yaw)
-    light = _random_light(rng)
-    ground = _random_ground(rng)
+    light = random_light(rng)
+    ground = random_ground(rng)
     texture_seed = float(rng.uniform(0, 100))
 
     # --- annotations (exact ray tests, before rendering); drop occluders that hide too much

@@ -32,7 +32,7 @@ import cv2
 import numpy as np
 
 from vfactor.observations import Detection, Frame, Scene
-from vfactor.render.dataset import HELD_OUT, SplitSpec, _random_appearance, _random_ground, _random_light
+from vfactor.render.dataset import HELD_OUT, SplitSpec, random_appearance, random_ground, random_light
 from vfactor.render.renderer import Renderer
 from vfactor.scene import save_scene
 from vfactor.sim import Simulation
@@ -98,9 +98,9 @@ def render_simulation(
     out_dir = Path(out_dir)
     (out_dir / "images").mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
-    light, ground = _random_light(rng), _random_ground(rng)
+    light, ground = random_light(rng), random_ground(rng)
     ids = list(dict.fromkeys(vid for truth in sim.truth for vid in truth))
-    appearance = {vid: _random_appearance(rng, split) for vid in ids}
+    appearance = {vid: random_appearance(rng, split) for vid in ids}
     renderers: dict[tuple[int, int], Renderer] = {}
     frames, boxes_true, keypoints_true, visible = [], [], [], []
     total, done = len(sim.scene.frames) * len(sim.scene.cameras), 0

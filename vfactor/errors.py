@@ -10,6 +10,9 @@ exit code 2.
 from __future__ import annotations
 
 import math
+import numbers
+
+import numpy as np
 
 __all__ = ["InputError", "SceneError", "CalibrationError", "ScenarioError", "check_numbers"]
 
@@ -63,10 +66,11 @@ def check_numbers(owner: str, obj, names, minimum: float = 0.0, strict: bool = T
 
     Raises:
         ValueError: ``"<owner>.<name>: expected a number > <minimum>, got <value>"`` for the
-            first attribute that is not a finite int or float (bools are refused) above the bound.
+            first attribute that is not a finite real number (Python's or NumPy's; bools are refused)
+            above the bound.
     """
     for name in names:
         value = getattr(obj, name)
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        ok = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) and math.isfinite(value)
         if not ok or (value <= minimum if strict else value < minimum):
             raise ValueError(f"{owner}.{name}: expected a number {'>' if strict else '>='} {minimum:g}, got {value!r}")

@@ -6,6 +6,7 @@ scene files, :mod:`vfactor.sim` makes them, the solvers read them.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -15,11 +16,20 @@ from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.ground_plane import GroundPlane
 
-__all__ = ["DEFAULT_VEHICLE_ID", "Detection", "Frame", "Scene"]
+__all__ = ["DEFAULT_VEHICLE_ID", "Detection", "Frame", "Scene", "resolve_path"]
 
 #: Track id given to the vehicle of a detection that names none (allowed when
 #: its frame holds a single vehicle).
 DEFAULT_VEHICLE_ID = "vehicle"
+
+
+def resolve_path(path: str | Path, base_dir: str | Path | None = None) -> Path:
+    """An absolute path for a path of a scene (heatmaps, images): relative ones start at ``base_dir``
+    (the scene file's folder; the current directory when None)."""
+    p = Path(path)
+    if not p.is_absolute():
+        p = Path(base_dir if base_dir is not None else Path.cwd()) / p
+    return Path(os.path.abspath(p))
 
 
 @dataclass

@@ -46,7 +46,7 @@ from vfactor.factors.ground_plane import GroundPlane
 from vfactor.errors import CalibrationError, SceneError
 from vfactor.heatmaps import decode_heatmaps
 from vfactor.keypoints import NUM_KEYPOINTS
-from vfactor.observations import DEFAULT_VEHICLE_ID, Detection, Frame, Scene
+from vfactor.observations import DEFAULT_VEHICLE_ID, Detection, Frame, Scene, resolve_path
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.wireframe import Wireframe
 
@@ -872,17 +872,10 @@ def _matrix(value, path: str, shape: tuple[int, int], what: str | None = None) -
     return np.array(value, dtype=float)
 
 
-def _resolve(path_str: str, base: Path | None) -> str:
-    p = Path(path_str)
-    if not p.is_absolute():
-        p = (base if base is not None else Path(os.getcwd())) / p
-    return os.path.abspath(p)
-
-
 def _existing_file(value, path: str, base: Path, what: str) -> str:
     if not isinstance(value, str) or not value:
         raise SceneError(path, f"expected {what} (a string), got {_kind(value)}")
-    resolved = _resolve(value, base)
+    resolved = str(resolve_path(value, base))
     if not os.path.isfile(resolved):
         raise SceneError(path, f"file not found: {resolved}")
     return resolved
@@ -892,7 +885,7 @@ def _path_out(path_str: str, scene_base: Path | None, out_base: Path | None) -> 
     """A held path as written into a file whose relative paths start at ``out_base``."""
     if out_base is None:
         return str(path_str)
-    absolute = _resolve(str(path_str), scene_base)
+    absolute = str(resolve_path(path_str, scene_base))
     try:
         return Path(os.path.relpath(absolute, os.path.abspath(out_base))).as_posix()
     except ValueError:  # another drive (Windows)

@@ -72,6 +72,12 @@ class SolveOptions:
     min_keypoints_in_one_view: int = 4
     ground_plane: GroundPlane | None = None
 
+    def for_scene(self, scene: Scene) -> "SolveOptions":
+        """These options, with the scene's road plane when they name none and the scene gives one."""
+        if self.ground_plane is None and scene.ground_plane is not None:
+            return dataclasses.replace(self, ground_plane=scene.ground_plane)
+        return self
+
     def lm_params(self) -> gtsam.LevenbergMarquardtParams:
         params = gtsam.LevenbergMarquardtParams()
         params.setMaxIterations(self.max_iterations)
@@ -317,8 +323,7 @@ def solve_scene(
             (:meth:`~vfactor.observations.Scene.require_keypoints`).
     """
     scene.require_keypoints()
-    if options.ground_plane is None and scene.ground_plane is not None:
-        options = dataclasses.replace(options, ground_plane=scene.ground_plane)
+    options = options.for_scene(scene)
     out = []
     for i, frame in enumerate(scene.frames):
         out.append(solve_frame(frame, scene.cameras, options, **kwargs))

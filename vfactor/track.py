@@ -444,7 +444,7 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
     if order != sorted(order):
         moved = [i for pos, i in enumerate(order) if i != pos]
         messages.append(f"frames are not in time order (e.g. frames[{moved[0]}]); tracked in time order")
-    options = _with_scene_plane(options, scene)
+    options = dataclasses.replace(options, solve=options.solve.for_scene(scene))
     tracker = Tracker(scene.cameras, options, **kwargs)
     online: dict[int, FrameResult] = {}
     final: dict[tuple[int, str], VehicleResult] = {}
@@ -477,13 +477,6 @@ def _refresh(final: dict, estimates: dict) -> None:
         final[key] = v
 
 
-def _with_scene_plane(options: TrackOptions, scene: Scene) -> TrackOptions:
-    """The options with the scene's road plane when they name none and the scene gives one."""
-    if options.solve.ground_plane is None and scene.ground_plane is not None:
-        return dataclasses.replace(options, solve=dataclasses.replace(options.solve, ground_plane=scene.ground_plane))
-    return options
-
-
 def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: ShapePrior | None = None,
                  bounds: HwcBounds | None = None) -> list[FrameResult]:
     """Batch smoothing: every track's whole graph solved at once by Levenberg-Marquardt.
@@ -500,7 +493,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
     prior = prior or default_shape_prior()
     bounds = bounds or default_hwc_bounds()
     order = frame_order(scene)
-    options = _with_scene_plane(options, scene)
+    options = dataclasses.replace(options, solve=options.solve.for_scene(scene))
     plane = options.solve.ground_plane
     keys = KeyScheme()
     config = options.solve.graph

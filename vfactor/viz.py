@@ -40,7 +40,7 @@ import numpy as np
 
 from vfactor.camera import Camera
 from vfactor.keypoints import NUM_KEYPOINTS, WIREFRAME_EDGES, layer_of
-from vfactor.observations import Detection, Frame
+from vfactor.observations import Detection, Frame, resolve_path
 from vfactor.result import VehicleResult
 from vfactor.wireframe import Wireframe
 
@@ -1451,15 +1451,6 @@ def _time_legend(ax, ids, colour, has_fbf) -> None:
 
 
 # ------------------------------------------------------------------ overlays
-def _resolve(path: str | None, base_dir: Path | None) -> Path | None:
-    if not path:
-        return None
-    p = Path(path)
-    if not p.is_absolute() and base_dir is not None:
-        p = Path(base_dir) / p
-    return p
-
-
 def write_overlays(
     out_dir: str | Path,
     scene_cameras: Mapping[str, Camera],
@@ -1503,7 +1494,8 @@ def write_overlays(
     written = []
     for name, camera in scene_cameras.items():
         img = None
-        image_path = _resolve((frame.images or {}).get(name), base_dir)
+        image = (frame.images or {}).get(name)
+        image_path = resolve_path(image, base_dir) if image else None
         if image_path is not None:
             img = cv2.imread(str(image_path), cv2.IMREAD_COLOR)
             if img is None:
@@ -1519,7 +1511,7 @@ def write_overlays(
             tr = truth[vid][1].in_world(truth[vid][0]) if vid in truth else None
             heat = None
             if show_heatmaps and detection is not None and detection.heatmaps:
-                hp = _resolve(detection.heatmaps, base_dir)
+                hp = resolve_path(detection.heatmaps, base_dir)
                 if hp is not None and hp.is_file():
                     heat = np.load(hp)
                 else:

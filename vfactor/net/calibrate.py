@@ -50,6 +50,7 @@ from typing import Any
 
 import numpy as np
 
+from vfactor.errors import check_numbers
 from vfactor.heatmaps import decode_heatmaps
 from vfactor.net.crop import crop_to_image
 from vfactor.net.targets import in_crop
@@ -102,14 +103,10 @@ class CovarianceCalibration:
     confidence_rate: float = 0.0
 
     def __post_init__(self):
-        checks = {"scale": lambda v: v > 0, "floor": lambda v: v >= 0, "confidence_rate": lambda v: v >= 0}
-        bounds = {"scale": "> 0", "floor": ">= 0", "confidence_rate": ">= 0"}
-        for name, ok in checks.items():
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-                    or not math.isfinite(value) or not ok(value):
-                raise ValueError(f"calibration.{name}: expected a finite number {bounds[name]}, got {value!r}")
-            object.__setattr__(self, name, float(value))
+        check_numbers("calibration", self, ("scale",))
+        check_numbers("calibration", self, ("floor", "confidence_rate"), strict=False)
+        for name in ("scale", "floor", "confidence_rate"):
+            object.__setattr__(self, name, float(getattr(self, name)))
 
     @property
     def is_identity(self) -> bool:

@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from vfactor.errors import SceneError
-from vfactor.observations import Scene
+from vfactor.observations import Scene, resolve_path
 
 __all__ = ["detect_scene", "read_image"]
 
@@ -104,11 +104,12 @@ def detect_scene(
             cams = list(dict.fromkeys(frame.detections[j].camera for j in pending))
             images = []
             for name in cams:
-                path = _image_path((frame.images or {}).get(name), scene.base_dir)
-                if path is None:
+                image = (frame.images or {}).get(name)
+                if image is None:
                     raise SceneError(f"frames[{f}].images.{name}",
                                      "missing: detections of this camera give only a box")
-                images.append(read_image(path, f"frames[{f}].images.{name}", scene.cameras[name].image_size))
+                images.append(read_image(resolve_path(image, scene.base_dir), f"frames[{f}].images.{name}",
+                                          scene.cameras[name].image_size))
             rois = [[frame.detections[j].roi for j in pending if frame.detections[j].camera == name] for name in cams]
             found = detector.detect_batch(images, rois)
             queue = {name: list(dets) for name, dets in zip(cams, found)}
@@ -127,13 +128,6 @@ def detect_scene(
         if progress is not None:
             progress(f + 1, len(scene.frames))
     return dataclasses.replace(scene, frames=frames)
-
-
-def _image_path(path: str | None, base_dir: Path | None) -> Path | None:
-    if path is None:
-        return None
-    p = Path(path)
-    return p if p.is_absolute() or base_dir is None else Path(base_dir) / p
 
 
 def _safe(name: str) -> str:

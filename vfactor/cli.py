@@ -186,23 +186,11 @@ def _net(argv: list[str]) -> int:
 
 
 # ---------------------------------------------------------------------------- helpers
-class _Progress:
-    """A one-line progress bar on stderr (only on a terminal)."""
+def _progress(label: str, enabled: bool = True):
+    """The progress callback of a command: a bar on a terminal, nothing otherwise."""
+    from vfactor.progress import Progress
 
-    def __init__(self, label: str, enabled: bool = True):
-        self.label, self.enabled = label, enabled and sys.stderr.isatty()
-        self.start = time.perf_counter()
-
-    def __call__(self, done: int, total: int) -> None:
-        if not self.enabled:
-            return
-        width = 30
-        filled = int(width * done / max(total, 1))
-        rate = done / max(time.perf_counter() - self.start, 1e-9)
-        sys.stderr.write(f"\r{self.label} [{'#' * filled}{'.' * (width - filled)}] {done}/{total} ({rate:.1f}/s)")
-        if done == total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+    return Progress(desc=label, enabled=enabled, tty_only=True)
 
 
 def _check_positive(value, name):
@@ -262,7 +250,7 @@ def _detect(scene, args):
     if args.save_detections:
         out = Path(args.save_detections)
         heatmaps_dir = out.with_name(out.stem + "_heatmaps")
-    scene = detect_scene(scene, detector, heatmaps_dir=heatmaps_dir, progress=_Progress("keypoints", not args.quiet))
+    scene = detect_scene(scene, detector, heatmaps_dir=heatmaps_dir, progress=_progress("keypoints", not args.quiet))
     if args.save_detections:
         from vfactor.scene import save_scene
 
@@ -282,7 +270,7 @@ def _solve(args) -> int:
     scene = _detect(load_scene(args.scene), args)
     options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
     t0 = time.perf_counter()
-    results = solve_scene(scene, options, progress=_Progress("solving", not args.quiet))
+    results = solve_scene(scene, options, progress=_progress("solving", not args.quiet))
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     save_results(args.out, results)
     vehicles = [v for fr in results for v in fr.vehicles]
@@ -308,7 +296,7 @@ def _track(args) -> int:
     if args.batch:
         results, messages = smooth_scene(scene, options), []
     else:
-        run = track_scene(scene, options, progress=_Progress("tracking", not args.quiet))
+        run = track_scene(scene, options, progress=_progress("tracking", not args.quiet))
         results, messages = (run.online if args.online else run.frames), run.messages
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     save_results(args.out, results)
@@ -419,7 +407,7 @@ def _demo_images(sim, out: Path):
                          "pip install -c constraints.txt -e '.[net,render]'") from None
     t0 = time.perf_counter()
     try:
-        rendered = render_simulation(sim, out, seed=sim.seed, progress=_Progress("rendering"))
+        rendered = render_simulation(sim, out, seed=sim.seed, progress=_progress("rendering"))
     except RenderingUnavailable as exc:
         raise InputError("--images", f"cannot render: {exc}") from None
     except ValueError as exc:  # e.g. a scenario camera without image_size
@@ -493,7 +481,7 @@ def _eval_images(scenario_name: str, frames, seed: int) -> list[str]:
     except ImportError as exc:
         raise InputError("images", f"needs PyTorch and moderngl ({exc}); install them with "
                          "pip install -c constraints.txt -e '.[net,render]'") from None
-    return [images_report(evaluate_images(scenario_name, frames, seed, progress=_Progress("rendering")))]
+    return [images_report(evaluate_images(scenario_name, frames, seed, progress=_progress("rendering")))]
 
 
 def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int) -> list[str]:

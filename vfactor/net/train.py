@@ -37,11 +37,11 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from vfactor.errors import check_numbers
-from vfactor.net._progress import Progress
 from vfactor.net.data import AugmentConfig, KeypointDataset, as_dataset, augment, sample_rng
 from vfactor.net.evaluate import decode_batch, score_predictions
 from vfactor.net.model import StackedHourglass, count_parameters, save_weights
 from vfactor.net.targets import heatmap_targets, keypoint_weights
+from vfactor.progress import Progress
 
 __all__ = ["TrainConfig", "TrainResult", "train", "heatmap_loss", "latest_checkpoint", "evaluate_model"]
 

@@ -856,14 +856,10 @@ def main(argv=None) -> int:
     parser.add_argument("--shard-size", type=int, default=1000)
     parser.add_argument("--workers", type=int, default=1)
     args = parser.parse_args(argv)
+    from vfactor.progress import Progress
+
     start = time.time()
-
-    def progress(done, n):
-        if done == n or done % 50 == 0:
-            rate = done / max(time.time() - start, 1e-9)
-            print(f"\r{done}/{n} samples, {rate:.1f}/s", end="", file=sys.stderr, flush=True)
-
     shards = make_dataset(args.n, args.seed, args.size, args.out, args.held_out, args.shard_size,
-                          progress=progress, workers=args.workers)
-    print(f"\nwrote {len(shards)} shard(s) to {args.out} in {time.time() - start:.1f} s", file=sys.stderr)
+                          progress=Progress(args.n, "samples"), workers=args.workers)
+    print(f"wrote {len(shards)} shard(s) to {args.out} in {time.time() - start:.1f} s", file=sys.stderr)
     return 0

@@ -179,8 +179,7 @@ def _net(argv: list[str]) -> int:
     try:
         from vfactor.net.commands import main as net_main
     except ImportError as exc:
-        print(f"vfactor {argv[0]}: error: the keypoint network needs PyTorch ({exc}); install it with "
-              "pip install -c constraints.txt -e '.[net]'", file=sys.stderr)
+        print(f"vfactor {argv[0]}: error: {_missing_extra('', exc, 'net')}", file=sys.stderr)
         return EXIT_INPUT
     return net_main(argv, prog="vfactor")
 
@@ -191,6 +190,14 @@ def _progress(label: str, enabled: bool = True):
     from vfactor.progress import Progress
 
     return Progress(desc=label, enabled=enabled, tty_only=True)
+
+
+def _missing_extra(field: str, exc: ImportError, extras: str, context: str = "") -> InputError:
+    """The error for a command part that needs an optional extra ("net": PyTorch, "render": moderngl)."""
+    needs = {"net": "PyTorch", "render": "moderngl"}
+    what = " and ".join(needs[e] for e in extras.split(","))
+    return InputError(field, f"{context}this needs {what} ({exc}); install with "
+                             f"pip install -c constraints.txt -e '.[{extras}]'")
 
 
 def _check_positive(value, name):
@@ -238,9 +245,7 @@ def _detect(scene, args):
         from vfactor.net.pipeline import detect_scene
     except ImportError as exc:
         f, j = pending[0]
-        raise InputError(f"frames[{f}].detections[{j}]",
-                         f"given as an image box: the keypoint network needs PyTorch ({exc}); install it with "
-                         "pip install -c constraints.txt -e '.[net]'") from None
+        raise _missing_extra(f"frames[{f}].detections[{j}]", exc, "net", "given as an image box: ") from None
     try:
         detector = KeypointDetector(args.weights)
     except Exception as exc:  # noqa: BLE001 - any failure to read the weights file is bad input
@@ -403,8 +408,7 @@ def _demo_images(sim, out: Path):
         from vfactor.render.scenes import render_simulation
         from vfactor.scene import save_scene
     except ImportError as exc:
-        raise InputError("--images", f"needs PyTorch and moderngl ({exc}); install them with "
-                         "pip install -c constraints.txt -e '.[net,render]'") from None
+        raise _missing_extra("--images", exc, "net,render") from None
     t0 = time.perf_counter()
     try:
         rendered = render_simulation(sim, out, seed=sim.seed, progress=_progress("rendering"))
@@ -479,8 +483,7 @@ def _eval_images(scenario_name: str, frames, seed: int) -> list[str]:
     try:
         from vfactor.net.end_to_end import evaluate_images, images_report
     except ImportError as exc:
-        raise InputError("images", f"needs PyTorch and moderngl ({exc}); install them with "
-                         "pip install -c constraints.txt -e '.[net,render]'") from None
+        raise _missing_extra("images", exc, "net,render") from None
     return [images_report(evaluate_images(scenario_name, frames, seed, progress=_progress("rendering")))]
 
 

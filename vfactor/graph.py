@@ -79,6 +79,14 @@ class GraphConfig:
             factor, when a road plane is given), metres.
         ground_sigma_height: that height's sigma (it also covers the unknown wheel radius), metres.
         ground_sigma_tilt: roll and pitch against the road plane's, radians.
+        truncation: the detector loses keypoints whose pixel falls outside the
+            image, so those it keeps near the border are biased inwards: compare
+            each with the mean of a Gaussian truncated to the image
+            (:mod:`vfactor.factors.truncation`). Applies to detections from
+            cameras with a known ``image_size`` whose seen keypoints all lie in
+            the image (a detector that reports a keypoint outside, as the
+            keypoint network does for vehicles cut by the border, does not
+            truncate).
     """
 
     relative_pixel_sigma: float = 0.03
@@ -98,6 +106,8 @@ class GraphConfig:
     hub_height: float = 0.34
     ground_sigma_height: float = 0.06
     ground_sigma_tilt: float = 0.03
+    truncation: bool = True
+    shape_prior_loss: RobustLoss = field(default_factory=lambda: RobustLoss("none"))
 
     def __post_init__(self):
         check_numbers("GraphConfig", self, (
@@ -107,6 +117,8 @@ class GraphConfig:
         ))
         if self.hwc not in ("always", "lazy", "off"):
             raise ValueError(f"GraphConfig.hwc: expected 'always', 'lazy' or 'off', got {self.hwc!r}")
+        if not isinstance(self.truncation, bool):
+            raise ValueError(f"GraphConfig.truncation: expected True or False, got {self.truncation!r}")
 
 
 def observations_from_detections(
@@ -116,19 +128,22 @@ def observations_from_detections(
 
     The pixel noise of keypoint k is the detection's 2x2 covariance where one is
     given, else isotropic with sigma ``max(min_pixel_sigma, relative_pixel_sigma *
-    box_diagonal) / confidence``.
+    box_diagonal) / confidence``. With ``config.truncation``, a detection whose
+    camera has an ``image_size`` and whose seen keypoints all lie in the image
+    gets the image as its truncation window.
 
     Raises:
         InputError: a detection names a camera that is not in ``cameras``.
     """
     names = list(cameras)
-    cam_idx, kp_idx, uv, sqrt_info = [], [], [], []
+    cam_idx, kp_idx, uv, sqrt_info, window = [], [], [], [], []
     for d in detections:
         if d.camera not in cameras:
             raise InputError("camera", f"unknown camera {d.camera!r}; known: {', '.join(names)}")
         seen = np.flatnonzero(d.confidence > 0)
         if len(seen) == 0:
             continue
+        edges = _truncation_window(cameras[d.camera], d.keypoints[seen]) if config.truncation else None
         base_sigma = max(config.min_pixel_sigma, config.relative_pixel_sigma * d.box_diagonal())
         for k in seen:
             cov = None if d.covariance is None else d.covariance[k]
@@ -140,13 +155,28 @@ def observations_from_detections(
             kp_idx.append(k)
             uv.append(d.keypoints[k])
             sqrt_info.append(L)
+            window.append(edges if edges is not None else _NO_WINDOW)
     return KeypointObservations(
         cameras=tuple(cameras.values()),
         camera_index=np.array(cam_idx, dtype=int),
         keypoint_index=np.array(kp_idx, dtype=int),
         uv=np.array(uv, dtype=float).reshape(-1, 2),
         sqrt_information=np.array(sqrt_info, dtype=float).reshape(-1, 2, 2),
+        window=np.array(window, dtype=float).reshape(-1, 4),
     )
+
+
+_NO_WINDOW = np.full(4, np.nan)
+
+
+def _truncation_window(camera: Camera, uv: np.ndarray) -> np.ndarray | None:
+    """The image's pixel edges ``[u_lo, v_lo, u_hi, v_hi]``, or None (size unknown, or a keypoint lies outside)."""
+    if camera.image_size is None:
+        return None
+    edges = np.array([-0.5, -0.5, camera.image_size[0] - 0.5, camera.image_size[1] - 0.5])
+    if np.any(uv < edges[:2]) or np.any(uv > edges[2:]):
+        return None
+    return edges
 
 
 def hwc_terms(config: GraphConfig = GraphConfig(), bounds: HwcBounds | None = None):
@@ -178,7 +208,8 @@ def add_shape_factors(
     for key in layer_keys:
         graph.add(symmetry_factor(key, config.symmetry_sigma))
     graph.add(rectangle_factor(layer_keys[0], config.rectangle_sigma))
-    graph.add(shape_prior_factor(layer_keys, prior or default_shape_prior(), config.shape_prior_weight))
+    graph.add(shape_prior_factor(layer_keys, prior or default_shape_prior(), config.shape_prior_weight,
+                                 config.shape_prior_loss))
     if config.hwc == "always":
         graph.add(hwc_factor(keys, vehicle, config, bounds))
 

@@ -160,3 +160,53 @@ def test_compiled_kernel_matches_the_numpy_projection_and_loss(name):
     e = whitened_residuals(obs, values.atPose3(KEYS.pose_key()), points)
     s, _ = loss.scale(np.linalg.norm(e, axis=1))
     assert np.allclose(whitened_error(factor, values), (e * s[:, None]).ravel(), rtol=1e-10, atol=1e-10)
+
+
+class TestProjectionTruncated(ProjectionContract):
+    """Observations with a window that cuts through the vehicle: the truncated-mean residual."""
+
+    loss = RobustLoss("cauchy", 2.0)
+
+    @staticmethod
+    def window(obs):
+        # a window whose edges run through the middle of each camera's view of the vehicle
+        centre = obs.uv.mean(axis=0)
+        return np.tile([centre[0] - 20.0, -0.5, 5000.0, centre[1] + 10.0], (len(obs), 1))
+
+    def make_factor(self):
+        obs = observations(2.0, np.random.default_rng(11), self.anisotropic)
+        obs = KeypointObservations(obs.cameras, obs.camera_index, obs.keypoint_index, obs.uv, obs.sqrt_information,
+                                   self.window(obs))
+        return projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss)
+
+    def test_zero_at_truth(self):
+        obs = observations()
+        windowed = KeypointObservations(obs.cameras, obs.camera_index, obs.keypoint_index, obs.uv,
+                                        obs.sqrt_information, self.window(obs))
+        expected, slope = windowed.expected_pixels(obs.uv)
+        assert np.abs(expected - obs.uv).max() > 0.5 and slope.min() < 0.9  # the window matters here
+        at_mean = KeypointObservations(obs.cameras, obs.camera_index, obs.keypoint_index, expected,
+                                       obs.sqrt_information, windowed.window)
+        factor = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), at_mean, self.loss)
+        assert factor.error(self.make_truth_values()) < 1e-12
+
+    def test_kernel_matches_numpy(self):
+        from vfactor.factors.projection import whitened_residuals
+        from vfactor.testing import whitened_error
+
+        factor = self.make_factor()
+        obs = observations(2.0, np.random.default_rng(11))
+        obs = KeypointObservations(obs.cameras, obs.camera_index, obs.keypoint_index, obs.uv, obs.sqrt_information,
+                                   self.window(obs))
+        values = self.make_values(np.random.default_rng(4))
+        points = np.concatenate([values.atVector(k) for k in KEYS.layer_keys()]).reshape(12, 3)
+        e = whitened_residuals(obs, values.atPose3(KEYS.pose_key()), points)
+        s, _ = self.loss.scale(np.linalg.norm(e, axis=1))
+        assert np.allclose(whitened_error(factor, values), (e * s[:, None]).ravel(), rtol=1e-10, atol=1e-10)
+
+
+def test_window_shape_is_checked():
+    obs = observations()
+    with pytest.raises(ValueError, match="window"):
+        KeypointObservations(obs.cameras, obs.camera_index, obs.keypoint_index, obs.uv, obs.sqrt_information,
+                             np.zeros((3, 4)))

@@ -13,8 +13,12 @@ For observation i of keypoint k from camera c (docs/factors.md)::
 
     world_p   = world_T_vehicle * vehicle_p_k          (vehicle_p_k from its layer key)
     camera_p  = camera_T_world * world_p
-    e_i       = L_i (pi_c(camera_p) - uv_i)            (L_i: 2x2 square-root information)
+    e_i       = L_i (m_i(pi_c(camera_p)) - uv_i)       (L_i: 2x2 square-root information)
     r_i       = s(|e_i|) e_i                           (robust loss per observation)
+
+``m_i`` is the identity, or, for an observation with a ``window`` (the detector
+loses keypoints pushed out of the image), the mean of the Gaussian truncated
+to it (:mod:`vfactor.factors.truncation`).
 
 Keys: ``[pose, wheel, light, roof]``.
 """
@@ -31,6 +35,7 @@ from vfactor.camera import Camera, project_pinhole
 from vfactor.factors.projection_kernel import LOSS_IDS, projection_kernel
 from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_terms import cross
+from vfactor.factors.truncation import truncated_means
 
 __all__ = ["KeypointObservations", "projection_factor", "project_keypoints", "whitened_residuals"]
 
@@ -49,6 +54,10 @@ class KeypointObservations:
         uv: (n, 2) measured pixels.
         sqrt_information: (n, 2, 2) ``L`` with ``L^T L`` the inverse pixel
             covariance (1/px).
+        window: optional (n, 4) ``[u_lo, v_lo, u_hi, v_hi]`` pixel edges of the
+            region outside which the detector loses a keypoint (the image:
+            ``[-0.5, -0.5, width - 0.5, height - 0.5]``); NaN rows, or None, for
+            measurements that are not truncated.
     """
 
     cameras: tuple[Camera, ...]
@@ -56,11 +65,23 @@ class KeypointObservations:
     keypoint_index: np.ndarray
     uv: np.ndarray
     sqrt_information: np.ndarray
+    window: np.ndarray | None = None
 
     def __post_init__(self):
         n = len(self.camera_index)
         if not (len(self.keypoint_index) == len(self.uv) == len(self.sqrt_information) == n):
             raise ValueError("KeypointObservations: camera_index, keypoint_index, uv and sqrt_information differ in length")
+        if self.window is not None and np.shape(self.window) != (n, 4):
+            raise ValueError(f"KeypointObservations.window: expected shape ({n}, 4), got {np.shape(self.window)}")
+        # truncation table for the kernel: window (NaN: none) and the marginal pixel sigmas
+        window = np.full((n, 4), np.nan) if self.window is None else np.asarray(self.window, dtype=float)
+        object.__setattr__(self, "_window_table", np.ascontiguousarray(window).reshape(n, 4))
+        truncated = np.isfinite(window[:, 0])
+        sigma = np.ones((n, 2))
+        if truncated.any():
+            L = np.asarray(self.sqrt_information, dtype=float)[truncated]
+            sigma[truncated] = np.sqrt(np.diagonal(np.linalg.inv(np.einsum("nki,nkj->nij", L, L)), axis1=1, axis2=2))
+        object.__setattr__(self, "_sigma_table", sigma)
         # per-observation camera parameters, so that projection is one vectorised pass
         cams = [self.cameras[c] for c in self.camera_index]
         K = np.array([c.K for c in cams]).reshape(n, 3, 3)
@@ -78,8 +99,25 @@ class KeypointObservations:
 
     def subset(self, mask: np.ndarray) -> "KeypointObservations":
         return KeypointObservations(
-            self.cameras, self.camera_index[mask], self.keypoint_index[mask], self.uv[mask], self.sqrt_information[mask]
+            self.cameras, self.camera_index[mask], self.keypoint_index[mask], self.uv[mask], self.sqrt_information[mask],
+            None if self.window is None else self.window[mask],
         )
+
+    def expected_pixels(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """What the detector is expected to measure for predicted pixels ``uv`` (n, 2), and the slope.
+
+        ``uv`` itself where the observation has no window; else the mean of the
+        Gaussian (the observation's marginal sigmas) truncated to the window.
+
+        Returns:
+            (n, 2) expected pixels and (n, 2) their derivative per axis (1 without a window).
+        """
+        m, slope = np.array(uv, dtype=float), np.ones_like(uv, dtype=float)
+        rows = np.isfinite(self._window_table[:, 0])
+        if rows.any():
+            w = self._window_table[rows]
+            m[rows], slope[rows] = truncated_means(uv[rows], self._sigma_table[rows], w[:, :2], w[:, 2:])
+        return m, slope
 
 
 def project_keypoints(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehicle_p: np.ndarray, jacobians: bool):
@@ -119,9 +157,10 @@ def project_keypoints(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, v
 
 
 def whitened_residuals(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehicle_p: np.ndarray) -> np.ndarray:
-    """(n, 2) whitened residuals ``L (pi(x) - uv)`` before the robust loss."""
+    """(n, 2) whitened residuals ``L (m(pi(x)) - uv)`` before the robust loss (``m``: :meth:`KeypointObservations.expected_pixels`)."""
     uv, _, _, _ = project_keypoints(obs, world_T_vehicle, vehicle_p, jacobians=False)
-    return np.einsum("nij,nj->ni", obs.sqrt_information, uv - obs.uv)
+    expected, _ = obs.expected_pixels(uv)
+    return np.einsum("nij,nj->ni", obs.sqrt_information, expected - obs.uv)
 
 
 def _layers_to_points(values: gtsam.Values, layer_keys) -> np.ndarray:
@@ -138,8 +177,8 @@ def _error(obs: KeypointObservations, loss: RobustLoss, this: gtsam.CustomFactor
     H_pose = np.empty((2 * n, 6)) if want else _EMPTY
     H_shape = np.zeros((2 * n, 36)) if want else _EMPTY
     projection_kernel(T[:3, :3], T[:3, 3], points, obs.keypoint_index, obs._R_cw, obs._t_cw, obs._intrinsics_table,
-                      obs._dist_table, obs.uv, obs.sqrt_information, LOSS_IDS[loss.name], float(loss.threshold),
-                      _MIN_DEPTH, want, r, H_pose, H_shape)
+                      obs._dist_table, obs.uv, obs.sqrt_information, obs._window_table, obs._sigma_table,
+                      LOSS_IDS[loss.name], float(loss.threshold), _MIN_DEPTH, want, r, H_pose, H_shape)
     if want:
         H[0] = H_pose
         for j in range(3):

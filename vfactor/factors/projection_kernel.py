@@ -20,15 +20,17 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["LOSS_IDS", "projection_kernel"]
+from vfactor.factors.truncation import truncated_mean
+
+__all__ = ["LOSS_IDS", "projection_kernel", "robust_scale"]
 
 #: Loss name -> id used by the kernel.
 LOSS_IDS = {"none": 0, "huber": 1, "cauchy": 2, "geman_mcclure": 3}
 
 
-@njit(cache=True, inline="always")
-def _scale(loss_id, k, n):
-    """Returns s(n) = sqrt(2 rho(n)) / n and s'(n) / n (see robust.py)."""
+@njit(cache=True)
+def robust_scale(loss_id, k, n):
+    """Returns s(n) = sqrt(2 rho(n)) / n and s'(n) / n (see robust.py) of one residual norm ``n``."""
     if loss_id == 0:
         return 1.0, 0.0
     if loss_id == 1:
@@ -52,8 +54,8 @@ def _scale(loss_id, k, n):
 
 
 @njit(cache=True)
-def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, dist, uv, L, loss_id, k, min_depth,
-                      want_jacobians, r_out, H_pose, H_shape):
+def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, dist, uv, L, window, sigma, loss_id, k,
+                      min_depth, want_jacobians, r_out, H_pose, H_shape):
     """Fills the robust whitened residuals and, if asked, the Jacobians of every observation.
 
     Args:
@@ -65,6 +67,8 @@ def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, dist
         dist: (n, 5) ``k1, k2, p1, p2, k3``.
         uv: (n, 2) measured pixels.
         L: (n, 2, 2) square-root information.
+        window: (n, 4) ``[u_lo, v_lo, u_hi, v_hi]`` truncation window; NaN rows: none.
+        sigma: (n, 2) marginal pixel sigmas (used with a window).
         loss_id, k: robust loss (see :data:`LOSS_IDS`) and its threshold.
         min_depth: depth clamp, metres.
         want_jacobians: whether to fill ``H_pose`` and ``H_shape``.
@@ -93,12 +97,18 @@ def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, dist
         radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
         xd = x * radial + 2.0 * q1 * x * y + q2 * (r2 + 2.0 * x * x)
         yd = y * radial + q1 * (r2 + 2.0 * y * y) + 2.0 * q2 * x * y
-        du = fx * xd + skew * yd + cx - uv[i, 0]
-        dv = fy * yd + cy - uv[i, 1]
+        mu_u = fx * xd + skew * yd + cx
+        mu_v = fy * yd + cy
+        slope_u, slope_v = 1.0, 1.0
+        if not math.isnan(window[i, 0]):  # truncated at the window: compare with the kept measurements' mean
+            mu_u, slope_u = truncated_mean(mu_u, sigma[i, 0], window[i, 0], window[i, 2])
+            mu_v, slope_v = truncated_mean(mu_v, sigma[i, 1], window[i, 1], window[i, 3])
+        du = mu_u - uv[i, 0]
+        dv = mu_v - uv[i, 1]
         e0 = L[i, 0, 0] * du + L[i, 0, 1] * dv
         e1 = L[i, 1, 0] * du + L[i, 1, 1] * dv
         norm = math.sqrt(e0 * e0 + e1 * e1)
-        s, ds = _scale(loss_id, k, norm)
+        s, ds = robust_scale(loss_id, k, norm)
         r_out[2 * i] = s * e0
         r_out[2 * i + 1] = s * e1
         if not want_jacobians:
@@ -108,10 +118,10 @@ def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, dist
         d00 = radial + 2.0 * x * x * dradial + 2.0 * q1 * y + 6.0 * q2 * x
         d01 = 2.0 * x * y * dradial + 2.0 * q1 * x + 2.0 * q2 * y
         d11 = radial + 2.0 * y * y * dradial + 6.0 * q1 * y + 2.0 * q2 * x
-        a00 = fx * d00 + skew * d01
-        a01 = fx * d01 + skew * d11
-        a10 = fy * d01
-        a11 = fy * d11
+        a00 = (fx * d00 + skew * d01) * slope_u
+        a01 = (fx * d01 + skew * d11) * slope_u
+        a10 = fy * d01 * slope_v
+        a11 = fy * d11 * slope_v
         J = np.empty((2, 3))
         J[0, 0] = a00 * inv_z
         J[0, 1] = a01 * inv_z

@@ -29,6 +29,7 @@ import numpy as np
 from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomic_factor
+from vfactor.factors.robust import RobustLoss
 from vfactor.factors.projection import KeypointObservations
 from vfactor.graph import (
     GraphConfig,
@@ -60,9 +61,10 @@ class TrackOptions:
 
     Attributes:
         solve: one-frame settings (graph noise, robust loss, initialisation). The
-            default weakens the mean-shape prior to 0.3 of the one-frame solve's:
-            a track's many frames constrain its shape (measured on tracks_3cam and
-            tracks_3veh: shape errors of vans 4-11 cm instead of 6-13 cm).
+            default makes the mean-shape prior heavy-tailed (a Cauchy loss with
+            threshold 3 on its Mahalanobis norm, ``GraphConfig.shape_prior_loss``):
+            the prior is learnt from cars, and over a track's many frames the data
+            can show a vehicle that is not one (a van: docs/results.md).
         motion: the vehicle motion model.
         lag: fixed lag in seconds (poses older than this are marginalised out,
             so memory and time per frame stay flat); ``None`` keeps every pose.
@@ -88,7 +90,8 @@ class TrackOptions:
         dogleg_delta: initial trust-region radius of the dogleg.
     """
 
-    solve: SolveOptions = field(default_factory=lambda: SolveOptions(graph=GraphConfig(shape_prior_weight=0.3)))
+    solve: SolveOptions = field(
+        default_factory=lambda: SolveOptions(graph=GraphConfig(shape_prior_loss=RobustLoss("cauchy", 3.0))))
     motion: MotionModel = field(default_factory=MotionModel)
     lag: float | None = None
     max_updates: int = 10

@@ -11,6 +11,7 @@ from vfactor.factors.distance_bounds import distance_bounds_term
 from vfactor.factors.layer_offset import layer_offset_term
 from vfactor.factors.planarity import layer_plane_term
 from vfactor.factors.rectangle import rectangle_factor
+from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_prior import shape_prior_factor
 from vfactor.factors.shape_terms import evaluate_terms, hinge, shape_terms_factor
 from vfactor.factors.symmetry import symmetry_factor
@@ -68,6 +69,41 @@ class TestShapePrior(ShapeFactorContract):
 
     def make_factor(self):
         return shape_prior_factor(KEYS, default_shape_prior())
+
+
+class TestShapePriorCauchy(ShapeFactorContract):
+    """The heavy-tailed prior: a Cauchy loss on the Mahalanobis norm."""
+
+    truth = Wireframe(default_shape_prior().mean)
+
+    def make_factor(self):
+        return shape_prior_factor(KEYS, default_shape_prior(), loss=RobustLoss("cauchy", 3.0))
+
+    def test_error_is_the_loss_of_the_mahalanobis_norm(self):
+        prior = default_shape_prior()
+        van = PRESETS["van"].wireframe()
+        values = layer_values(van)
+        d = np.linalg.norm(prior.sqrt_information() @ (van.vehicle_p_keypoints - prior.mean).ravel())
+        gaussian = shape_prior_factor(KEYS, prior).error(values)
+        assert np.isclose(gaussian, 0.5 * d * d)
+        assert np.isclose(self.make_factor().error(values), RobustLoss("cauchy", 3.0).rho(np.array([d]))[0])
+        # the van is far outside the cars the prior is learnt from (d^2 about 76): its pull is cut by 1 + d^2 / 9
+
+        def pull(factor):
+            A, b = factor.linearize(values).jacobian()
+            return np.linalg.norm(A.T @ b)
+
+        ratio = pull(self.make_factor()) / pull(shape_prior_factor(KEYS, prior))
+        assert d > 8 and np.isclose(ratio, 1 / (1 + d * d / 9.0))
+
+
+@pytest.mark.parametrize("name", ["huber", "geman_mcclure"])
+def test_robust_shape_prior_jacobians(name):
+    from vfactor.testing import check_factor_jacobians
+
+    factor = shape_prior_factor(KEYS, default_shape_prior(), 0.5, RobustLoss(name, 2.0))
+    for seed in (0, 1):
+        check_factor_jacobians(factor, layer_values(PRESETS["van"].wireframe(), 0.1, np.random.default_rng(seed)))
 
 
 class TestLayerPlane(ShapeFactorContract):

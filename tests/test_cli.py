@@ -111,6 +111,15 @@ def test_eval_prints_the_comparison(tmp_path, capsys):
     assert "vfactor eval --frames 3" in md.read_text()
 
 
+def test_eval_tracks_over_noise_draws(capsys):
+    assert main(["eval", "tracks", "--scenario", "intersection_2cam_track", "--frames", "6", "--draws", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "over 2 draws of the keypoint noise" in out and "| v1 | 2 |" in out
+    assert "--draws 2" in out
+    assert main(["eval", "tracks", "--draws", "-1"]) == 2
+    assert "--draws" in capsys.readouterr().err
+
+
 def test_unknown_scenario_and_bad_counts_exit_2(tmp_path, capsys):
     assert main(["simulate", "no_such_rig", "--out", str(tmp_path / "s.json")]) == 2
     assert "packaged" in capsys.readouterr().err

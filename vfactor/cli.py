@@ -141,6 +141,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, help="number of scenes or frames (default: the scenario's)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     p.add_argument("--seeds", type=int, default=1, help="tracks: how many seeds from --seed on (default: 1)")
+    p.add_argument("--draws", type=int, default=0,
+                   help="tracks: also batch-smooth each seed's tracks over this many new draws of the keypoint noise "
+                   "and report each final shape's mean error, bias and spread (default: 0)")
     p.add_argument("--markdown", help="also write the tables to this Markdown file")
     return parser
 
@@ -438,10 +441,12 @@ def _eval(args) -> int:
     t0 = time.perf_counter()
     frames = _check_positive(args.frames, "--frames")
     _check_positive(args.seeds, "--seeds")
+    if args.draws < 0:
+        raise InputError("--draws", f"expected an integer >= 0, got {args.draws}")
     if args.experiment == "frames":
         sections = _eval_frames(args.scenario or "accuracy_2cam", frames, args.seed)
     elif args.experiment == "tracks":
-        sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds)
+        sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws)
     elif args.experiment == "images":
         sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed)
     else:
@@ -455,7 +460,8 @@ def _eval(args) -> int:
     command = "vfactor eval" + (f" {args.experiment}" if args.experiment != "frames" else "") + \
         (f" --scenario {args.scenario}" if args.scenario and args.scenario != default else "") + \
         (f" --frames {args.frames}" if args.frames else "") + (f" --seed {args.seed}" if args.seed else "") + \
-        (f" --seeds {args.seeds}" if args.seeds != 1 else "") + (f" --figures {args.figures}" if args.figures else "") + \
+        (f" --seeds {args.seeds}" if args.seeds != 1 else "") + (f" --draws {args.draws}" if args.draws else "") + \
+        (f" --figures {args.figures}" if args.figures else "") + \
         (f" --sweep-frames {args.sweep_frames}" if args.experiment == "paper" and args.sweep_frames != 30 else "")
     for section in sections:
         print(section)
@@ -487,8 +493,8 @@ def _eval_images(scenario_name: str, frames, seed: int) -> list[str]:
     return [images_report(evaluate_images(scenario_name, frames, seed, progress=_progress("rendering")))]
 
 
-def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int) -> list[str]:
-    from vfactor.evaluation import compare_tracking, tracking_table
+def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int = 0) -> list[str]:
+    from vfactor.evaluation import compare_tracking, shape_draws_table, shape_over_noise_draws, tracking_table
     from vfactor.sim import load_scenario, simulate
 
     scenario = load_scenario(scenario_name)
@@ -499,6 +505,9 @@ def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int) -> list[str]
         title = (f"### {scenario.name}, seed {s}: {len(sim.scene.frames)} frames, {len(ids)} vehicles, "
                  f"{len(sim.scene.cameras)} cameras" + (", road plane given" if sim.scene.ground_plane else ""))
         sections.append(f"{title}\n\n{tracking_table(compare_tracking(sim))}\n")
+        if draws:
+            sections.append(f"Final shapes of batch smoothing over {draws} draws of the keypoint noise (same "
+                            f"vehicles and motion):\n\n{shape_draws_table(shape_over_noise_draws(sim, draws))}\n")
     return sections
 
 

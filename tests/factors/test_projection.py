@@ -210,3 +210,8 @@ def test_window_shape_is_checked():
     with pytest.raises(ValueError, match="window"):
         KeypointObservations(obs.cameras, obs.camera_index, obs.keypoint_index, obs.uv, obs.sqrt_information,
                              np.zeros((3, 4)))
+    upside_down = np.tile([0.0, 0.0, 640.0, 480.0], (len(obs), 1))
+    upside_down[3] = [0.0, 480.0, 640.0, 0.0]
+    with pytest.raises(ValueError, match="v_lo < v_hi"):
+        KeypointObservations(obs.cameras, obs.camera_index, obs.keypoint_index, obs.uv, obs.sqrt_information,
+                             upside_down)

@@ -16,6 +16,7 @@ from vfactor.sim import (
     footprint,
     footprints_overlap,
     load_scenario,
+    redraw_noise,
     simulate,
 )
 
@@ -50,6 +51,16 @@ def test_simulation_is_deterministic_and_depends_on_the_seed(sim2):
     assert not _same(_arrays(sim2), _arrays(simulate(scenario, seed=6, num_frames=12)))
     default = simulate("intersection_2cam")  # a packaged name works too; seed from the scenario
     assert default.seed == scenario.seed and len(default.scene.frames) == scenario.num_frames
+
+
+def test_redraw_noise_keeps_the_truth_and_draws_new_detections(sim2):
+    assert _same(_arrays(redraw_noise(sim2, sim2.seed)), _arrays(sim2))
+    other = redraw_noise(sim2, 77)
+    assert other.truth is sim2.truth and other.scene.cameras == sim2.scene.cameras
+    assert [f.t for f in other.scene.frames] == [f.t for f in sim2.scene.frames]
+    assert not _same(_arrays(other), _arrays(sim2))
+    with pytest.raises(ValueError, match="noise_seed"):
+        redraw_noise(sim2, -1)
 
 
 def test_earlier_frames_do_not_depend_on_the_number_of_frames(sim2):

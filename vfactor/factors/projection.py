@@ -75,8 +75,10 @@ class KeypointObservations:
             raise ValueError(f"KeypointObservations.window: expected shape ({n}, 4), got {np.shape(self.window)}")
         # truncation table for the kernel: window (NaN: none) and the marginal pixel sigmas
         window = np.full((n, 4), np.nan) if self.window is None else np.asarray(self.window, dtype=float)
-        object.__setattr__(self, "_window_table", np.ascontiguousarray(window).reshape(n, 4))
         truncated = np.isfinite(window[:, 0])
+        if not np.all(np.isfinite(window[truncated])) or np.any(window[truncated, 2:] <= window[truncated, :2]):
+            raise ValueError("KeypointObservations.window: each row must be all NaN or finite with u_lo < u_hi, v_lo < v_hi")
+        object.__setattr__(self, "_window_table", np.ascontiguousarray(window).reshape(n, 4))
         sigma = np.ones((n, 2))
         if truncated.any():
             L = np.asarray(self.sqrt_information, dtype=float)[truncated]

@@ -51,6 +51,7 @@ from vfactor.sim.simulate import (
     Simulation,
     VehicleTruth,
     keypoints_in_view,
+    redraw_noise,
     simulate,
     vehicle_ids,
 )
@@ -122,6 +123,7 @@ __all__ = [
     "noise_from_value",
     # simulation and truth
     "simulate",
+    "redraw_noise",
     "Simulation",
     "VehicleTruth",
     "DetectionTruth",

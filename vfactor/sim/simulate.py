@@ -205,6 +205,29 @@ def simulate(scenario: Scenario | str | Path, seed: int | None = None, num_frame
     )
 
 
+def redraw_noise(sim: Simulation, noise_seed: int) -> Simulation:
+    """The same vehicles and motion with newly drawn detection noise.
+
+    ``redraw_noise(sim, sim.seed)`` gives ``sim`` again; other seeds give other
+    draws of the scenario's noise model for the same truth (for Monte Carlo
+    studies: how much of an estimate's error is bias and how much spread).
+
+    Args:
+        sim: a simulation.
+        noise_seed: seed of the detection noise (an integer >= 0).
+    """
+    if int(noise_seed) < 0:
+        raise ValueError(f"noise_seed: expected an integer >= 0, got {noise_seed}")
+    frames, detection_truth = [], []
+    for f, vehicles in enumerate(sim.truth):
+        frame, labels = _observe(sim.scenario, vehicles, np.random.default_rng([int(noise_seed), _NOISE, f]),
+                                 t=f * sim.scenario.dt)
+        frames.append(frame)
+        detection_truth.append(labels)
+    scene = dataclasses.replace(sim.scene, frames=frames)
+    return dataclasses.replace(sim, scene=scene, detection_truth=detection_truth)
+
+
 def _pick_presets(scenario: Scenario, rng: np.random.Generator, first_slot: int) -> list[str]:
     n, names = scenario.vehicles_per_frame, scenario.vehicles
     if scenario.vehicle_order == "random":

@@ -118,6 +118,8 @@ def test_eval_tracks_over_noise_draws(capsys):
     assert "--draws 2" in out
     assert main(["eval", "tracks", "--draws", "-1"]) == 2
     assert "--draws" in capsys.readouterr().err
+    assert main(["eval", "tracks", "--scenario", "accuracy_2cam"]) == 2  # independent frames: nothing to track
+    assert "no motion" in capsys.readouterr().err
 
 
 def test_unknown_scenario_and_bad_counts_exit_2(tmp_path, capsys):

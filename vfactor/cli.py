@@ -498,6 +498,9 @@ def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int =
     from vfactor.sim import load_scenario, simulate
 
     scenario = load_scenario(scenario_name)
+    if scenario.motion is None:
+        raise InputError("--scenario", f"{scenario.name!r} has no motion: each frame holds new vehicles, so there "
+                         "is nothing to track; use a scenario with tracks, e.g. tracks_3veh or tracks_3cam")
     sections = []
     for s in range(seed, seed + seeds):
         sim = simulate(scenario, seed=s, num_frames=frames)

@@ -163,6 +163,7 @@ def test_cli_eval_images(rendered, tmp_path, capsys):
     assert "vfactor eval images --frames 2 --seed 4" in text
     for method in ("factor_graph", "triangulation", "pnp", "known_shape", "factor_graph_simulated_noise"):
         assert f"| {method} | 2 |" in text
+    assert "Tracking" not in text  # accuracy_2cam's frames hold new vehicles each: nothing to track
 
 
 def test_lens_distortion_end_to_end(rendered, detector, tmp_path):

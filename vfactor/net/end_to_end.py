@@ -9,7 +9,7 @@ methods of :mod:`vfactor.evaluation` (factor graph, triangulation, PnP, the
 known-shape reference) on the network's keypoints. Beside them, the factor
 graph on the simulator's own keypoints (paper-like noise on the true
 projections) shows how the network's errors compare with that noise model.
-A scenario with tracks (vehicles seen over several frames) is also tracked
+A scenario with motion (each id one vehicle over its frames) is also tracked
 from the network's keypoints (:func:`vfactor.evaluation.compare_tracking`:
 iSAM2, fixed lag and batch smoothing beside frame-by-frame solving).
 ``vfactor eval images`` is the command; it needs torch and moderngl.
@@ -98,7 +98,9 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
         "summary": method -> summarise_methods row, "tracking": compare_tracking(...) or None}``;
         the methods are ``factor_graph``, ``triangulation``, ``pnp``, ``known_shape`` on the
         network's keypoints and ``factor_graph_simulated_noise`` on the simulator's keypoints;
-        ``tracking`` is given when some vehicle is seen in more than one frame.
+        ``tracking`` is given for a scenario with motion (each id one vehicle over
+        its frames); without motion every frame holds new vehicles and there is
+        nothing to track.
     """
     from vfactor.net.infer import KeypointDetector
     from vfactor.render.scenes import render_simulation
@@ -112,7 +114,7 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
     keypoints = keypoint_accuracy(detected, rendered, detector.crop_box)
     rows = compare_methods(dataclasses.replace(sim, scene=detected), options)
     rows["factor_graph_simulated_noise"] = compare_methods(sim, options, methods=("factor_graph",))["factor_graph"]
-    tracked = any(len(sim.vehicle_frames(vid)) > 1 for vid in {v for truth in sim.truth for v in truth})
+    tracked = sim.scenario.motion is not None
     tracking = compare_tracking(dataclasses.replace(sim, scene=detected)) if tracked else None
     return {"scenario": sim.scenario.name, "seed": seed, "frames": len(sim.scene.frames), "keypoints": keypoints,
             "summary": summarise_methods(rows), "tracking": tracking}

@@ -142,6 +142,14 @@ def test_track_writes_results_and_plot(tmp_path, capsys):
     frames = load_results(out)
     assert len(frames) == 8 and all(f.vehicles[0].status.value == "converged" for f in frames)
     assert plot.stat().st_size > 0
+    from vfactor.scene import load_scene
+    from vfactor.track import TrackOptions, track_scene
+
+    api = track_scene(load_scene(scene), TrackOptions()).frames  # the CLI runs the tracker's default settings
+    for a, b in zip(frames, api):
+        assert np.allclose(a.vehicles[0].world_T_vehicle.matrix(), b.vehicles[0].world_T_vehicle.matrix(), atol=1e-9)
+        assert np.allclose(a.vehicles[0].wireframe.vehicle_p_keypoints, b.vehicles[0].wireframe.vehicle_p_keypoints,
+                           atol=1e-9)
     assert main(["track", str(scene), "--out", str(out), "--lag", "0.3", "--online"]) == 0
     assert main(["track", str(scene), "--out", str(out), "--batch"]) == 0
     assert main(["track", str(scene), "--out", str(out), "--lag", "-1"]) == 2

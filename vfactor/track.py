@@ -65,6 +65,9 @@ class TrackOptions:
             threshold 3 on its Mahalanobis norm, ``GraphConfig.shape_prior_loss``):
             the prior is learnt from cars, and over a track's many frames the data
             can show a vehicle that is not one (a van: docs/results.md).
+            A ``SolveOptions`` given here replaces these graph settings too: to
+            change one setting, start from ``TrackOptions().solve`` with
+            ``dataclasses.replace``.
         motion: the vehicle motion model.
         lag: fixed lag in seconds (poses older than this are marginalised out,
             so memory and time per frame stay flat); ``None`` keeps every pose.

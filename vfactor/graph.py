@@ -87,6 +87,10 @@ class GraphConfig:
             the image (a detector that reports a keypoint outside, as the
             keypoint network does for vehicles cut by the border, does not
             truncate).
+        shape_prior_loss: robust loss on the shape prior's Mahalanobis norm:
+            ``"none"`` (default) is the native Gaussian; a heavy tail (tracking
+            uses ``RobustLoss("cauchy", 3.0)``) lets the data overrule the car
+            prior for a vehicle far from a car (docs/factors.md).
     """
 
     relative_pixel_sigma: float = 0.03

@@ -15,6 +15,7 @@ from vfactor.net.calibrate import (  # noqa: E402
     CovarianceCalibration,
     KeypointErrors,
     fit_calibration,
+    load_crops,
     measure_errors,
     summarise,
     write_calibration,
@@ -149,6 +150,30 @@ def test_errors_are_measured_in_image_pixels_through_the_crop_boxes():
     assert err.self_occluded.sum() == 6 and err.visible.sum() == 16
     stats = summarise(err)
     assert stats["self_occluded"]["n"] == 6 and stats["all"]["n"] == 22
+
+
+def test_load_crops_returns_the_shards_rois_reading_each_shard_once(tmp_path, monkeypatch):
+    images, kp, vis, occ = blob_dataset(6, 32, seed=2)
+    rois = np.array([[10.0 * i, 20.0, 10.0 * i + 96.0, 116.0] for i in range(6)])
+    (tmp_path / "val").mkdir()
+    for name, rows in (("a", slice(0, 4)), ("b", slice(4, 6))):  # renderer-like shards: more keys than read
+        np.savez_compressed(tmp_path / "val" / f"{name}.npz", images=images[rows], keypoints=kp[rows],
+                            visible=vis[rows], self_occluded=occ[rows], rois=rois[rows], in_crop=vis[rows])
+    opened = []
+    real_load = np.load
+    monkeypatch.setattr(np, "load", lambda f, *a, **k: opened.append(f) or real_load(f, *a, **k))
+    ds, got = load_crops(tmp_path / "val", size=16)
+    assert len(opened) == 2  # one read per shard
+    assert ds.crop_size == 16 and got is ds.rois
+    np.testing.assert_array_equal(got, rois)  # full-image boxes: unchanged by the resize
+    monkeypatch.undo()
+    np.savez_compressed(tmp_path / "val" / "c.npz", images=images[:1], keypoints=kp[:1])  # no rois
+    ds, got = load_crops([tmp_path / "val" / "a.npz", tmp_path / "val" / "c.npz"])
+    assert len(ds) == 5 and got is None
+    arrays = {"images": images, "keypoints": kp, "visible": vis, "self_occluded": occ, "rois": rois}
+    for form in (arrays, KeypointDataset(images, kp, vis, occ, rois)):
+        np.testing.assert_array_equal(load_crops(form)[1], rois)
+    assert load_crops(KeypointDataset(images, kp, vis, occ))[1] is None
 
 
 def test_calibrate_command_reports_and_writes(tmp_path, capsys):

@@ -1,6 +1,9 @@
-"""Training data: augmentation moves keypoints with the pixels (flip swaps left and right), datasets in every form."""
+"""Training data: augmentation moves keypoints with the pixels (flip swaps left and right), datasets in every form
+(the crops' boxes, ``rois``, carried along)."""
 
 from __future__ import annotations
+
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -90,3 +93,58 @@ def test_dataset_checks_shapes():
         KeypointDataset(np.zeros((2, 32, 16, 3), np.uint8), np.zeros((2, 12, 2)))
     with pytest.raises(ValueError, match="visible"):
         KeypointDataset(np.zeros((2, 32, 32, 3), np.uint8), np.zeros((2, 12, 2)), np.zeros((2, 11), bool))
+    with pytest.raises(ValueError, match=r"rois: expected shape \(2, 4\)"):
+        KeypointDataset(np.zeros((2, 32, 32, 3), np.uint8), np.zeros((2, 12, 2)), rois=np.zeros((2, 3)))
+    with pytest.raises(ValueError, match=r"rois: expected shape \(2, 4\)"):
+        KeypointDataset(np.zeros((2, 32, 32, 3), np.uint8), np.zeros((2, 12, 2)), rois=np.zeros((3, 4)))
+    with pytest.raises(ValueError, match="rois: expected finite"):
+        KeypointDataset(np.zeros((2, 32, 32, 3), np.uint8), np.zeros((2, 12, 2)),
+                        rois=[[0, 0, 8, 8], [0, np.nan, 8, 8]])
+
+
+def boxed_dataset(n: int = 4, size: int = 32) -> KeypointDataset:
+    """Blob crops with distinct boxes: crop i covers ``(10 i, 5 i, 10 i + 64, 5 i + 64)`` of its image."""
+    images, kp, vis, occ = blob_dataset(n, size)
+    i = np.arange(n, dtype=float)
+    return KeypointDataset(images, kp, vis, occ, rois=np.stack([10 * i, 5 * i, 10 * i + 64, 5 * i + 64], axis=1))
+
+
+def test_rois_round_trip_through_npz_shards(tmp_path):
+    ds = boxed_dataset()
+    assert ds.rois.dtype == np.float64 and ds.rois.shape == (4, 4)
+    ds.subset([0, 1]).save_npz(tmp_path / "shards" / "a.npz")
+    ds.subset([2, 3]).save_npz(tmp_path / "shards" / "b.npz")
+    got = KeypointDataset.from_npz(tmp_path / "shards")
+    np.testing.assert_array_equal(got.rois, ds.rois)
+    np.testing.assert_array_equal(got.images, ds.images)
+    # a shard without boxes among shards with them: the boxes of the whole are unknown
+    KeypointDataset(ds.images[:1], ds.keypoints[:1]).save_npz(tmp_path / "shards" / "c.npz")
+    with np.load(tmp_path / "shards" / "c.npz") as z:
+        assert "rois" not in z.files
+    mixed = KeypointDataset.from_npz(tmp_path / "shards")
+    assert len(mixed) == 5 and mixed.rois is None
+    assert KeypointDataset.from_npz([tmp_path / "shards" / "a.npz", tmp_path / "shards" / "b.npz"]).rois is not None
+
+
+def test_subset_concatenate_and_resized_keep_each_crops_box():
+    ds = boxed_dataset()
+    np.testing.assert_array_equal(ds.subset([3, 1]).rois, ds.rois[[3, 1]])
+    np.testing.assert_array_equal(ds.subset(np.array([True, False, True, False])).rois, ds.rois[[0, 2]])
+    both = KeypointDataset.concatenate([ds.subset([2]), ds.subset([0, 1])])
+    np.testing.assert_array_equal(both.rois, ds.rois[[2, 0, 1]])
+    assert KeypointDataset.concatenate([ds.subset([2]), KeypointDataset(ds.images[:1], ds.keypoints[:1])]).rois is None
+    small = ds.resized(16)
+    assert small.crop_size == 16
+    np.testing.assert_allclose(small.keypoints, (ds.keypoints + 0.5) / 2 - 0.5, atol=1e-5)  # crop pixels: scaled
+    np.testing.assert_array_equal(small.rois, ds.rois)  # full-image pixels: unchanged
+    assert KeypointDataset(ds.images, ds.keypoints).resized(16).rois is None
+
+
+def test_as_dataset_takes_the_rois_of_arrays_and_objects():
+    ds = boxed_dataset()
+    arrays = {"images": ds.images, "keypoints": ds.keypoints, "visible": ds.visible,
+              "self_occluded": ds.self_occluded, "rois": ds.rois}
+    for form in (arrays, SimpleNamespace(**arrays), ds):  # SimpleNamespace: like vfactor.render.RenderedDataset
+        np.testing.assert_array_equal(as_dataset(form).rois, ds.rois)
+    assert as_dataset({k: v for k, v in arrays.items() if k != "rois"}).rois is None
+    assert as_dataset([ds.sample(i) for i in range(4)]).rois is None

@@ -217,35 +217,20 @@ def load_crops(data, size: int | None = None):
             or folders, a :class:`vfactor.net.data.KeypointDataset`, the
             renderer's loaded dataset...). The crops' boxes in the full image
             are the ``rois`` (array attribute or shard key) when present.
-        size: resize the crops to this side (the network's input); keypoints
-            follow, boxes are unchanged.
+        size: resize the crops to this side, pixels (the network's input);
+            keypoints follow, boxes are unchanged.
 
     Returns:
-        ``(dataset, rois)``: a :class:`vfactor.net.data.KeypointDataset` and
-        (N, 4) ``(x0, y0, x1, y1)`` boxes in image pixel edges, or None when
-        the data have none.
+        ``(dataset, rois)``: a :class:`vfactor.net.data.KeypointDataset` and its
+        ``rois``, (N, 4) ``(x0, y0, x1, y1)`` boxes in image pixel edges, or
+        None when the data have none.
     """
-    from vfactor.net.data import _npz_files, as_dataset  # noqa: PLC0415
+    from vfactor.net.data import as_dataset  # noqa: PLC0415
 
-    rois = None
-    if isinstance(data, (str, Path)) or (isinstance(data, (list, tuple)) and data
-                                         and all(isinstance(d, (str, Path)) for d in data)):
-        parts = []
-        for f in _npz_files(data):
-            with np.load(f, allow_pickle=False) as z:
-                parts.append(np.asarray(z["rois"], float) if "rois" in z.files else None)
-        if parts and all(p is not None for p in parts):
-            rois = np.concatenate(parts)
-    elif getattr(data, "rois", None) is not None:
-        rois = np.asarray(data.rois, float)
-    elif hasattr(data, "keys") and "rois" in data.keys():
-        rois = np.asarray(data["rois"], float)
     ds = as_dataset(data, size=size)
     if size is not None:
         ds = ds.resized(size)
-    if rois is not None and rois.shape != (len(ds), 4):
-        raise ValueError(f"rois: expected shape ({len(ds)}, 4), got {rois.shape}")
-    return ds, rois
+    return ds, ds.rois
 
 
 def measure_errors(detector, data, rois=None, batch_size: int = 64) -> KeypointErrors:

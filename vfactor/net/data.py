@@ -61,14 +61,20 @@ class Sample:
 class KeypointDataset:
     """Crops and annotations held as arrays (the whole set in memory: 128x128 crops take 49 kB each).
 
+    The constructor takes the attributes below; ``visible`` defaults to all
+    True, ``self_occluded`` to all False, ``rois`` to None. Wrong shapes (and
+    non-finite ``rois``) raise ``ValueError`` naming the argument.
+
     Attributes:
         images: (N, S, S, 3) uint8.
         keypoints: (N, K, 2) float32 crop pixels (NaN: not annotated).
         visible: (N, K) bool.
         self_occluded: (N, K) bool.
+        rois: (N, 4) float64 boxes ``(x0, y0, x1, y1)`` of the crops in their
+            full images, image pixel edges; None when unknown.
     """
 
-    def __init__(self, images, keypoints, visible=None, self_occluded=None):
+    def __init__(self, images, keypoints, visible=None, self_occluded=None, rois=None):
         images = np.asarray(images)
         if images.ndim != 4 or images.shape[3] != 3 or images.shape[1] != images.shape[2]:
             raise ValueError(f"images: expected shape (N, S, S, 3) (square RGB crops), got {images.shape}")
@@ -84,7 +90,18 @@ class KeypointDataset:
         for name, arr in (("visible", visible), ("self_occluded", self_occluded)):
             if arr.shape != (n, k):
                 raise ValueError(f"{name}: expected shape ({n}, {k}), got {arr.shape}")
+        if rois is not None:
+            try:
+                rois = np.asarray(rois, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(f"rois: expected ({n}, 4) boxes (x0, y0, x1, y1), got {type(rois).__name__}") from None
+            if rois.shape != (n, 4):
+                raise ValueError(f"rois: expected shape ({n}, 4) boxes (x0, y0, x1, y1), got {rois.shape}")
+            bad = np.flatnonzero(~np.all(np.isfinite(rois), axis=1))
+            if bad.size:
+                raise ValueError(f"rois: expected finite boxes, got NaN or inf in rows {bad[:5].tolist()}")
         self.images, self.keypoints, self.visible, self.self_occluded = images, keypoints, visible, self_occluded
+        self.rois = rois
 
     def __len__(self) -> int:
         return len(self.images)
@@ -98,17 +115,25 @@ class KeypointDataset:
         return int(self.keypoints.shape[1])
 
     def resized(self, size: int) -> "KeypointDataset":
-        """The same crops resampled to ``size x size`` (keypoints scaled with them); ``self`` if already that size."""
+        """The same crops resampled to ``size x size``; ``self`` if already that size.
+
+        Keypoints (crop pixels) are scaled with the crops; ``rois`` (full-image
+        pixels) are unchanged: each crop still covers the same box of its image.
+        """
         S = self.crop_size
         if size == S:
             return self
         box = (0.0, 0.0, float(S), float(S))
         images = np.stack([crop_roi(img, box, size)[0] for img in self.images])
-        return KeypointDataset(images, image_to_crop(self.keypoints, box, size), self.visible, self.self_occluded)
+        return KeypointDataset(images, image_to_crop(self.keypoints, box, size), self.visible, self.self_occluded,
+                               self.rois)
 
     def subset(self, indices) -> "KeypointDataset":
+        """The crops at ``indices`` (an index array or a boolean mask of length N), in that order, with their rows
+        of every array (``rois`` included when known)."""
         idx = np.asarray(indices)
-        return KeypointDataset(self.images[idx], self.keypoints[idx], self.visible[idx], self.self_occluded[idx])
+        return KeypointDataset(self.images[idx], self.keypoints[idx], self.visible[idx], self.self_occluded[idx],
+                               None if self.rois is None else self.rois[idx])
 
     def sample(self, i: int):
         """Item ``i`` as a :class:`Sample` (ROI: the whole crop)."""
@@ -124,7 +149,8 @@ class KeypointDataset:
         """Stacks samples with fields ``image``, ``keypoints``, ``visible``, ``self_occluded``.
 
         Crops of another size than ``size`` (default: the first sample's) are
-        resized, their keypoints scaled with them.
+        resized, their keypoints scaled with them. The samples' ``roi`` is not
+        read: the result's ``rois`` is None.
         """
         images, kps, vis, occ = [], [], [], []
         for i, s in enumerate(samples):
@@ -148,17 +174,20 @@ class KeypointDataset:
     @classmethod
     def from_arrays(cls, arrays) -> "KeypointDataset":
         """From a mapping (e.g. an ``np.load`` of a shard) with ``images`` (or ``image``),
-        ``keypoints``, and optionally ``visible`` and ``self_occluded``."""
+        ``keypoints``, and optionally ``visible``, ``self_occluded`` and ``rois``."""
         keys = set(arrays.keys()) if hasattr(arrays, "keys") else set()
         img_key = "images" if "images" in keys else "image" if "image" in keys else None
         if img_key is None or "keypoints" not in keys:
             raise ValueError(f"arrays: expected keys 'images' and 'keypoints', got {sorted(keys)}")
         get = lambda k: np.asarray(arrays[k]) if k in keys else None  # noqa: E731
-        return cls(get(img_key), get("keypoints"), get("visible"), get("self_occluded"))
+        return cls(get(img_key), get("keypoints"), get("visible"), get("self_occluded"), get("rois"))
 
     @classmethod
     def from_npz(cls, paths) -> "KeypointDataset":
-        """Concatenates ``.npz`` shards (a file, a folder of ``*.npz`` or a list of files)."""
+        """Concatenates ``.npz`` shards (a file, a folder of ``*.npz`` or a list of files).
+
+        The result has ``rois`` only when every shard has a ``rois`` key.
+        """
         files = _npz_files(paths)
         parts = []
         for f in files:
@@ -171,11 +200,15 @@ class KeypointDataset:
 
     @classmethod
     def concatenate(cls, parts: Sequence["KeypointDataset"]) -> "KeypointDataset":
+        """The datasets one after the other (same crop size and keypoint count); ``rois`` only when every part has
+        them."""
         if not parts:
             raise ValueError("concatenate: no datasets")
+        rois = [p.rois for p in parts]
         return cls(
             np.concatenate([p.images for p in parts]), np.concatenate([p.keypoints for p in parts]),
             np.concatenate([p.visible for p in parts]), np.concatenate([p.self_occluded for p in parts]),
+            np.concatenate(rois) if all(r is not None for r in rois) else None,
         )
 
     @classmethod
@@ -190,11 +223,14 @@ class KeypointDataset:
         )
 
     def save_npz(self, path) -> Path:
-        """Writes one shard readable by :meth:`from_npz`."""
+        """Writes one shard readable by :meth:`from_npz` (with a ``rois`` key when they are known)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        np.savez_compressed(path, images=self.images, keypoints=self.keypoints, visible=self.visible,
-                            self_occluded=self.self_occluded)
+        arrays = dict(images=self.images, keypoints=self.keypoints, visible=self.visible,
+                      self_occluded=self.self_occluded)
+        if self.rois is not None:
+            arrays["rois"] = self.rois
+        np.savez_compressed(path, **arrays)
         return path
 
 
@@ -202,10 +238,12 @@ def as_dataset(data: Any, size: int | None = None) -> KeypointDataset:
     """Turns what :func:`vfactor.net.train.train` accepts into a :class:`KeypointDataset`.
 
     Accepted: a :class:`KeypointDataset`; an object with array attributes
-    ``images``, ``keypoints``, ``visible``, ``self_occluded``; a mapping of such
-    arrays; a path (``.npz`` shard or folder of shards) or list of paths; a
-    sequence of samples (objects with ``image``, ``keypoints``, ``visible``,
-    ``self_occluded``).
+    ``images``, ``keypoints``, ``visible``, ``self_occluded`` (the renderer's
+    :class:`vfactor.render.RenderedDataset`); a mapping of such arrays; a path
+    (``.npz`` shard or folder of shards) or list of paths; a sequence of
+    samples (objects with ``image``, ``keypoints``, ``visible``,
+    ``self_occluded``). The crops' boxes come along as ``rois`` where the data
+    have them (attribute, key or shard key ``rois``); samples give none.
     """
     if isinstance(data, KeypointDataset):
         return data
@@ -215,7 +253,7 @@ def as_dataset(data: Any, size: int | None = None) -> KeypointDataset:
         return KeypointDataset.from_npz(list(data))
     if all(hasattr(data, a) for a in ("images", "keypoints")) and not hasattr(data, "keys"):
         return KeypointDataset(data.images, data.keypoints, getattr(data, "visible", None),
-                               getattr(data, "self_occluded", None))
+                               getattr(data, "self_occluded", None), getattr(data, "rois", None))
     if hasattr(data, "keys"):
         return KeypointDataset.from_arrays(data)
     if isinstance(data, Iterable):

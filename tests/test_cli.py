@@ -118,6 +118,8 @@ def test_eval_tracks_over_noise_draws(capsys):
     assert "--draws 2" in out
     assert main(["eval", "tracks", "--draws", "-1"]) == 2
     assert "--draws" in capsys.readouterr().err
+    assert main(["eval", "tracks", "--lag", "0"]) == 2
+    assert "--lag" in capsys.readouterr().err
     assert main(["eval", "tracks", "--scenario", "accuracy_2cam"]) == 2  # independent frames: nothing to track
     assert "no motion" in capsys.readouterr().err
 

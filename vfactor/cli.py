@@ -145,6 +145,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--draws", type=int, default=0,
                    help="tracks: also batch-smooth each seed's tracks over this many new draws of the keypoint noise "
                    "and report each final shape's mean error, bias and spread (default: 0)")
+    p.add_argument("--lag", type=float, default=0.5,
+                   help="tracks: the fixed lag of the isam2_lag row, seconds (default: 0.5)")
     p.add_argument("--markdown", help="also write the tables to this Markdown file")
     return parser
 
@@ -446,10 +448,12 @@ def _eval(args) -> int:
     _check_positive(args.seeds, "--seeds")
     if args.draws < 0:
         raise InputError("--draws", f"expected an integer >= 0, got {args.draws}")
+    if not (np.isfinite(args.lag) and args.lag > 0):
+        raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
     if args.experiment == "frames":
         sections = _eval_frames(args.scenario or "accuracy_2cam", frames, args.seed)
     elif args.experiment == "tracks":
-        sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws)
+        sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws, args.lag)
     elif args.experiment == "images":
         sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed)
     else:
@@ -464,6 +468,7 @@ def _eval(args) -> int:
         (f" --scenario {args.scenario}" if args.scenario and args.scenario != default else "") + \
         (f" --frames {args.frames}" if args.frames else "") + (f" --seed {args.seed}" if args.seed else "") + \
         (f" --seeds {args.seeds}" if args.seeds != 1 else "") + (f" --draws {args.draws}" if args.draws else "") + \
+        (f" --lag {args.lag:g}" if args.experiment == "tracks" and args.lag != 0.5 else "") + \
         (f" --figures {args.figures}" if args.figures else "") + \
         (f" --sweep-frames {args.sweep_frames}" if args.experiment == "paper" and args.sweep_frames != 30 else "")
     for section in sections:
@@ -496,7 +501,7 @@ def _eval_images(scenario_name: str, frames, seed: int) -> list[str]:
     return [images_report(evaluate_images(scenario_name, frames, seed, progress=_progress("rendering")))]
 
 
-def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int = 0) -> list[str]:
+def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int = 0, lag: float = 0.5) -> list[str]:
     from vfactor.evaluation import compare_tracking, shape_draws_table, shape_over_noise_draws, tracking_table
     from vfactor.sim import load_scenario, simulate
 
@@ -510,7 +515,7 @@ def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int =
         ids = sorted({vid for f in sim.scene.frames for vid in f.vehicle_ids()})
         title = (f"### {scenario.name}, seed {s}: {len(sim.scene.frames)} frames, {len(ids)} vehicles, "
                  f"{len(sim.scene.cameras)} cameras" + (", road plane given" if sim.scene.ground_plane else ""))
-        sections.append(f"{title}\n\n{tracking_table(compare_tracking(sim))}\n")
+        sections.append(f"{title}\n\n{tracking_table(compare_tracking(sim, lag=lag))}\n")
         if draws:
             sections.append(f"Final shapes of batch smoothing over {draws} draws of the keypoint noise (same "
                             f"vehicles and motion):\n\n{shape_draws_table(shape_over_noise_draws(sim, draws))}\n")

@@ -123,6 +123,10 @@ class GraphConfig:
             raise ValueError(f"GraphConfig.hwc: expected 'always', 'lazy' or 'off', got {self.hwc!r}")
         if not isinstance(self.truncation, bool):
             raise ValueError(f"GraphConfig.truncation: expected True or False, got {self.truncation!r}")
+        for name in ("loss", "shape_prior_loss"):
+            if not isinstance(getattr(self, name), RobustLoss):
+                raise ValueError(f"GraphConfig.{name}: expected a RobustLoss, e.g. RobustLoss('cauchy', 2.5), "
+                                 f"got {getattr(self, name)!r}")
 
 
 def observations_from_detections(

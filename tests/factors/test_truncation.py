@@ -76,6 +76,8 @@ def test_windows_of_observations():
     assert np.all(np.isnan(obs.window))
     with pytest.raises(ValueError, match="truncation"):
         GraphConfig(truncation=1)
+    with pytest.raises(ValueError, match="shape_prior_loss"):
+        GraphConfig(shape_prior_loss="cauchy")
 
 
 def test_truncation_removes_most_of_the_shrinking_of_a_vehicle_cut_by_the_border():

@@ -29,8 +29,8 @@ import numpy as np
 from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomic_factor
-from vfactor.factors.robust import RobustLoss
 from vfactor.factors.projection import KeypointObservations
+from vfactor.factors.robust import RobustLoss
 from vfactor.graph import (
     GraphConfig,
     add_observation_factor,

@@ -167,3 +167,20 @@ def test_motion_model_allows_a_fast_intersection_turn():
     step = gtsam.Pose3.Expmap(np.array([0, 0, yaw_rate * dt, speed * dt, 0, 0]))
     values.insert(1, step)
     assert nonholonomic_factor(0, 1, dt, MotionModel()).unwhitenedError(values)[4] == 0.0
+
+
+def test_batch_shapes_of_three_vehicles_within_5cm_van_included():
+    """Issue 3's setting (tracks_3cam: 30 frames, 3 vehicles, 3 cameras): every final shape within 5 cm.
+
+    The van stands with its back cut by one image for part of the track: it needs
+    the truncation at the image border and the heavy-tailed shape prior
+    (docs/results.md; with the Gaussian prior at weight 0.3 and no truncation
+    its van was 4.5 cm on this seed and 5.9 cm on seed 3).
+    """
+    sim = simulate("tracks_3cam", seed=0)
+    final = {}
+    for f, frame in enumerate(smooth_scene(sim.scene, TrackOptions(covariance=False))):
+        for v in frame.vehicles:
+            assert v.ok, (f, v.id, v.status)
+            final[v.id] = 100 * np.linalg.norm(v.keypoints_vehicle - sim.truth[f][v.id].keypoints_vehicle, axis=1).mean()
+    assert len(final) == 3 and max(final.values()) <= 5.0, final

@@ -245,25 +245,6 @@ class Tracker:
         return VehicleResult(track.id, Status.CONVERGED, world_T_vehicle=estimate.atPose3(key), wireframe=wireframe,
                              pose_covariance=covariance, message=message)
 
-    def _pose_factors(self, graph, track: _TrackState, key: int, t: float) -> None:
-        """Motion factors to the previous poses and the ground factor of a new pose."""
-        motion = self.options.motion
-        if track.poses:
-            _, t1, k1 = track.poses[-1]
-            graph.add(nonholonomic_factor(k1, key, t - t1, motion))
-            if len(track.poses) >= 2:
-                _, t0, k0 = track.poses[-2]
-                if self.options.lag is None or t - t0 < self.options.lag:
-                    graph.add(acceleration_factor(k0, k1, key, t1 - t0, t - t1, motion))
-        if self.options.solve.ground_plane is not None:
-            graph.add(ground_factor(key, self.options.solve.ground_plane, self.options.solve.graph))
-
-    def _motion_fixes_pose(self, track: _TrackState, t: float) -> bool:
-        """Whether a new pose at ``t`` gets both motion factors (it has two earlier poses inside the lag)."""
-        if len(track.poses) < 2:
-            return False
-        return self.options.lag is None or t - track.poses[-2][1] < self.options.lag
-
     def _predict(self, track: _TrackState, estimate: gtsam.Values, t: float) -> gtsam.Pose3:
         """Constant-twist prediction of the pose at ``t`` from the last two poses."""
         _, t1, k1 = track.poses[-1]
@@ -284,7 +265,7 @@ class Tracker:
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         add_shape_factors(graph, self.keys, track.index, self.options.solve.graph, self.prior, self.bounds)
         add_observation_factor(graph, self.keys, obs, track.index, frame_index, self.options.solve.graph)
-        self._pose_factors(graph, track, key, t)
+        _add_pose_factors(graph, track.poses, key, t, self.options)
         insert_vehicle_values(values, self.keys, first.world_T_vehicle, first.wireframe, track.index, frame_index)
         stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}}
         track.smoother.update(graph, values, stamps)
@@ -333,10 +314,9 @@ class Tracker:
         if track.smoother is None:
             return self._start(track, frame_index, t, obs)
         options = self.options.solve
-        # from its third pose on, the motion factors alone fix a pose (lateral, vertical, tilt by the
-        # non-holonomic factor; speed and yaw rate by the acceleration factor), so any keypoint helps,
-        # as in smooth_scene; a younger track needs three
-        if len(obs) < options.min_observations and len(obs) < 3 and not self._motion_fixes_pose(track, t):
+        # once both motion factors fix the pose any keypoint helps, as in smooth_scene; a younger track needs three
+        fixed_by_motion = _acceleration_applies(track.poses, t, self.options.lag)
+        if len(obs) < options.min_observations and len(obs) < 3 and not fixed_by_motion:
             return VehicleResult(vid, Status.DEGENERATE, message=f"only {len(obs)} keypoints seen in this frame")
         estimate = track.smoother.calculateEstimate()
         wireframe = self._wireframe(estimate, track)
@@ -350,7 +330,7 @@ class Tracker:
         key = self.keys.pose_key(track.index, frame_index)
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         add_observation_factor(graph, self.keys, obs, track.index, frame_index, options.graph)
-        self._pose_factors(graph, track, key, t)
+        _add_pose_factors(graph, track.poses, key, t, self.options)
         values.insert(key, guess)
         stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}}
         track.smoother.update(graph, values, stamps)
@@ -409,6 +389,35 @@ class Tracker:
         covariance = smoother.marginalCovariance(key) if self.options.covariance else None
         message = "" if track.frames_seen > 1 else "first frame of the track: no motion factors yet"
         return self._result(track, estimate, key, wireframe, covariance, message)
+
+
+def _add_pose_factors(graph: gtsam.NonlinearFactorGraph, poses, key: int, t: float, options: TrackOptions) -> None:
+    """The factors of a track's new pose ``key`` at time ``t`` (seconds): motion and ground.
+
+    A non-holonomic factor to the previous pose, an acceleration factor over the
+    last two (when both are within ``options.lag``), and the ground-plane factor
+    when ``options.solve.ground_plane`` is set. ``poses``: the track's earlier
+    ``(frame index, t, key)`` in time order. The tracker and batch smoothing
+    both build their graphs with it.
+    """
+    if poses:
+        _, t1, k1 = poses[-1]
+        graph.add(nonholonomic_factor(k1, key, t - t1, options.motion))
+        if _acceleration_applies(poses, t, options.lag):
+            _, t0, k0 = poses[-2]
+            graph.add(acceleration_factor(k0, k1, key, t1 - t0, t - t1, options.motion))
+    if options.solve.ground_plane is not None:
+        graph.add(ground_factor(key, options.solve.ground_plane, options.solve.graph))
+
+
+def _acceleration_applies(poses, t: float, lag: float | None) -> bool:
+    """Whether a new pose at ``t`` gets both motion factors (two earlier poses, both inside the lag).
+
+    From a track's third pose on these alone fix a pose (lateral, vertical and
+    tilt by the non-holonomic factor; speed and yaw rate by the acceleration
+    factor).
+    """
+    return len(poses) >= 2 and (lag is None or t - poses[-2][1] < lag)
 
 
 def _camera_count(obs: KeypointObservations) -> int:
@@ -499,8 +508,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
     prior = prior or default_shape_prior()
     bounds = bounds or default_hwc_bounds()
     order = frame_order(scene)
-    options = dataclasses.replace(options, solve=options.solve.for_scene(scene))
-    plane = options.solve.ground_plane
+    options = dataclasses.replace(options, solve=options.solve.for_scene(scene), lag=None)
     keys = KeyScheme()
     config = options.solve.graph
     per_track: dict[str, list] = {}
@@ -528,13 +536,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
                     insert_vehicle_values(values, keys, None, first.wireframe, index)
             key = keys.pose_key(index, i)
             add_observation_factor(graph, keys, obs, index, i, config)
-            if posed:
-                graph.add(nonholonomic_factor(posed[-1][2], key, t - posed[-1][1], options.motion))
-                if len(posed) >= 2:
-                    graph.add(acceleration_factor(posed[-2][2], posed[-1][2], key, posed[-1][1] - posed[-2][1],
-                                                  t - posed[-1][1], options.motion))
-            if plane is not None:
-                graph.add(ground_factor(key, plane, config))
+            _add_pose_factors(graph, posed, key, t, options)
             values.insert(key, guess)
             posed.append((i, t, key))
         if not posed:

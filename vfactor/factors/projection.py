@@ -32,7 +32,7 @@ import gtsam
 import numpy as np
 
 from vfactor.camera import Camera, project_pinhole
-from vfactor.factors.projection_kernel import LOSS_IDS, projection_kernel
+from vfactor.factors.projection_kernel import projection_kernel
 from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_terms import cross
 from vfactor.factors.truncation import truncated_means
@@ -180,7 +180,7 @@ def _error(obs: KeypointObservations, loss: RobustLoss, this: gtsam.CustomFactor
     H_shape = np.zeros((2 * n, 36)) if want else _EMPTY
     projection_kernel(T[:3, :3], T[:3, 3], points, obs.keypoint_index, obs._R_cw, obs._t_cw, obs._intrinsics_table,
                       obs._dist_table, obs.uv, obs.sqrt_information, obs._window_table, obs._sigma_table,
-                      LOSS_IDS[loss.name], float(loss.threshold), _MIN_DEPTH, want, r, H_pose, H_shape)
+                      loss.id, float(loss.threshold), _MIN_DEPTH, want, r, H_pose, H_shape)
     if want:
         H[0] = H_pose
         for j in range(3):

@@ -20,38 +20,10 @@ import math
 import numpy as np
 from numba import njit
 
+from vfactor.factors.robust import robust_scale
 from vfactor.factors.truncation import INSIDE_SIGMAS, truncated_mean
 
-__all__ = ["LOSS_IDS", "projection_kernel", "robust_scale"]
-
-#: Loss name -> id used by the kernel.
-LOSS_IDS = {"none": 0, "huber": 1, "cauchy": 2, "geman_mcclure": 3}
-
-
-@njit(cache=True)
-def robust_scale(loss_id, k, n):
-    """Returns s(n) = sqrt(2 rho(n)) / n and s'(n) / n (see robust.py) of one residual norm ``n``."""
-    if loss_id == 0:
-        return 1.0, 0.0
-    if loss_id == 1:
-        if n <= k:
-            return 1.0, 0.0
-        root = math.sqrt(2.0 * k * n - k * k)
-        return root / n, (k * k - k * n) / (n * n * n * root)
-    if loss_id == 2:
-        u = (n / k) ** 2
-        if u < 1e-6:
-            ratio = 1.0 - 0.5 * u
-            dratio = -0.5 + 2.0 * u / 3.0
-        else:
-            log_term = math.log1p(u)
-            ratio = log_term / u
-            dratio = (u / (1.0 + u) - log_term) / (u * u)
-        s = math.sqrt(ratio)
-        return s, dratio / (k * k * s)
-    denom = k * k + n * n
-    return k / math.sqrt(denom), -k / denom**1.5
-
+__all__ = ["projection_kernel"]
 
 @njit(cache=True)
 def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, dist, uv, L, window, sigma, loss_id, k,
@@ -69,7 +41,7 @@ def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, dist
         L: (n, 2, 2) square-root information.
         window: (n, 4) ``[u_lo, v_lo, u_hi, v_hi]`` truncation window; NaN rows: none.
         sigma: (n, 2) marginal pixel sigmas (used with a window).
-        loss_id, k: robust loss (see :data:`LOSS_IDS`) and its threshold.
+        loss_id, k: robust loss (:attr:`RobustLoss.id`) and its threshold.
         min_depth: depth clamp, metres.
         want_jacobians: whether to fill ``H_pose`` and ``H_shape``.
         r_out: (2n,) residuals, written.

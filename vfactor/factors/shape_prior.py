@@ -13,8 +13,7 @@ import gtsam
 import numpy as np
 
 from vfactor.factors.linear import linear_vector_factor
-from vfactor.factors.projection_kernel import LOSS_IDS, robust_scale
-from vfactor.factors.robust import RobustLoss
+from vfactor.factors.robust import RobustLoss, robust_scale
 from vfactor.shape_model import ShapePrior
 
 __all__ = ["shape_prior_factor"]
@@ -37,7 +36,7 @@ def shape_prior_factor(layer_keys, prior: ShapePrior, weight: float = 1.0, loss:
     if loss.name == "none":
         blocks = [R[:, 12 * j : 12 * j + 12] for j in range(3)]
         return linear_vector_factor(layer_keys, blocks, b, 1.0)
-    error = partial(_robust_error, np.ascontiguousarray(R), b, LOSS_IDS[loss.name], float(loss.threshold))
+    error = partial(_robust_error, np.ascontiguousarray(R), b, loss.id, float(loss.threshold))
     return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(36), list(layer_keys), error)
 
 

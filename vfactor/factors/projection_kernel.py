@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from vfactor.factors.robust import robust_scale
-from vfactor.factors.truncation import INSIDE_SIGMAS, truncated_mean
+from vfactor.factors.truncation import truncated_mean
 
 __all__ = ["projection_kernel"]
 
@@ -73,11 +73,8 @@ def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, dist
         mu_v = fy * yd + cy
         slope_u, slope_v = 1.0, 1.0
         if not math.isnan(window[i, 0]):  # truncated at the window: compare with the kept measurements' mean
-            reach_u, reach_v = INSIDE_SIGMAS * sigma[i, 0], INSIDE_SIGMAS * sigma[i, 1]
-            if mu_u - window[i, 0] < reach_u or window[i, 2] - mu_u < reach_u:
-                mu_u, slope_u = truncated_mean(mu_u, sigma[i, 0], window[i, 0], window[i, 2])
-            if mu_v - window[i, 1] < reach_v or window[i, 3] - mu_v < reach_v:
-                mu_v, slope_v = truncated_mean(mu_v, sigma[i, 1], window[i, 1], window[i, 3])
+            mu_u, slope_u = truncated_mean(mu_u, sigma[i, 0], window[i, 0], window[i, 2])
+            mu_v, slope_v = truncated_mean(mu_v, sigma[i, 1], window[i, 1], window[i, 3])
         du = mu_u - uv[i, 0]
         dv = mu_v - uv[i, 1]
         e0 = L[i, 0, 0] * du + L[i, 0, 1] * dv

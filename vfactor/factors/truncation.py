@@ -27,10 +27,10 @@ __all__ = ["truncated_mean", "truncated_means"]
 
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 _SQRT_HALF = math.sqrt(0.5)
-INSIDE_SIGMAS = 8.0  # sigmas from both edges beyond which m = mu and dm/dmu = 1 to double precision
+_INSIDE_SIGMAS = 8.0  # sigmas from both edges beyond which m = mu and dm/dmu = 1 to double precision
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def truncated_mean(mu, sigma, lo, hi):
     """Mean ``m`` of ``N(mu, sigma^2)`` truncated to ``[lo, hi]`` and ``dm/dmu``.
 
@@ -43,7 +43,7 @@ def truncated_mean(mu, sigma, lo, hi):
     """
     a_lo = (lo - mu) / sigma
     a_hi = (hi - mu) / sigma
-    if a_lo < -INSIDE_SIGMAS and a_hi > INSIDE_SIGMAS:  # the shift is below 1e-14 sigma: skip the special functions
+    if a_lo < -_INSIDE_SIGMAS and a_hi > _INSIDE_SIGMAS:  # the shift is below 1e-14 sigma: skip the special functions
         return mu, 1.0
     # Mirror the window so that mu is nearer its upper edge: the mass then
     # comes from the lower tail, which erfc keeps accurate down to 1e-300.

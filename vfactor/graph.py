@@ -179,12 +179,9 @@ _NO_WINDOW = np.full(4, np.nan)
 
 def _truncation_window(camera: Camera, uv: np.ndarray) -> np.ndarray | None:
     """The image's pixel edges ``[u_lo, v_lo, u_hi, v_hi]``, or None (size unknown, or a keypoint lies outside)."""
-    if camera.image_size is None:
+    if camera.image_size is None or not camera.in_image(uv).all():
         return None
-    edges = np.array([-0.5, -0.5, camera.image_size[0] - 0.5, camera.image_size[1] - 0.5])
-    if np.any(uv < edges[:2]) or np.any(uv > edges[2:]):
-        return None
-    return edges
+    return np.array([-0.5, -0.5, camera.image_size[0] - 0.5, camera.image_size[1] - 0.5])
 
 
 def hwc_terms(config: GraphConfig = GraphConfig(), bounds: HwcBounds | None = None):

@@ -53,8 +53,7 @@ def keypoint_accuracy(detected, rendered, crop_box) -> dict:
             if key not in rendered.keypoints_true[f]:
                 continue
             uv = rendered.keypoints_true[f][key]
-            size = detected.cameras[det.camera].image_size
-            inside = (uv[:, 0] >= 0) & (uv[:, 0] < size[0]) & (uv[:, 1] >= 0) & (uv[:, 1] < size[1])
+            inside = detected.cameras[det.camera].in_image(uv)
             visible = rendered.visible[f][key] & inside
             x0, y0, x1, y1 = crop_box(rendered.boxes_true[f][key])
             pred.append(np.where(det.confidence[:, None] > 0, det.keypoints, np.nan))

@@ -326,7 +326,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise InputError("--val", str(exc)) from None
     chosen = models[-1][1]
-    before, after = summarise(check_half), summarise(check_half, chosen)
+    summaries = [summarise(check_half, c) for _, c in models]  # models[0] is the identity: the "before"
+    before, after = summaries[0], summaries[-1]
     print(f"data: {', '.join(args.val)}: {len(crops)} crops, {len(errors)} keypoints inside them "
           f"({int(errors.found.sum())} found); weights: {weights}")
     print(f"fit on the even-numbered crops ({int(fit_half.found.sum())} found keypoints), checked on the "
@@ -338,7 +339,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
            [[name, f"{c.scale:.4g}", f"{c.floor:.4g}", f"{c.confidence_rate:.3g}"]
             + [_fmt(s["all"][k]) for k in ("d2_median", "d2_mean_correct", "within_95")]
             + [_fmt(s["visible"]["d2_median"]), _fmt(s["self_occluded"]["d2_median"])]
-            for name, c, s in ((name, c, summarise(check_half, c)) for name, c in models)])
+            for (name, c), s in zip(models, summaries)])
     print(f"\ncalibration: S_cal = exp({chosen.confidence_rate:.3f} (1 - confidence)) ({chosen.scale:.4f} S "
           f"+ diag(({chosen.floor:.4f} w)^2, ({chosen.floor:.4f} h)^2)), w, h: the crop box's sides (px)\n")
     rows = []

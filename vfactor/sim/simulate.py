@@ -191,12 +191,7 @@ def simulate(scenario: Scenario | str | Path, seed: int | None = None, num_frame
     else:
         truth = _place_tracks(scenario, np.random.default_rng([seed, _TRACKS]), num_frames)
 
-    frames, detection_truth = [], []
-    for f, vehicles in enumerate(truth):
-        rng = np.random.default_rng([seed, _NOISE, f])
-        frame, labels = _observe(scenario, vehicles, rng, t=f * scenario.dt)
-        frames.append(frame)
-        detection_truth.append(labels)
+    frames, detection_truth = _observe_frames(scenario, truth, seed)
     scene = Scene(cameras=dict(scenario.cameras), frames=frames, base_dir=None,
                   ground_plane=GroundPlane() if scenario.ground_plane else None)
     return Simulation(
@@ -218,12 +213,7 @@ def redraw_noise(sim: Simulation, noise_seed: int) -> Simulation:
     """
     if int(noise_seed) < 0:
         raise ValueError(f"noise_seed: expected an integer >= 0, got {noise_seed}")
-    frames, detection_truth = [], []
-    for f, vehicles in enumerate(sim.truth):
-        frame, labels = _observe(sim.scenario, vehicles, np.random.default_rng([int(noise_seed), _NOISE, f]),
-                                 t=f * sim.scenario.dt)
-        frames.append(frame)
-        detection_truth.append(labels)
+    frames, detection_truth = _observe_frames(sim.scenario, sim.truth, int(noise_seed))
     scene = dataclasses.replace(sim.scene, frames=frames)
     return dataclasses.replace(sim, scene=scene, detection_truth=detection_truth)
 
@@ -438,6 +428,16 @@ def _track_problem(scenario: Scenario, track: dict[int, VehicleTruth], frames, t
         if other is not None:
             return f"at t = {times[f]:g} s it comes closer than min_gap = {scenario.min_gap:g} m to {other}"
     return None
+
+
+def _observe_frames(scenario: Scenario, truth: list[dict[str, VehicleTruth]], seed: int):
+    """Every frame's detections and their labels; frame ``f`` draws its noise from ``[seed, _NOISE, f]``."""
+    frames, detection_truth = [], []
+    for f, vehicles in enumerate(truth):
+        frame, labels = _observe(scenario, vehicles, np.random.default_rng([seed, _NOISE, f]), t=f * scenario.dt)
+        frames.append(frame)
+        detection_truth.append(labels)
+    return frames, detection_truth
 
 
 def _observe(

@@ -19,7 +19,7 @@ from vfactor.sim import Scenario, Simulation, load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations
 
 __all__ = ["METHODS", "compare_methods", "summarise_methods", "accuracy_table", "keypoint_table", "noise_variant", "run_accuracy",
-           "compare_tracking", "tracking_table", "shape_over_noise_draws", "shape_draws_table"]
+           "compare_tracking", "tracking_table", "final_shape_errors", "shape_over_noise_draws", "shape_draws_table"]
 
 #: Method name -> description, in table order.
 METHODS = {
@@ -164,7 +164,7 @@ def compare_tracking(sim: Simulation, options=None, lag: float = 0.5) -> dict:
     seconds["batch"] = time.perf_counter() - t0
     errors, shapes = {}, {}
     for method, frames in runs.items():
-        rows, last = [], {}
+        rows = []
         for f, frame in enumerate(frames):
             for v in frame.vehicles:
                 row = {"frame": f, "vehicle": v.id, "status": v.status.value}
@@ -172,9 +172,10 @@ def compare_tracking(sim: Simulation, options=None, lag: float = 0.5) -> dict:
                     truth = sim.truth[f][v.id]
                     row.update(pose_errors(v.world_T_vehicle, v.keypoints_world, truth.world_T_vehicle,
                                            truth.keypoints_world))
-                    last[v.id] = 100 * float(np.linalg.norm(v.keypoints_vehicle - truth.keypoints_vehicle, axis=1).mean())
                 rows.append(row)
-        errors[method], shapes[method] = rows, last
+        errors[method] = rows
+        shapes[method] = {vid: 100 * float(np.linalg.norm(e, axis=1).mean())
+                          for vid, e in final_shape_errors(sim, frames).items()}
     diffs = [(100 * np.linalg.norm(a.world_T_vehicle.translation() - b.world_T_vehicle.translation()),
               np.degrees(np.linalg.norm(a.world_T_vehicle.rotation().logmap(b.world_T_vehicle.rotation()))))
              for fa, fb in zip(runs["isam2"], runs["batch"]) for a, b in zip(fa.vehicles, fb.vehicles) if a.ok and b.ok]
@@ -203,6 +204,16 @@ def tracking_table(comparison: dict) -> str:
     return "\n".join(lines)
 
 
+def final_shape_errors(sim: Simulation, frames) -> dict[str, np.ndarray]:
+    """Track id -> (12, 3) body-frame keypoint errors (metres) of the shape in the track's last solved frame."""
+    final = {}
+    for f, frame in enumerate(frames):
+        for v in frame.vehicles:
+            if v.ok:
+                final[v.id] = v.keypoints_vehicle - sim.truth[f][v.id].keypoints_vehicle
+    return final
+
+
 def shape_over_noise_draws(sim: Simulation, draws: int, options=None) -> dict[str, np.ndarray]:
     """Batch-smoothed shapes of every track over ``draws`` new draws of the detection noise.
 
@@ -224,12 +235,7 @@ def shape_over_noise_draws(sim: Simulation, draws: int, options=None) -> dict[st
     errors = {vid: np.full((draws, 12, 3), np.nan) for vid in ids}
     for k in range(draws):
         noisy = redraw_noise(sim, 10_000 * (sim.seed + 1) + k)
-        final = {}
-        for f, frame in enumerate(smooth_scene(noisy.scene, options)):
-            for v in frame.vehicles:
-                if v.ok:
-                    final[v.id] = v.keypoints_vehicle - sim.truth[f][v.id].keypoints_vehicle
-        for vid, e in final.items():
+        for vid, e in final_shape_errors(sim, smooth_scene(noisy.scene, options)).items():
             errors[vid][k] = e
     return errors
 

@@ -8,7 +8,6 @@ scenario or calibration: the message names the field) or a vehicle reported
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -302,9 +301,7 @@ def _track(args) -> int:
     if args.batch and (args.lag is not None or args.online):
         raise InputError("--batch", "batch smoothing uses every frame: it takes neither --lag nor --online")
     scene = _detect(load_scene(args.scene), args)
-    defaults = TrackOptions()  # the tracker's own graph settings (its heavy-tailed shape prior), not the one-frame ones
-    options = dataclasses.replace(defaults, solve=dataclasses.replace(defaults.solve, covariance=False), lag=args.lag,
-                                  covariance=not args.no_covariance)
+    options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance)
     t0 = time.perf_counter()
     if args.batch:
         results, messages = smooth_scene(scene, options), []

@@ -32,7 +32,6 @@ from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomi
 from vfactor.factors.projection import KeypointObservations
 from vfactor.factors.robust import RobustLoss
 from vfactor.graph import (
-    GraphConfig,
     add_observation_factor,
     add_shape_factors,
     copy_graph,
@@ -60,14 +59,13 @@ class TrackOptions:
     """Settings of tracking and batch smoothing.
 
     Attributes:
-        solve: one-frame settings (graph noise, robust loss, initialisation). The
-            default makes the mean-shape prior heavy-tailed (a Cauchy loss with
-            threshold 3 on its Mahalanobis norm, ``GraphConfig.shape_prior_loss``):
-            the prior is learnt from cars, and over a track's many frames the data
-            can show a vehicle that is not one (a van: docs/results.md).
-            A ``SolveOptions`` given here replaces these graph settings too: to
-            change one setting, start from ``TrackOptions().solve`` with
-            ``dataclasses.replace``.
+        solve: one-frame settings (graph noise, robust loss, initialisation);
+            its ``graph.shape_prior_loss`` is replaced by ``shape_prior_loss``.
+        shape_prior_loss: robust loss on the mean-shape prior's Mahalanobis norm
+            in tracks (``GraphConfig.shape_prior_loss``). Heavy-tailed by default
+            (Cauchy, threshold 3): the prior is learnt from cars, and over a
+            track's many frames the data can show a vehicle that is not one (a
+            van: docs/results.md). ``RobustLoss("none")``: the Gaussian.
         motion: the vehicle motion model.
         lag: fixed lag in seconds (poses older than this are marginalised out,
             so memory and time per frame stay flat); ``None`` keeps every pose.
@@ -93,8 +91,8 @@ class TrackOptions:
         dogleg_delta: initial trust-region radius of the dogleg.
     """
 
-    solve: SolveOptions = field(
-        default_factory=lambda: SolveOptions(graph=GraphConfig(shape_prior_loss=RobustLoss("cauchy", 3.0))))
+    solve: SolveOptions = field(default_factory=SolveOptions)
+    shape_prior_loss: RobustLoss = field(default_factory=lambda: RobustLoss("cauchy", 3.0))
     motion: MotionModel = field(default_factory=MotionModel)
     lag: float | None = None
     max_updates: int = 10
@@ -111,6 +109,11 @@ class TrackOptions:
             raise ValueError(f"TrackOptions.optimizer: expected 'dogleg' or 'gn', got {self.optimizer!r}")
         if not isinstance(self.max_updates, int) or self.max_updates < 0:
             raise ValueError(f"TrackOptions.max_updates: expected an integer >= 0, got {self.max_updates!r}")
+        if not isinstance(self.shape_prior_loss, RobustLoss):
+            raise ValueError(f"TrackOptions.shape_prior_loss: expected a RobustLoss, got {self.shape_prior_loss!r}")
+        if self.solve.graph.shape_prior_loss != self.shape_prior_loss:  # the tracks' prior, wherever solve is used
+            graph = dataclasses.replace(self.solve.graph, shape_prior_loss=self.shape_prior_loss)
+            object.__setattr__(self, "solve", dataclasses.replace(self.solve, graph=graph))
 
 
 _REANCHOR_FRAMES = 5  # frames seen by two cameras over which a young track is re-solved by LM

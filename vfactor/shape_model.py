@@ -1,13 +1,20 @@
-"""Statistics of vehicle shapes: the mean-shape prior and the HWC bounds.
+"""Statistics of vehicle shapes: shape priors, the body-type shape model and the HWC bounds.
 
-Both are learnt from the nine PASCAL3D+ car CAD models (scaled to metres by a
-wheelbase) and, for the bounds, from the presets too, so that vans and pickups
-stay inside the hinge limits.
+* :func:`default_shape_prior`: the paper's car prior, learnt from the nine
+  PASCAL3D+ car CAD models scaled to metres by a wheelbase (the baselines use it).
+* :class:`ShapeModel` / :func:`default_shape_model`: one Gaussian prior per body
+  type (sedan, hatchback, wagon, SUV, pickup, van) and a pooled prior over all
+  of them, learnt from the vehicle library (:mod:`vfactor.vehicle_library`),
+  optionally without some vehicles (leave-one-model-out evaluation). The solver
+  picks the body type by its Laplace evidence (:meth:`ShapeModel.type_log_evidence`).
+* :func:`default_hwc_bounds`: bounds spanning every library vehicle, the
+  PASCAL3D+ cars and the presets, widened: HWC says what is physically a
+  vehicle, not what a car looks like.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from itertools import combinations
 
@@ -16,7 +23,8 @@ import numpy as np
 from vfactor.keypoints import LAYERS, MIRROR_PERMUTATION
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
 
-__all__ = ["ShapePrior", "HwcBounds", "default_shape_prior", "default_hwc_bounds", "DISTANCE_PAIRS"]
+__all__ = ["ShapePrior", "ShapeModel", "HwcBounds", "default_shape_prior", "default_shape_model", "default_hwc_bounds",
+           "DISTANCE_PAIRS", "CLASS_HINTS"]
 
 #: All 66 keypoint pairs (i < j) whose distance the HWC distance factor bounds.
 DISTANCE_PAIRS: np.ndarray = np.array(list(combinations(range(12), 2)))
@@ -35,6 +43,33 @@ class ShapePrior:
 
     mean: np.ndarray
     covariance: np.ndarray
+
+    @classmethod
+    def from_wireframes(cls, wireframes, floor_sigma=0.04, inflation: float = 1.5) -> "ShapePrior":
+        """Mean and covariance of metric shapes, symmetrised.
+
+        ``cov = inflation * S + diag(floor^2)`` with ``S`` the sample covariance
+        (``n - 1`` in the denominator): a handful of vehicles spans few
+        directions, and a vehicle not among them lies further from their mean
+        than they do (the inflation), in every direction a little (the floor).
+
+        Args:
+            wireframes: at least two shapes, body frame, metres.
+            floor_sigma: standard deviation added to every coordinate, metres: one
+                number, or one per keypoint (12,).
+            inflation: multiplies the sample covariance.
+        """
+        pts = np.array([w.vehicle_p_keypoints for w in wireframes], dtype=float)
+        if len(pts) < 2:
+            raise ValueError(f"ShapePrior.from_wireframes: expected at least 2 shapes, got {len(pts)}")
+        pts = 0.5 * (pts + pts[:, MIRROR_PERMUTATION] * [1.0, -1.0, 1.0])
+        flat = pts.reshape(len(pts), 36)
+        mean = flat.mean(0).reshape(12, 3)
+        floor = np.repeat(np.broadcast_to(np.asarray(floor_sigma, dtype=float), (12,)), 3)
+        cov = inflation * np.cov(flat, rowvar=False) + np.diag(floor**2)
+        mean.setflags(write=False)
+        cov.setflags(write=False)
+        return cls(mean=mean, covariance=cov)
 
     @property
     def wireframe(self) -> Wireframe:
@@ -122,9 +157,153 @@ def _widen(lo, hi, margin, minimum):
     return np.stack([lo - pad, hi + pad], axis=-1)
 
 
-@lru_cache(maxsize=1)
-def default_hwc_bounds() -> HwcBounds:
-    """HWC bounds from the PASCAL3D+ cars at wheelbases 2.4-3.1 m and all presets."""
+@lru_cache(maxsize=64)
+def default_hwc_bounds(exclude: frozenset = frozenset()) -> HwcBounds:
+    """HWC bounds spanning every vehicle of the library, the PASCAL3D+ cars at wheelbases 2.4-3.1 m and the presets.
+
+    Widened by 50 % of each range (at least 5 cm, 10 cm for the layer offsets)
+    so that a vehicle outside the sample (a longer van, a lower sports car) is
+    still a vehicle to HWC.
+
+    Args:
+        exclude: library ids left out (leave-one-model-out evaluation).
+    """
+    from vfactor.vehicle_library import vehicle_library
+
     wireframes = [Wireframe(s * wb) for s in pascal3d_shapes() for wb in (2.4, 3.1)]
     wireframes += [p.wireframe() for p in PRESETS.values()]
-    return HwcBounds.from_wireframes(wireframes)
+    wireframes += [v.wireframe for v in vehicle_library().values() if v.id not in exclude]
+    return HwcBounds.from_wireframes(wireframes, margin=0.5)
+
+
+#: A 2D detector's class -> the body types it suggests (``"class"`` of a detection):
+#: COCO / YOLO names and vfactor's own body types.
+CLASS_HINTS: dict[str, tuple[str, ...]] = {
+    "car": ("sedan", "hatchback", "wagon", "suv"),
+    "truck": ("pickup", "van"),
+    "bus": ("van",),
+    "sedan": ("sedan",),
+    "hatchback": ("hatchback",),
+    "wagon": ("wagon",),
+    "suv": ("suv",),
+    "pickup": ("pickup",),
+    "van": ("van",),
+}
+
+
+@dataclass(frozen=True)
+class ShapeModel:
+    """One shape prior per body type, a pooled prior over all of them, and the HWC bounds.
+
+    Attributes:
+        types: body type -> :class:`ShapePrior` (metres).
+        pooled: the prior of all types' vehicles together (the first solve's, and
+            the mean shape that initialisation aligns).
+        bounds: the HWC bounds.
+        prior_probability: body type -> probability before any observation.
+        hint_weight: probability mass that a detection's ``class`` puts on the
+            body types it suggests (:data:`CLASS_HINTS`); the rest stays on the
+            other types, so a hint is never a hard rule.
+        spreads: multipliers of each type's covariance among which the
+            evidence chooses too (empirical Bayes on the prior's width): a
+            vehicle unlike the library's of its type gets a wider prior rather
+            than being pulled to their mean.
+    """
+
+    types: dict
+    pooled: ShapePrior
+    bounds: HwcBounds
+    prior_probability: dict
+    hint_weight: float = 0.8
+    spreads: tuple = (1.0, 4.0, 16.0)
+    _variants: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def prior(self, body_type: str, spread: float = 1.0) -> ShapePrior:
+        """The prior of ``body_type`` with its covariance times ``spread`` (made once, then cached)."""
+        key = (body_type, float(spread))
+        if key not in self._variants:
+            base = self.types[body_type]
+            cov = base.covariance * spread
+            cov.setflags(write=False)
+            self._variants[key] = base if spread == 1.0 else ShapePrior(mean=base.mean, covariance=cov)
+        return self._variants[key]
+
+    def log_prior(self, hints=()) -> dict[str, float]:
+        """Body type -> log probability given the detections' class ``hints`` (unknown classes are ignored)."""
+        logp = {t: float(np.log(self.prior_probability[t])) for t in self.types}
+        for hint in hints:
+            suggested = CLASS_HINTS.get(str(hint).lower())
+            if not suggested:
+                continue
+            inside = [t for t in self.types if t in suggested]
+            outside = [t for t in self.types if t not in suggested]
+            for t in inside:
+                logp[t] += np.log(self.hint_weight / len(inside))
+            for t in outside:
+                logp[t] += np.log((1 - self.hint_weight) / len(outside))
+        return logp
+
+    def type_log_evidence(self, information: np.ndarray, eta: np.ndarray) -> dict[tuple[str, float], float]:
+        """Log marginal likelihood of the observations under each body type's prior and spread (Laplace), up to a constant.
+
+        The observations (the pose marginalised out) are summarised by a
+        Gaussian in the 36 shape coordinates, ``exp(-x^T Lambda x / 2 + eta^T x)``
+        (information form; ``Lambda`` may be singular: directions the views do
+        not see). With the type's prior ``N(mu, Sigma)``, ``P = Sigma^-1``::
+
+            log p(z | type) = -1/2 [mu^T P mu - b^T (Lambda + P)^-1 b + log|Sigma| + log|Lambda + P|] + c,
+            b = eta + P mu
+
+        with ``c`` the same for every type (docs/factors.md).
+
+        Args:
+            information: (36, 36) ``Lambda``, 1/m^2.
+            eta: (36,) information vector, 1/m.
+
+        Returns:
+            (body type, spread) -> log evidence.
+        """
+        out = {}
+        for name, spread in ((t, k) for t in self.types for k in self.spreads):
+            prior = self.prior(name, spread)
+            P = prior.sqrt_information().T @ prior.sqrt_information()
+            mu = np.asarray(prior.mean).ravel()
+            A = information + P
+            b = eta + P @ mu
+            L = np.linalg.cholesky(A)
+            y = np.linalg.solve(L, b)
+            logdet_A = 2 * np.log(np.diag(L)).sum()
+            logdet_sigma = -2 * np.log(np.abs(np.diag(prior.sqrt_information()))).sum()
+            out[(name, spread)] = -0.5 * (mu @ P @ mu - y @ y + logdet_sigma + logdet_A)
+        return out
+
+
+@lru_cache(maxsize=128)
+def default_shape_model(exclude: frozenset = frozenset(), hub_sigma: float = 0.02, rule_sigma: float = 0.08,
+                        inflation: float = 1.5) -> ShapeModel:
+    """The body-type shape model learnt from the vehicle library, uniform over the types.
+
+    The library's hubs come from published dimensions, its lamps and window
+    tops from placement rules (docs/vehicles.md) that a real vehicle departs
+    from: the priors' floor is ``hub_sigma`` on the hubs and ``rule_sigma`` on
+    the other eight keypoints.
+
+    Args:
+        exclude: library ids left out of every prior and of the bounds
+            (leave-one-model-out evaluation: the solved vehicle is never in the prior).
+        hub_sigma, rule_sigma: the floor (:meth:`ShapePrior.from_wireframes`), metres.
+        inflation: see :meth:`ShapePrior.from_wireframes`.
+    """
+    from vfactor.vehicle_library import BODY_TYPES, vehicle_library
+
+    exclude = frozenset(exclude)
+    floor_sigma = np.array([hub_sigma] * 4 + [rule_sigma] * 8)
+    vehicles = [v for v in vehicle_library().values() if v.id not in exclude]
+    types = {}
+    for body_type in BODY_TYPES:
+        shapes = [v.wireframe for v in vehicles if v.body_type == body_type]
+        if len(shapes) >= 2:
+            types[body_type] = ShapePrior.from_wireframes(shapes, floor_sigma, inflation)
+    pooled = ShapePrior.from_wireframes([v.wireframe for v in vehicles], floor_sigma, inflation)
+    return ShapeModel(types=types, pooled=pooled, bounds=default_hwc_bounds(exclude),
+                      prior_probability={t: 1.0 / len(types) for t in types})

@@ -105,6 +105,13 @@ class KeypointObservations:
             None if self.window is None else self.window[mask],
         )
 
+    def scaled(self, noise_scale: float) -> "KeypointObservations":
+        """The same observations with every pixel sigma multiplied by ``noise_scale`` (> 0)."""
+        if not noise_scale > 0:
+            raise ValueError(f"noise_scale: expected > 0, got {noise_scale}")
+        return KeypointObservations(self.cameras, self.camera_index, self.keypoint_index, self.uv,
+                                    np.asarray(self.sqrt_information) / noise_scale, self.window)
+
     def expected_pixels(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """What the detector is expected to measure for predicted pixels ``uv`` (n, 2), and the slope.
 

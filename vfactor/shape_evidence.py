@@ -1,0 +1,232 @@
+"""What a solved vehicle's observations say about its shape and their noise: the body-type choice and the pixel-noise scale.
+
+After a first solve with the pooled prior (:class:`vfactor.shape_model.ShapeModel`),
+the graph is linearised at the solution. Its dense Gauss-Newton Hessian gives
+
+* the **noise scale** ``s``: the keypoints' pixel sigmas are the detector's
+  (confidence- or covariance-derived) sigmas times ``s``, estimated from the
+  whitened residuals with a robust (median) estimator corrected for the
+  degrees of freedom the solution used (:func:`noise_scale`);
+* the **information on the shape** with the pose marginalised out and the
+  pooled prior removed (:func:`shape_information`), from which each body
+  type's Laplace evidence follows (:meth:`ShapeModel.type_log_evidence`).
+
+docs/factors.md gives the maths.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+
+from vfactor.keys import KeyScheme
+from vfactor.shape_model import ShapeModel, ShapePrior
+
+__all__ = ["Linearisation", "linearise", "noise_scale", "shape_information", "BodyTypeChoice", "choose_body_type",
+           "TrackShape", "track_shape", "NOISE_SCALE_RANGE"]
+
+#: The noise scale is kept within this range: down to a thirtieth of the detector's nominal sigma, up to four times it
+#: (a noisier detector; beyond that, keypoints at odds with each other are outliers, not noise).
+NOISE_SCALE_RANGE = (1.0 / 30.0, 4.0)
+
+_CHI2_2_MEDIAN = 2.0 * np.log(2.0)  # median of a chi-square with 2 degrees of freedom
+
+
+@dataclass(frozen=True)
+class Linearisation:
+    """Dense Gauss-Newton Hessians of a one-vehicle graph at a solution, variables ``[pose (6), wheel, light, roof (36)]``.
+
+    Each Hessian ``H`` comes with its information vector ``eta`` (minus the
+    cost's gradient): the quadratic model is ``1/2 dx^T H dx - eta^T dx``.
+
+    Attributes:
+        total, total_eta: the whole graph.
+        projection, projection_eta: the keypoint projection factor alone.
+        prior, prior_eta: the shape prior factor alone.
+        shape: (36,) the shape at the linearisation point (keypoint-major, metres).
+    """
+
+    total: np.ndarray
+    total_eta: np.ndarray
+    projection: np.ndarray
+    projection_eta: np.ndarray
+    prior: np.ndarray
+    prior_eta: np.ndarray
+    shape: np.ndarray
+
+
+def linearise(graph: gtsam.NonlinearFactorGraph, projection: gtsam.NonlinearFactor, prior: gtsam.NonlinearFactor,
+              values: gtsam.Values, keys: KeyScheme = KeyScheme(), vehicle: int = 0, frame: int = 0) -> Linearisation:
+    """The graph's, the projection factor's and the shape prior's dense Hessians at ``values``.
+
+    Args:
+        graph: the one-frame graph of one vehicle.
+        projection: its keypoint projection factor.
+        prior: its shape prior factor (or an identical one).
+        values: the solution.
+    """
+    layer_keys = keys.layer_keys(vehicle)
+
+    def hessian(factors, variables):
+        ordering = gtsam.Ordering()
+        for key in variables:
+            ordering.push_back(key)
+        linear = gtsam.GaussianFactorGraph()
+        for factor in factors:
+            linear.push_back(factor.linearize(values))
+        H, eta = linear.hessian(ordering)
+        return H, np.ravel(eta)
+
+    variables = [keys.pose_key(vehicle, frame), *layer_keys]
+    H, eta = hessian([graph.at(i) for i in range(graph.size())], variables)
+    Hp, eta_p = hessian([projection], variables)
+    Hs, eta_s = np.zeros((42, 42)), np.zeros(42)
+    Hs[6:, 6:], eta_s[6:] = hessian([prior], layer_keys)
+    shape = np.concatenate([values.atVector(k) for k in layer_keys])
+    return Linearisation(H, eta, Hp, eta_p, Hs, eta_s, shape)
+
+
+def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -> tuple[float, float]:
+    """Robust scale of the whitened keypoint residuals, corrected for the degrees of freedom of the fit.
+
+    With ``e_i`` the 2-vector whitened residuals at the nominal sigmas,
+    ``s^2 = median |e_i|^2 / median chi2(2) * 2n / (2n - p(s))``, where
+    ``p(s) = tr(H_proj(s) H(s)^-1)`` is the number of parameters the keypoints
+    determine at that scale (the trace of the hat matrix: 6 for the pose plus
+    the part of the shape that the prior does not hold; ``H_proj(s) = H_proj / s^2``).
+    ``p`` grows as ``s`` shrinks, so the two are iterated to their fixed point.
+    The median ignores outliers (up to half of the keypoints). Clipped to
+    :data:`NOISE_SCALE_RANGE`.
+
+    Args:
+        whitened: (n, 2) whitened residuals of the keypoints at the solution, nominal sigmas.
+        lin: the linearisation at the solution (nominal sigmas).
+        iterations: fixed-point iterations of ``s`` and ``p``.
+
+    Returns:
+        (scale, p): the noise scale (multiplies the sigmas) and the effective
+        number of parameters at that scale.
+    """
+    n = len(whitened)
+    if n == 0:
+        return 1.0, 0.0
+    base = float(np.median(np.sum(whitened**2, axis=1))) / _CHI2_2_MEDIAN
+    other = lin.total - lin.projection
+    scale, p = 1.0, 0.0
+    for _ in range(iterations):
+        info = lin.projection / scale**2
+        p = float(np.trace(np.linalg.solve(other + info, info)))
+        dof = max(2.0 * n - p, 2.0)
+        scale = float(np.clip(np.sqrt(max(base * 2.0 * n / dof, 0.0)), *NOISE_SCALE_RANGE))
+    return scale, p
+
+
+def shape_information(lin: Linearisation, projection_factor: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """The observations' Gaussian on the shape: pose marginalised out, the shape prior removed.
+
+    The graph's quadratic model around the solution ``x0`` is
+    ``1/2 dx^T H dx - eta^T dx``. The shape prior's part is removed, the
+    projection factor's part scaled by ``projection_factor`` (``1 / s^2`` for a
+    new noise scale), and the pose eliminated by its Schur complement. In the
+    absolute shape coordinates ``x = x0 + dx`` the result is
+    ``exp(-x^T Lambda x / 2 + (eta + Lambda x0)^T x)``.
+
+    Returns:
+        (Lambda (36, 36), information vector (36,)) for
+        :meth:`ShapeModel.type_log_evidence`.
+    """
+    H = lin.total - lin.prior + (projection_factor - 1.0) * lin.projection
+    eta = lin.total_eta - lin.prior_eta + (projection_factor - 1.0) * lin.projection_eta
+    Hpp, Hps, Hss = H[:6, :6], H[:6, 6:], H[6:, 6:]
+    K = np.linalg.solve(Hpp, Hps)
+    Lam = Hss - Hps.T @ K
+    Lam = 0.5 * (Lam + Lam.T)
+    eta_s = eta[6:] - K.T @ eta[:6]
+    return Lam, eta_s + Lam @ lin.shape
+
+
+@dataclass(frozen=True)
+class BodyTypeChoice:
+    """The body type (and prior spread) a vehicle's observations choose.
+
+    Attributes:
+        body_type: the type of highest posterior probability.
+        spread: the covariance multiplier of highest evidence for that type.
+        probability: the type's posterior probability (over its spreads).
+        posterior: body type -> posterior probability.
+        prior: the chosen :class:`ShapePrior` (``model.prior(body_type, spread)``).
+    """
+
+    body_type: str
+    spread: float
+    probability: float
+    posterior: dict
+    prior: ShapePrior
+
+
+def choose_body_type(model: ShapeModel, information: np.ndarray, eta: np.ndarray, hints=()) -> BodyTypeChoice:
+    """The body type of highest posterior probability, its prior spread, and every type's probability.
+
+    ``p(type, spread | z) ~ p(z | type, spread) p(type | hints) / len(spreads)``:
+    the Laplace evidence of :meth:`ShapeModel.type_log_evidence` times the
+    prior of :meth:`ShapeModel.log_prior`; a type's probability sums over its spreads.
+    """
+    log_evidence = model.type_log_evidence(information, eta)
+    log_prior = model.log_prior(hints)
+    log_post = {key: value + log_prior[key[0]] for key, value in log_evidence.items()}
+    top = max(log_post.values())
+    weights = {key: float(np.exp(v - top)) for key, v in log_post.items()}
+    total = sum(weights.values())
+    posterior = {t: 0.0 for t in model.types}
+    for (t, _), w in weights.items():
+        posterior[t] += w / total
+    body_type = max(posterior, key=posterior.get)
+    spread = max((k for t, k in weights if t == body_type), key=lambda k: weights[(body_type, k)])
+    return BodyTypeChoice(body_type, float(spread), posterior[body_type], posterior, model.prior(body_type, spread))
+
+
+@dataclass(frozen=True)
+class TrackShape:
+    """The shape prior and noise scale of a track (or of any vehicle seen in several frames).
+
+    Attributes:
+        prior: the shape prior for the track's shared shape.
+        noise_scale: multiplies the detections' pixel sigmas in every frame.
+        body_type: the chosen body type, or None (no model, or no frame solved).
+        probability: its posterior probability, or None.
+    """
+
+    prior: ShapePrior
+    noise_scale: float = 1.0
+    body_type: str | None = None
+    probability: float | None = None
+
+
+def track_shape(results, model: ShapeModel | None, fallback: ShapePrior | None = None) -> TrackShape:
+    """The prior and noise scale of a vehicle seen in several frames, from its one-frame solves.
+
+    The frames share one shape, so the observations' Gaussians on it
+    (``extras["shape_information"]`` of each result of
+    :func:`vfactor.solve.solve_observations`) add up, and the body type is
+    chosen from their sum; the noise scale is the median of the frames'.
+    :func:`vfactor.track.smooth_scene`, the tracker (over a young track's
+    frames) and a graph of your own (examples/infrastructure_graph.py) use it.
+
+    Args:
+        results: one-frame results of the vehicle (unsolved ones are skipped).
+        model: the shape model, or None to keep ``fallback``.
+        fallback: the prior without a model or without a solved frame
+            (default: the model's pooled prior).
+    """
+    solved = [r for r in results if r is not None and r.ok]
+    fallback = fallback if fallback is not None else (model.pooled if model is not None else None)
+    if not solved:
+        return TrackShape(fallback)
+    scale = float(np.median([r.extras.get("noise_scale", 1.0) for r in solved]))
+    informations = [r.extras["shape_information"] for r in solved if "shape_information" in r.extras]
+    if model is None or not informations:
+        return TrackShape(fallback, scale)
+    choice = choose_body_type(model, sum(a for a, _ in informations), sum(b for _, b in informations))
+    return TrackShape(choice.prior, scale, choice.body_type, choice.probability)

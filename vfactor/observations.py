@@ -51,6 +51,10 @@ class Detection:
             as a box only); until then ``keypoints`` are NaN and ``confidence`` 0.
             :func:`vfactor.net.pipeline.detect_scene` fills them in; the solvers
             refuse such a detection with an :class:`~vfactor.errors.InputError`.
+        vehicle_class: optional class from the 2D detector (the scene's
+            ``"class"``: COCO / YOLO ``car``, ``truck``, ``bus`` or a vfactor
+            body type), a hint for the body type, never a hard rule
+            (:data:`vfactor.shape_model.CLASS_HINTS`).
     """
 
     camera: str
@@ -61,6 +65,7 @@ class Detection:
     heatmaps: str | None = None
     roi: tuple[float, float, float, float] | None = None
     from_image: bool = False
+    vehicle_class: str | None = None
 
     @property
     def seen(self) -> np.ndarray:

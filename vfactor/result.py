@@ -39,7 +39,13 @@ class VehicleResult:
         iterations: optimiser iterations.
         final_error: final value of the graph's cost (0.5 * sum of squared whitened residuals, robust).
         message: human-readable detail (always set for DEGENERATE and FAILED).
-        extras: solver diagnostics; ``"inlier_weights"``: (n,) robust-loss weight in
+        body_type: the body type whose shape prior the solve chose (one of
+            :data:`vfactor.vehicle_library.BODY_TYPES`), None when a single
+            prior was given.
+        body_type_probability: its posterior probability, in [0, 1].
+        extras: solver diagnostics; ``"body_type_posterior"``: body type ->
+            probability; ``"noise_scale"``: the estimated pixel-noise scale
+            (multiplies the detector's sigmas); ``"inlier_weights"``: (n,) robust-loss weight in
             [0, 1] of each observation, in the order of
             :func:`vfactor.graph.observations_from_detections` (near 0: rejected).
     """
@@ -53,6 +59,8 @@ class VehicleResult:
     iterations: int = 0
     final_error: float = float("nan")
     message: str = ""
+    body_type: str | None = None
+    body_type_probability: float | None = None
     extras: dict = field(default_factory=dict)
 
     @property

@@ -65,7 +65,7 @@ _TOP_KEYS = ("cameras", "frames", "ground_plane")
 _REQUIRED_TOP_KEYS = ("cameras", "frames")
 _CAMERA_KEYS = ("name", "K", "dist", "image_size", "world_T_camera")
 _FRAME_KEYS = ("t", "detections", "images")
-_DETECTION_KEYS = ("camera", "vehicle", "keypoints", "keypoint_covariances", "heatmaps", "roi")
+_DETECTION_KEYS = ("camera", "vehicle", "keypoints", "keypoint_covariances", "heatmaps", "roi", "class")
 _RESULT_TOP_KEYS = ("frames",)
 _RESULT_FRAME_KEYS = ("t", "vehicles")
 _VEHICLE_KEYS = (
@@ -79,6 +79,8 @@ _VEHICLE_KEYS = (
     "final_error",
     "message",
     "keypoint_covariances_world",
+    "body_type",
+    "body_type_probability",
 )
 _OK_STATUSES = (Status.CONVERGED, Status.MAX_ITERATIONS)
 #: Relative tolerance of the symmetry checks of covariance matrices.
@@ -322,6 +324,7 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: Path
         raise SceneError(f"{path}.camera", f"unknown camera {camera!r}; known: {', '.join(cameras)}")
     has_vehicle = det.get("vehicle") is not None
     vehicle = _string(det["vehicle"], f"{path}.vehicle") if has_vehicle else DEFAULT_VEHICLE_ID
+    vehicle_class = _string(det["class"], f"{path}.class") if det.get("class") is not None else None
 
     roi = det.get("roi")
     if roi is not None:
@@ -374,6 +377,7 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: Path
         heatmaps=heatmaps,
         roi=roi,
         from_image=from_image,
+        vehicle_class=vehicle_class,
     )
     return detection, has_vehicle
 
@@ -451,7 +455,10 @@ def _decode(stack: np.ndarray, roi, field: str):
 
 def _detection_to_dict(det: Detection, path: str, scene_base: Path | None, out_base: Path | None) -> dict:
     if det.from_image:
-        return {"camera": det.camera, "vehicle": det.vehicle, "roi": [float(b) for b in det.roi]}
+        out = {"camera": det.camera, "vehicle": det.vehicle, "roi": [float(b) for b in det.roi]}
+        if det.vehicle_class:
+            out["class"] = det.vehicle_class
+        return out
     keypoints = np.asarray(det.keypoints, dtype=float)
     confidence = np.asarray(det.confidence, dtype=float)
     if keypoints.shape != (NUM_KEYPOINTS, 2) or confidence.shape != (NUM_KEYPOINTS,):
@@ -485,6 +492,8 @@ def _detection_to_dict(det: Detection, path: str, scene_base: Path | None, out_b
         out["heatmaps"] = _path_out(det.heatmaps, scene_base, out_base)
     if det.roi is not None:
         out["roi"] = [float(b) for b in det.roi]
+    if det.vehicle_class:
+        out["class"] = det.vehicle_class
     return out
 
 
@@ -591,6 +600,9 @@ def _vehicle_to_dict(v: VehicleResult, path: str) -> dict:
     out["final_error"] = error if math.isfinite(error) else None
     if v.message:
         out["message"] = str(v.message)
+    if ok and v.body_type is not None:
+        out["body_type"] = str(v.body_type)
+        out["body_type_probability"] = float(v.body_type_probability)
     if ok:
         kp_cov = _finite_or_none(
             v.keypoint_covariances_world, (NUM_KEYPOINTS, 3, 3), f"{path}.keypoint_covariances_world"
@@ -676,6 +688,14 @@ def _vehicle_from_dict(data, path: str) -> VehicleResult:
     message = entry.get("message", "")
     if not isinstance(message, str):
         raise SceneError(f"{path}.message", f"expected a string, got {_kind(message)}")
+    body_type = _string(entry["body_type"], f"{path}.body_type") if entry.get("body_type") is not None else None
+    body_type_probability = None
+    if entry.get("body_type_probability") is not None:
+        body_type_probability = _number(entry["body_type_probability"], f"{path}.body_type_probability",
+                                        "a probability in [0, 1]")
+        if not 0.0 <= body_type_probability <= 1.0:
+            raise SceneError(f"{path}.body_type_probability", f"expected a probability in [0, 1], got "
+                                                              f"{body_type_probability}")
     return VehicleResult(
         id=vid,
         status=status,
@@ -686,6 +706,8 @@ def _vehicle_from_dict(data, path: str) -> VehicleResult:
         iterations=int(iterations),
         final_error=final_error,
         message=message,
+        body_type=body_type,
+        body_type_probability=body_type_probability,
     )
 
 

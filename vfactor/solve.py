@@ -19,6 +19,7 @@ from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.factors.projection import KeypointObservations, whitened_residuals
+from vfactor.factors.shape_prior import shape_prior_factor
 from vfactor.graph import (
     GraphConfig,
     build_vehicle_graph,
@@ -34,7 +35,8 @@ from vfactor.init import best_candidates
 from vfactor.keys import KeyScheme
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
-from vfactor.shape_model import HwcBounds, ShapePrior, default_hwc_bounds, default_shape_prior
+from vfactor.shape_evidence import choose_body_type, linearise, noise_scale, shape_information
+from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, default_shape_model
 from vfactor.wireframe import Wireframe
 
 __all__ = ["SolveOptions", "solve_vehicle", "solve_observations", "solve_frame", "solve_scene", "keypoint_covariances"]
@@ -60,6 +62,11 @@ class SolveOptions:
             holds the hubs at ``graph.hub_height`` above it and roll and pitch
             near its (docs/factors.md). ``None``: no ground factor; ``solve_scene``
             then uses the scene's plane when it gives one.
+        estimate_noise: estimate the pixel-noise scale from the residuals of a
+            first solve and solve again with it (docs/factors.md), so that the
+            balance of keypoints and shape prior holds at any noise level;
+            ``False`` keeps the sigmas of ``graph`` (``relative_pixel_sigma``,
+            or the detections' covariances) as they are.
     """
 
     graph: GraphConfig = field(default_factory=GraphConfig)
@@ -71,6 +78,7 @@ class SolveOptions:
     min_observations: int = 6
     min_keypoints_in_one_view: int = 4
     ground_plane: GroundPlane | None = None
+    estimate_noise: bool = True
 
     def for_scene(self, scene: Scene) -> "SolveOptions":
         """These options, with the scene's road plane when they name none and the scene gives one."""
@@ -119,11 +127,19 @@ def solve_observations(
     obs: KeypointObservations,
     options: SolveOptions = SolveOptions(),
     vehicle_id: str = "vehicle",
-    prior: ShapePrior | None = None,
+    prior: ShapePrior | ShapeModel | None = None,
     bounds: HwcBounds | None = None,
     initial: tuple[gtsam.Pose3, Wireframe] | None = None,
+    hints: tuple[str, ...] = (),
 ) -> VehicleResult:
     """Solves one vehicle from stacked observations (see :func:`solve_vehicle`).
+
+    With a :class:`~vfactor.shape_model.ShapeModel` (the default), the vehicle
+    is first solved with the model's pooled prior; the noise scale (with
+    ``options.estimate_noise``) and the body type (Laplace evidence and the
+    ``hints``) are then read off that solution, and it is solved again, from
+    there, with the chosen type's prior and the estimated sigmas. With a single
+    :class:`~vfactor.shape_model.ShapePrior` that prior is used throughout.
 
     Args:
         obs: the vehicle's observations in all cameras
@@ -132,9 +148,13 @@ def solve_observations(
         vehicle_id: id for the result.
         initial: a (pose, wireframe) to start from instead of the PnP and
             triangulation candidates (e.g. a tracker's prediction).
+        hints: 2D-detector classes of the vehicle (``"car"``, ``"truck"``,
+            ``"bus"`` or a body type), weighing the body types
+            (:data:`vfactor.shape_model.CLASS_HINTS`); never a hard rule.
     """
-    prior = prior or default_shape_prior()
-    bounds = bounds or default_hwc_bounds()
+    model = default_shape_model() if prior is None else (prior if isinstance(prior, ShapeModel) else None)
+    first_prior = model.pooled if model is not None else prior
+    bounds = bounds or (model.bounds if model is not None else default_shape_model().bounds)
     keys = KeyScheme()
     n_seen = len(obs)
     if n_seen < options.min_observations:
@@ -142,7 +162,7 @@ def solve_observations(
             vehicle_id, Status.DEGENERATE,
             message=f"only {n_seen} keypoints seen over all cameras; at least {options.min_observations} are needed",
         )
-    mean = Wireframe(prior.mean)
+    mean = Wireframe(first_prior.mean)
     if initial is not None:
         starts = [initial]
     else:
@@ -158,7 +178,7 @@ def solve_observations(
                 ),
             )
         starts = [(c.world_T_vehicle, c.wireframe) for c in candidates]
-    graph = build_vehicle_graph(obs, keys, config=options.graph, prior=prior, bounds=bounds,
+    graph = build_vehicle_graph(obs, keys, config=options.graph, prior=first_prior, bounds=bounds,
                                 ground_plane=options.ground_plane)
     terms = hwc_terms(options.graph, bounds)
     hwc = hwc_factor(keys, 0, terms=terms)
@@ -176,6 +196,13 @@ def solve_observations(
             best = outcome
     if best is None:
         return VehicleResult(vehicle_id, Status.FAILED, message=f"optimisation failed: {failure}")
+    extras = {}
+    nominal = obs
+    if model is not None or options.estimate_noise:
+        try:
+            best, obs, extras = _refine(best, obs, options, model, first_prior, hints, keys, bounds, terms, hwc)
+        except (RuntimeError, np.linalg.LinAlgError) as exc:
+            extras = {"refinement": f"kept the first solve: {exc}"}
     estimate, error, iterations, hit_limit, graph = best
     pose_key = keys.pose_key()
     world_T_vehicle = estimate.atPose3(pose_key)
@@ -183,12 +210,18 @@ def solve_observations(
     status = Status.MAX_ITERATIONS if hit_limit else Status.CONVERGED
     result = VehicleResult(
         vehicle_id, status, world_T_vehicle=world_T_vehicle, wireframe=wireframe, iterations=int(iterations),
-        final_error=float(error),
+        final_error=float(error), body_type=extras.pop("body_type", None),
+        body_type_probability=extras.pop("body_type_probability", None),
     )
+    result.extras.update(extras)
     e = whitened_residuals(obs, world_T_vehicle, wireframe.vehicle_p_keypoints)
     weights = options.graph.loss.weight(np.linalg.norm(e, axis=1))
     result.extras["inlier_weights"] = weights
-    problem = _camera_disagreement(obs, weights, mean, options)
+    # a camera at odds with the others inflates the estimated noise: judge it at no more than the nominal sigmas
+    strict = nominal.scaled(min(float(extras.get("noise_scale", 1.0)), 1.0))
+    strict_weights = options.graph.loss.weight(np.linalg.norm(
+        whitened_residuals(strict, world_T_vehicle, wireframe.vehicle_p_keypoints), axis=1))
+    problem = _camera_disagreement(strict, strict_weights, mean, options)
     if problem:
         return VehicleResult(vehicle_id, Status.FAILED, message=problem)
     if options.covariance:
@@ -199,6 +232,59 @@ def solve_observations(
         except RuntimeError as exc:
             result.message = f"covariance unavailable: {exc}"
     return result
+
+
+def _refine(first, obs: KeypointObservations, options: SolveOptions, model: ShapeModel | None, first_prior: ShapePrior,
+            hints, keys: KeyScheme, bounds: HwcBounds, terms, hwc, passes: int = 3):
+    """The refining solves: noise scale and body type read off the solution, then LM from it.
+
+    Each pass linearises the graph at the current solution, estimates the noise
+    scale (:func:`~vfactor.shape_evidence.noise_scale`) and, with a model, the
+    body type and prior spread (:func:`~vfactor.shape_evidence.choose_body_type`,
+    with the prior of the graph removed from the information), and solves
+    again from there with them. Passes stop when the scale moves by less than
+    10 % and the choice stays: the first solution's residuals, fitted under the
+    nominal sigmas and the pooled prior, overstate a small noise.
+
+    Returns:
+        (the outcome of :func:`_optimise`, the observations with the estimated
+        sigmas, extras: ``noise_scale``, ``effective_parameters``, ``passes``,
+        and with a model ``body_type``, ``body_type_probability``,
+        ``body_type_posterior``, ``prior_spread`` and ``shape_information``: the
+        observations' (information, vector) on the shape,
+        :func:`vfactor.shape_evidence.shape_information`).
+    """
+    extras = {}
+    outcome, scale, prior = first, 1.0, first_prior
+    for k in range(passes):
+        estimate, graph = outcome[0], outcome[4]
+        prior_factor = shape_prior_factor(keys.layer_keys(0), prior, options.graph.shape_prior_weight,
+                                          options.graph.shape_prior_loss)
+        lin = linearise(graph, graph.at(0), prior_factor, estimate, keys)
+        new_scale, new_prior = scale, prior
+        if options.estimate_noise:
+            world_T_vehicle = estimate.atPose3(keys.pose_key())
+            points = wireframe_from_values(estimate, keys).vehicle_p_keypoints
+            relative, p_eff = noise_scale(whitened_residuals(obs.scaled(scale), world_T_vehicle, points), lin)
+            new_scale = scale * relative
+            extras.update(effective_parameters=p_eff)
+        if model is not None:
+            information, eta = shape_information(lin, (scale / new_scale) ** 2)
+            choice = choose_body_type(model, information, eta, hints)
+            new_prior = choice.prior
+            extras.update(body_type=choice.body_type, body_type_probability=choice.probability,
+                          body_type_posterior=choice.posterior, prior_spread=choice.spread,
+                          shape_information=(information, eta))
+        if k > 0 and new_prior is prior and abs(np.log(new_scale / scale)) < np.log(1.1):
+            break
+        scale, prior = new_scale, new_prior
+        graph = build_vehicle_graph(obs.scaled(scale), keys, config=options.graph, prior=prior, bounds=bounds,
+                                    ground_plane=options.ground_plane)
+        estimate, error, iterations, hit_limit, graph = _optimise(graph, estimate, keys, options, terms, hwc)
+        outcome = (estimate, error, outcome[2] + iterations, hit_limit or outcome[3], graph)
+        extras["passes"] = k + 1
+    extras["noise_scale"] = scale
+    return outcome, obs.scaled(scale), extras
 
 
 def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc):
@@ -271,7 +357,7 @@ def solve_vehicle(
     cameras: dict[str, Camera],
     options: SolveOptions = SolveOptions(),
     vehicle_id: str | None = None,
-    prior: ShapePrior | None = None,
+    prior: ShapePrior | ShapeModel | None = None,
     bounds: HwcBounds | None = None,
 ) -> VehicleResult:
     """Estimates one vehicle's pose, shape and covariances from its detections in one frame.
@@ -281,8 +367,10 @@ def solve_vehicle(
         cameras: camera name -> camera (must hold every detection's camera).
         options: solver settings.
         vehicle_id: track id for the result (defaults to the detections' id).
-        prior: mean-shape prior (default: PASCAL3D+ cars).
-        bounds: HWC bounds (default: PASCAL3D+ cars and the presets).
+        prior: the body-type shape model (default: :func:`~vfactor.shape_model.default_shape_model`,
+            learnt from the vehicle library), or one :class:`~vfactor.shape_model.ShapePrior`
+            to use for every vehicle (e.g. :func:`~vfactor.shape_model.default_shape_prior`, the paper's car prior).
+        bounds: HWC bounds (default: the model's, spanning the library, PASCAL3D+ cars and presets).
 
     Returns:
         A :class:`VehicleResult`; ``degenerate`` when too little is seen.
@@ -292,7 +380,8 @@ def solve_vehicle(
     """
     vehicle_id = vehicle_id or (detections[0].vehicle if detections else "vehicle")
     obs = observations_from_detections(detections, cameras, options.graph)
-    return solve_observations(obs, options, vehicle_id, prior, bounds)
+    hints = tuple(d.vehicle_class for d in detections if d.vehicle_class)
+    return solve_observations(obs, options, vehicle_id, prior, bounds, hints=hints)
 
 
 def solve_frame(frame: Frame, cameras: dict[str, Camera], options: SolveOptions = SolveOptions(), **kwargs) -> FrameResult:

@@ -13,6 +13,8 @@ standalone batch smoother.
 
 from __future__ import annotations
 
+import dataclasses
+
 import gtsam
 import numpy as np
 
@@ -45,17 +47,24 @@ def build_graph(scenario: str = "intersection_2cam_track", seed: int = 2, frames
     graph.add(gtsam.PriorFactorPose3(RSU, RSU_POSE, gtsam.noiseModel.Isotropic.Sigma(6, 0.005)))
     values.insert(RSU, RSU_POSE)
 
-    # vfactor's part: one shape per vehicle, one pose per frame, with the tracker's settings.
-    config = vfactor.TrackOptions().solve.graph
-    vfactor.add_shape_factors(graph, KEYS, vehicle=0, config=config)
+    # vfactor's part: one shape per vehicle, one pose per frame, with the tracker's settings. Each frame is
+    # solved alone first: the solves give the initial values, and together the body type (the shape prior)
+    # and the noise scale of the keypoints (vfactor.track_shape, as vfactor's batch smoother does).
+    options = vfactor.TrackOptions().solve
+    config = options.graph
+    model = vfactor.default_shape_model()
+    frames = [(f, frame) for f, frame in enumerate(sim.scene.frames) if frame.detections_of(vehicle)]
+    observations = {f: vfactor.observations_from_detections(frame.detections_of(vehicle), sim.scene.cameras, config)
+                    for f, frame in frames}
+    firsts = {f: vfactor.solve_observations(obs, dataclasses.replace(options, covariance=False), prior=model)
+              for f, obs in observations.items()}
+    shape = vfactor.track_shape(list(firsts.values()), model)
+    vfactor.add_shape_factors(graph, KEYS, vehicle=0, config=config, prior=shape.prior)
     motion = MotionModel()
     pose_keys = {}
     previous = []
-    for f, frame in enumerate(sim.scene.frames):
-        detections = frame.detections_of(vehicle)
-        if not detections:
-            continue
-        obs = vfactor.observations_from_detections(detections, sim.scene.cameras, config)
+    for f, frame in frames:
+        obs = observations[f].scaled(shape.noise_scale)
         key = KEYS.pose_key(0, f)
         vfactor.add_observation_factor(graph, KEYS, obs, vehicle=0, frame=f, config=config)
         if previous:
@@ -69,10 +78,10 @@ def build_graph(scenario: str = "intersection_2cam_track", seed: int = 2, frames
         measured = RSU_POSE.between(truth).retract(rng.normal(0, sigmas))
         noise = gtsam.noiseModel.Diagonal.Sigmas(sigmas)
         graph.add(gtsam.BetweenFactorPose3(RSU, key, measured, noise))
-        # Initial values from vfactor's one-frame solve (the first frame's shape for the track).
-        first = vfactor.solve_observations(obs, vfactor.SolveOptions(covariance=False))
+        # Initial values from vfactor's one-frame solve (the shape of the frame with the most keypoints).
+        first = firsts[f]
         values.insert(key, first.world_T_vehicle if first.ok else RSU_POSE.compose(measured))
-        if first.ok and not values.exists(KEYS.layer_key("wheel", 0)):
+        if first.ok and len(obs) >= max((len(observations[g]) for g in firsts if firsts[g].ok), default=0):
             vfactor.insert_vehicle_values(values, KEYS, None, first.wireframe, vehicle=0)
         pose_keys[f] = key
         previous.append((frame.t, key))

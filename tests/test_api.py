@@ -14,7 +14,8 @@ PUBLIC = {
     "add_shape_factors", "build_vehicle_graph", "default_hwc_bounds", "default_shape_prior", "hwc_factor",
     "insert_vehicle_values", "load_results", "load_scene", "observations_from_detections", "save_results",
     "save_scene", "solve_frame", "solve_observations", "solve_scene", "solve_vehicle", "GroundPlane", "MotionModel",
-    "TrackOptions", "TrackRun", "Tracker", "smooth_scene", "track_scene",
+    "TrackOptions", "TrackRun", "Tracker", "smooth_scene", "track_scene", "BODY_TYPES", "ShapeModel", "TrackShape",
+    "default_shape_model", "track_shape",
 }
 
 

@@ -32,9 +32,11 @@ from vfactor.keys import KeyScheme
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.scene import load_results, load_scene, save_results, save_scene
-from vfactor.shape_model import ShapePrior, default_hwc_bounds, default_shape_prior
+from vfactor.shape_evidence import TrackShape, track_shape
+from vfactor.shape_model import ShapeModel, ShapePrior, default_hwc_bounds, default_shape_model, default_shape_prior
 from vfactor.solve import SolveOptions, solve_frame, solve_observations, solve_scene, solve_vehicle
 from vfactor.track import Tracker, TrackOptions, TrackRun, smooth_scene, track_scene
+from vfactor.vehicle_library import BODY_TYPES
 from vfactor.wireframe import PRESETS, Wireframe
 
 __version__ = "0.1.0"
@@ -59,18 +61,22 @@ __all__ = [
     "Scene",
     "SceneError",
     "ScenarioError",
+    "ShapeModel",
     "ShapePrior",
     "SolveOptions",
     "Status",
     "TrackOptions",
     "TrackRun",
+    "TrackShape",
     "Tracker",
     "VehicleResult",
     "Wireframe",
     "add_observation_factor",
     "add_shape_factors",
     "build_vehicle_graph",
+    "BODY_TYPES",
     "default_hwc_bounds",
+    "default_shape_model",
     "default_shape_prior",
     "hwc_factor",
     "insert_vehicle_values",
@@ -85,4 +91,5 @@ __all__ = [
     "solve_vehicle",
     "smooth_scene",
     "track_scene",
+    "track_shape",
 ]

@@ -34,7 +34,6 @@ from vfactor.factors.robust import RobustLoss
 from vfactor.graph import (
     add_observation_factor,
     add_shape_factors,
-    copy_graph,
     ground_factor,
     hwc_factor,
     hwc_terms,
@@ -47,7 +46,8 @@ from vfactor.init import best_candidates, cross_projection_cost
 from vfactor.keys import KeyScheme
 from vfactor.observations import Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
-from vfactor.shape_model import HwcBounds, ShapePrior, default_hwc_bounds, default_shape_prior
+from vfactor.shape_evidence import track_shape
+from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, default_shape_model
 from vfactor.solve import SolveOptions, solve_observations
 from vfactor.wireframe import Wireframe
 
@@ -129,12 +129,17 @@ class _TrackState:
     poses: list = field(default_factory=list)  # (frame index, t, pose key)
     hwc_added: bool = False
     frames_seen: int = 0
-    # while the track is young (fewer than _REANCHOR_FRAMES frames seen by two cameras) its factors and
-    # observations are kept, so that it can be re-solved by Levenberg-Marquardt (see Tracker._reanchor)
-    young_graph: gtsam.NonlinearFactorGraph | None = None
-    young_obs: list = field(default_factory=list)  # (pose key, observations) of those frames
+    # while the track is young (fewer than _REANCHOR_FRAMES frames seen by two cameras) its observations and
+    # motion factors are kept, so that it can be re-solved by Levenberg-Marquardt (see Tracker._reanchor)
+    young: bool = False
+    # (frame index, observations at nominal sigmas, motion factors, the frame solved alone or None)
+    young_frames: list = field(default_factory=list)
     multiview_frames: int = 0  # frames two cameras saw
     reanchored: bool = False
+    prior: ShapePrior | None = None  # the track's shape prior (its body type's)
+    body_type: str | None = None
+    body_type_probability: float | None = None
+    noise_scale: float = 1.0  # multiplies the detections' pixel sigmas
 
 
 def frame_order(scene: Scene) -> list[int]:
@@ -157,17 +162,24 @@ class Tracker:
     Args:
         cameras: camera name -> camera.
         options: tracking settings.
-        prior, bounds: shape prior and HWC bounds (defaults: PASCAL3D+ cars).
+        prior: the body-type shape model (default:
+            :func:`~vfactor.shape_model.default_shape_model`): each track takes the
+            body type, and the noise scale, of its first one-frame solve
+            (:func:`~vfactor.solve.solve_observations`) for all its frames; or one
+            :class:`~vfactor.shape_model.ShapePrior` for every track.
+        bounds: HWC bounds (default: the model's).
         keys: key scheme of the variables (each track's smoother uses vehicle index
             0..n-1 in order of first appearance).
     """
 
     def __init__(self, cameras: dict[str, Camera], options: TrackOptions = TrackOptions(),
-                 prior: ShapePrior | None = None, bounds: HwcBounds | None = None, keys: KeyScheme = KeyScheme()):
+                 prior: ShapePrior | ShapeModel | None = None, bounds: HwcBounds | None = None,
+                 keys: KeyScheme = KeyScheme()):
         self.cameras = cameras
         self.options = options
-        self.prior = prior or default_shape_prior()
-        self.bounds = bounds or default_hwc_bounds()
+        self.model = default_shape_model() if prior is None else (prior if isinstance(prior, ShapeModel) else None)
+        self.prior = None if self.model is not None else prior
+        self.bounds = bounds or (self.model or default_shape_model()).bounds
         self.keys = keys
         self._terms = hwc_terms(options.solve.graph, self.bounds)
         self._tracks: dict[str, _TrackState] = {}
@@ -245,8 +257,11 @@ class Tracker:
         return wireframe_from_values(estimate, self.keys, track.index)
 
     def _result(self, track, estimate, key, wireframe, covariance=None, message="") -> VehicleResult:
-        return VehicleResult(track.id, Status.CONVERGED, world_T_vehicle=estimate.atPose3(key), wireframe=wireframe,
-                             pose_covariance=covariance, message=message)
+        result = VehicleResult(track.id, Status.CONVERGED, world_T_vehicle=estimate.atPose3(key), wireframe=wireframe,
+                               pose_covariance=covariance, message=message, body_type=track.body_type,
+                               body_type_probability=track.body_type_probability)
+        result.extras["noise_scale"] = track.noise_scale
+        return result
 
     def _predict(self, track: _TrackState, estimate: gtsam.Values, t: float) -> gtsam.Pose3:
         """Constant-twist prediction of the pose at ``t`` from the last two poses."""
@@ -259,23 +274,48 @@ class Tracker:
         return T1.compose(gtsam.Pose3.Expmap(twist * (t - t1)))
 
     def _start(self, track: _TrackState, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
-        first = solve_observations(obs, self.options.solve, track.id, self.prior, self.bounds)
+        first = solve_observations(obs, self.options.solve, track.id, self.model or self.prior, self.bounds)
         if not first.ok:
             return first
+        if self.model is not None:
+            track.prior = (self.model.prior(first.body_type, first.extras.get("prior_spread", 1.0)) if first.body_type
+                           else self.model.pooled)
+        else:
+            track.prior = self.prior
+        track.body_type, track.body_type_probability = first.body_type, first.body_type_probability
+        track.noise_scale = float(first.extras.get("noise_scale", 1.0))
         track.smoother = self._new_smoother()
         track.poses, track.hwc_added = [], False
         key = self.keys.pose_key(track.index, frame_index)
-        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        add_shape_factors(graph, self.keys, track.index, self.options.solve.graph, self.prior, self.bounds)
-        add_observation_factor(graph, self.keys, obs, track.index, frame_index, self.options.solve.graph)
-        _add_pose_factors(graph, track.poses, key, t, self.options)
+        motion, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        _add_pose_factors(motion, track.poses, key, t, self.options)
+        track.young, track.young_frames = True, [(frame_index, obs, motion, first)]
         insert_vehicle_values(values, self.keys, first.world_T_vehicle, first.wireframe, track.index, frame_index)
         stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}}
-        track.smoother.update(graph, values, stamps)
+        track.smoother.update(self._young_graph(track), values, stamps)
         track.poses.append((frame_index, t, key))
-        track.young_graph, track.young_obs = copy_graph(graph), [(key, obs)]
         track.multiview_frames, track.reanchored = int(_camera_count(obs) >= 2), False
         return self._finish(track, key, t)
+
+    def _young_graph(self, track: _TrackState) -> gtsam.NonlinearFactorGraph:
+        """A young track's whole graph: shape factors (its prior), each frame's keypoints (its noise scale) and motion."""
+        config = self.options.solve.graph
+        graph = gtsam.NonlinearFactorGraph()
+        add_shape_factors(graph, self.keys, track.index, config, track.prior, self.bounds)
+        for frame_index, obs, motion, _ in track.young_frames:
+            add_observation_factor(graph, self.keys, obs.scaled(track.noise_scale), track.index, frame_index, config)
+            graph.push_back(motion)
+        if track.hwc_added:
+            graph.add(hwc_factor(self.keys, track.index, terms=self._terms))
+        return graph
+
+    def _rechoose(self, track: _TrackState, alone: list[VehicleResult]) -> None:
+        """The body type and noise scale of a young track from its frames solved alone (as :func:`smooth_scene` does)."""
+        if not any(r.ok for r in alone):
+            return
+        shape = track_shape(alone, self.model, self.prior)
+        track.prior, track.noise_scale = shape.prior, shape.noise_scale
+        track.body_type, track.body_type_probability = shape.body_type, shape.probability
 
     def _reanchor(self, track: _TrackState, t: float) -> None:
         """Re-solves a young track by Levenberg-Marquardt over its whole graph.
@@ -289,20 +329,24 @@ class Tracker:
         :func:`smooth_scene` starts (each pose from its own frame's solve, where
         that succeeds), and the smoother restarted from the solution.
         """
-        graph, frames = track.young_graph, track.young_obs
-        if track.multiview_frames >= _REANCHOR_FRAMES:  # well seen now: plain incremental updates from here
-            track.young_graph, track.young_obs = None, []
+        graph = self._young_graph(track)
         estimate = track.smoother.calculateEstimate()
         if not all(estimate.exists(k) for k in graph.keyVector()):  # poses already marginalised (fixed lag)
-            track.young_graph, track.young_obs = None, []
+            track.young, track.young_frames = False, []
             return
-        if not track.reanchored:
-            track.reanchored = True
-            for key, obs in frames:
-                alone = solve_observations(obs, dataclasses.replace(self.options.solve, covariance=False), track.id,
-                                           self.prior, self.bounds)
-                if alone.ok:
-                    estimate.update(key, alone.world_T_vehicle)
+        # every young frame solved alone (once): the first time its start, every time the type and noise scale
+        options = dataclasses.replace(self.options.solve, covariance=False)
+        for i, (frame_index, obs, motion, alone) in enumerate(track.young_frames):
+            if alone is None:
+                alone = solve_observations(obs, options, track.id, self.model or self.prior, self.bounds)
+                track.young_frames[i] = (frame_index, obs, motion, alone)
+            if not track.reanchored and alone.ok:
+                estimate.update(self.keys.pose_key(track.index, frame_index), alone.world_T_vehicle)
+        track.reanchored = True
+        self._rechoose(track, [alone for *_, alone in track.young_frames])  # all frames so far, not the first alone
+        graph = self._young_graph(track)
+        if track.multiview_frames >= _REANCHOR_FRAMES:  # well seen now: plain incremental updates from here
+            track.young, track.young_frames = False, []
         solved = gtsam.LevenbergMarquardtOptimizer(graph, estimate, self.options.solve.lm_params()).optimize()
         track.smoother = self._new_smoother()
         stamps = {key: stamp for _, stamp, key in track.poses}
@@ -316,6 +360,7 @@ class Tracker:
         track.frames_seen += 1
         if track.smoother is None:
             return self._start(track, frame_index, t, obs)
+        raw, obs = obs, obs.scaled(track.noise_scale)
         options = self.options.solve
         # once both motion factors fix the pose any keypoint helps, as in smooth_scene; a younger track needs three
         fixed_by_motion = _acceleration_applies(track.poses, t, self.options.lag)
@@ -331,16 +376,16 @@ class Tracker:
             if starts and starts[0].cost < cross_projection_cost(obs, guess, wireframe, loss):
                 guess = starts[0].world_T_vehicle
         key = self.keys.pose_key(track.index, frame_index)
-        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        graph, motion, values = gtsam.NonlinearFactorGraph(), gtsam.NonlinearFactorGraph(), gtsam.Values()
         add_observation_factor(graph, self.keys, obs, track.index, frame_index, options.graph)
-        _add_pose_factors(graph, track.poses, key, t, self.options)
+        _add_pose_factors(motion, track.poses, key, t, self.options)
+        graph.push_back(motion)
         values.insert(key, guess)
         stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}}
         track.smoother.update(graph, values, stamps)
         track.poses.append((frame_index, t, key))
-        if track.young_graph is not None:
-            track.young_graph.push_back(graph)
-            track.young_obs.append((key, obs))
+        if track.young:
+            track.young_frames.append((frame_index, raw, motion, None))
             if _camera_count(obs) >= 2:
                 track.multiview_frames += 1
                 self._reanchor(track, t)
@@ -385,8 +430,6 @@ class Tracker:
             graph.add(hwc_factor(self.keys, track.index, terms=self._terms))
             smoother.update(graph, gtsam.Values(), {k: t for k in self.keys.layer_keys(track.index)})
             track.hwc_added = True
-            if track.young_graph is not None:
-                track.young_graph.push_back(graph)
             estimate = smoother.calculateEstimate()
             wireframe = self._wireframe(estimate, track)
         covariance = smoother.marginalCovariance(key) if self.options.covariance else None
@@ -495,21 +538,24 @@ def _refresh(final: dict, estimates: dict) -> None:
         final[key] = v
 
 
-def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: ShapePrior | None = None,
+def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: ShapePrior | ShapeModel | None = None,
                  bounds: HwcBounds | None = None) -> list[FrameResult]:
     """Batch smoothing: every track's whole graph solved at once by Levenberg-Marquardt.
 
     Each track starts from its one-frame solves (each frame's pose, the previous
     pose where a frame cannot be solved alone, and the shape of the solved frame
     with the most keypoints: a first frame seen partly can start LM in a worse
-    minimum, as on tracks_3cam seed 0).
+    minimum, as on tracks_3cam seed 0). With a shape model (the default) the
+    track's body type is chosen from the evidence of all its solved frames
+    together (their shape informations add up: they share one shape), and its
+    noise scale is the median of theirs.
 
     Raises:
         InputError: a detection still waits for the keypoint network.
     """
     scene.require_keypoints()
-    prior = prior or default_shape_prior()
-    bounds = bounds or default_hwc_bounds()
+    model = default_shape_model() if prior is None else (prior if isinstance(prior, ShapeModel) else None)
+    bounds = bounds or (model or default_shape_model()).bounds
     order = frame_order(scene)
     options = dataclasses.replace(options, solve=options.solve.for_scene(scene), lag=None)
     keys = KeyScheme()
@@ -522,11 +568,15 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
             per_track.setdefault(vid, []).append((i, frame.t, obs))
     results: dict[tuple[int, str], VehicleResult] = {}
     for index, (vid, items) in enumerate(per_track.items()):
+        firsts = [solve_observations(obs, options.solve, vid, model or prior, bounds) if len(obs) else None
+                  for _, _, obs in items]
+        shape = track_shape(firsts, model, prior)
+        track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        add_shape_factors(graph, keys, index, config, prior, bounds)
+        add_shape_factors(graph, keys, index, config, track_prior, bounds)
         posed, best = [], -1
-        for i, t, obs in items:
-            first = solve_observations(obs, options.solve, vid, prior, bounds) if len(obs) else None
+        for (i, t, obs), first in zip(items, firsts):
+            obs = obs.scaled(scale)
             if first is None or not first.ok:
                 if not posed:
                     results[(i, vid)] = first or VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen")
@@ -564,5 +614,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
             results[(i, vid)] = VehicleResult(
                 vid, Status.MAX_ITERATIONS if hit else Status.CONVERGED, world_T_vehicle=estimate.atPose3(key),
                 wireframe=wireframe, pose_covariance=marginals.marginalCovariance(key) if marginals else None,
-                iterations=optimizer.iterations(), final_error=graph.error(estimate))
+                iterations=optimizer.iterations(), final_error=graph.error(estimate), body_type=body_type,
+                body_type_probability=probability)
+            results[(i, vid)].extras["noise_scale"] = scale
     return [FrameResult(f.t, [results[(i, vid)] for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]

@@ -121,9 +121,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser(
         "eval", help="accuracy against simulated ground truth: one-frame methods, or tracking",
-        description="frames (default): run the factor graph, multi-view triangulation and the known-shape reference "
-        "(true wireframe given, pose solved from the truth) on the same simulated scenes, at paper-like noise and at "
-        "a harder setting (15%% outliers, 8%% left/right swaps), and print the paper's metrics side by side. "
+        description="frames (default): run the factor graph (each vehicle solved with a shape model learnt without "
+        "it), the factor graph with the old car prior, multi-view triangulation, PnP and the known-shape reference "
+        "(true wireframe given, pose solved from the truth) on the same simulated scenes, at clean noise (0.3%% of the "
+        "box), paper-like noise and a harder setting (15%% outliers, 8%% left/right swaps, 10%% missing), and print "
+        "the paper's metrics side by side, overall and per body type. "
         "tracks: track the vehicles of a simulated multi-frame scene with iSAM2 (online, final, fixed lag) and batch "
         "smoothing, beside frame-by-frame solving of the same frames. "
         "paper: the paper's comparison (its Tables I and II) on its three vehicles: the factor graph, CPO + HWC as "
@@ -137,7 +139,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "(rendered images -> keypoint network -> graph); default: frames")
     p.add_argument("--figures", help="paper: folder for the plots (the Markdown links them as figures/NAME.png)")
     p.add_argument("--sweep-frames", type=int, default=30, help="paper: vehicles per point of the plots (default: 30)")
-    p.add_argument("--scenario", help="scenario (default: accuracy_2cam for frames, tracks_3veh for tracks)")
+    p.add_argument("--scenario", help="scenario (default: library_2cam for frames, tracks_3veh for tracks, "
+                   "accuracy_2cam for images)")
+    p.add_argument("--levels", default="clean,paper,hard",
+                   help="frames: noise levels, comma-separated, of clean, paper, hard (default: all three)")
     p.add_argument("--frames", type=int, help="number of scenes or frames (default: the scenario's)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     p.add_argument("--seeds", type=int, default=1, help="tracks: how many seeds from --seed on (default: 1)")
@@ -448,7 +453,7 @@ def _eval(args) -> int:
     if not (np.isfinite(args.lag) and args.lag > 0):
         raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
     if args.experiment == "frames":
-        sections = _eval_frames(args.scenario or "accuracy_2cam", frames, args.seed)
+        sections = _eval_frames(args.scenario or "library_2cam", frames, args.seed, _levels(args.levels))
     elif args.experiment == "tracks":
         sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws, args.lag)
     elif args.experiment == "images":
@@ -459,13 +464,14 @@ def _eval(args) -> int:
         from vfactor.paper_comparison import paper_report
 
         sections = [paper_report(frames, args.seed, args.figures, _check_positive(args.sweep_frames, "--sweep-frames"))]
-    default = {"frames": "accuracy_2cam", "tracks": "tracks_3veh", "paper": None, "images": "accuracy_2cam"}[
+    default = {"frames": "library_2cam", "tracks": "tracks_3veh", "paper": None, "images": "accuracy_2cam"}[
         args.experiment]
     command = "vfactor eval" + (f" {args.experiment}" if args.experiment != "frames" else "") + \
         (f" --scenario {args.scenario}" if args.scenario and args.scenario != default else "") + \
         (f" --frames {args.frames}" if args.frames else "") + (f" --seed {args.seed}" if args.seed else "") + \
         (f" --seeds {args.seeds}" if args.seeds != 1 else "") + (f" --draws {args.draws}" if args.draws else "") + \
         (f" --lag {args.lag:g}" if args.experiment == "tracks" and args.lag != 0.5 else "") + \
+        (f" --levels {args.levels}" if args.experiment == "frames" and args.levels != "clean,paper,hard" else "") + \
         (f" --figures {args.figures}" if args.figures else "") + \
         (f" --sweep-frames {args.sweep_frames}" if args.experiment == "paper" and args.sweep_frames != 30 else "")
     for section in sections:
@@ -476,17 +482,29 @@ def _eval(args) -> int:
     return EXIT_OK
 
 
-def _eval_frames(scenario_name: str, frames, seed: int) -> list[str]:
-    from vfactor.evaluation import accuracy_table, keypoint_table, run_accuracy
+def _levels(text: str) -> tuple[str, ...]:
+    from vfactor.evaluation import NOISE_LEVELS
+
+    levels = tuple(t.strip() for t in text.split(",") if t.strip())
+    unknown = [t for t in levels if t not in NOISE_LEVELS]
+    if not levels or unknown:
+        raise InputError("--levels", f"expected a comma-separated list of {', '.join(NOISE_LEVELS)}, got {text!r}")
+    return levels
+
+
+def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper", "hard")) -> list[str]:
+    from vfactor.evaluation import accuracy_table, body_type_table, keypoint_table, run_accuracy, summarise_methods
 
     sections = []
-    for scenario, summary in run_accuracy(scenario_name, frames, seed):
+    for scenario, rows in run_accuracy(scenario_name, frames, seed, levels):
         n = scenario.noise
+        summary = summarise_methods(rows)
         title = (f"### {scenario.name}: {n.outlier_rate:.0%} outliers, {n.swap_rate:.0%} left/right swaps, "
-                 f"{n.missing_rate:.0%} missing, sigma {n.relative_sigma:.0%} of the box diagonal "
+                 f"{n.missing_rate:.0%} missing, sigma {n.relative_sigma:.1%} of the box diagonal "
                  f"(x{n.occluded_factor:g} when self-occluded), seed {seed}")
-        sections.append(f"{title}\n\n{accuracy_table(summary)}\n\nMean error per keypoint (cm):\n\n"
-                        f"{keypoint_table(summary)}\n")
+        sections.append(f"{title}\n\n{accuracy_table(summary)}\n\nPer body type (each vehicle solved with a "
+                        f"shape model learnt without it):\n\n{body_type_table(rows)}\n\nMean error per keypoint "
+                        f"(cm):\n\n{keypoint_table(summary)}\n")
     return sections
 
 

@@ -2,7 +2,13 @@
 
 :func:`compare_methods` runs every method on the same simulated observations
 (one vehicle per frame and per id), :func:`accuracy_table` prints the paper's
-metrics side by side. ``vfactor eval`` is the command.
+metrics side by side and :func:`body_type_table` the same per body type.
+``vfactor eval`` is the command.
+
+Leave-one-model-out: a simulated library vehicle is solved with the shape
+model learnt without it (:func:`held_out_model`), so that no figure here comes
+from a vehicle the prior has seen. Presets and PASCAL3D+ cars are never in
+the library's priors.
 """
 
 from __future__ import annotations
@@ -15,48 +21,94 @@ import numpy as np
 from vfactor.baselines import known_shape, pnp, triangulation
 from vfactor.graph import observations_from_detections
 from vfactor.metrics import pose_errors
+from vfactor.shape_model import HwcBounds, ShapeModel, default_shape_model, default_shape_prior
 from vfactor.sim import Scenario, Simulation, load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations
+from vfactor.vehicle_library import BODY_TYPES, vehicle_library
+from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
 
-__all__ = ["METHODS", "compare_methods", "summarise_methods", "accuracy_table", "keypoint_table", "noise_variant", "run_accuracy",
-           "compare_tracking", "tracking_table", "final_shape_errors", "shape_over_noise_draws", "shape_draws_table"]
+__all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held_out_model", "car_prior_bounds",
+           "compare_methods", "summarise_methods", "accuracy_table", "keypoint_table", "body_type_table",
+           "noise_variant", "run_accuracy", "compare_tracking", "tracking_table", "final_shape_errors",
+           "shape_over_noise_draws", "shape_draws_table"]
 
 #: Method name -> description, in table order.
 METHODS = {
-    "factor_graph": "vfactor factor graph (LM, robust, shape + HWC)",
+    "factor_graph": "vfactor factor graph (LM, robust, body-type shape model + HWC, noise scale estimated)",
+    "car_prior": "the factor graph as before the body-type model: PASCAL3D+ car prior and bounds, fixed 3 % sigma",
     "triangulation": "multi-view triangulation + mean-shape alignment",
     "pnp": "PnP of the mean shape in the best single camera",
     "known_shape": "reference: true shape given, pose from the truth",
 }
 
+#: Noise levels of ``vfactor eval``: name -> changes to the scenario's noise.
+NOISE_LEVELS: dict[str, dict] = {
+    "clean": {"relative_sigma": 0.003, "outlier_rate": 0.0, "swap_rate": 0.0, "missing_rate": 0.0},
+    "paper": {"relative_sigma": 0.03, "outlier_rate": 0.05, "swap_rate": 0.03, "missing_rate": 0.05},
+    "hard": {"relative_sigma": 0.03, "outlier_rate": 0.15, "swap_rate": 0.08, "missing_rate": 0.10},
+}
 
-def noise_variant(scenario: Scenario, outlier_rate: float | None = None, swap_rate: float | None = None) -> Scenario:
-    """The scenario with other outlier and left/right swap rates."""
-    noise = scenario.noise
-    changes = {k: v for k, v in (("outlier_rate", outlier_rate), ("swap_rate", swap_rate)) if v is not None}
-    return dataclasses.replace(scenario, noise=dataclasses.replace(noise, **changes))
+#: Body type of each preset (for the per-type tables; the presets are never in the library's priors).
+PRESET_BODY_TYPES = {"lincoln_mkz": "sedan", "toyota_prius": "hatchback", "bmw_x5": "suv", "hatchback": "hatchback",
+                     "suv": "suv", "pickup": "pickup", "van": "van"}
+
+
+def body_type_of(model: str) -> str:
+    """Body type of a simulated vehicle model (library id, preset name); ``"pascal3d"`` for random PASCAL3D+ cars."""
+    library = vehicle_library()
+    if model in library:
+        return library[model].body_type
+    return PRESET_BODY_TYPES.get(model, "pascal3d")
+
+
+def held_out_model(model: str) -> ShapeModel:
+    """The shape model learnt without the vehicle ``model`` (the full model when it is not in the library)."""
+    return default_shape_model(frozenset({model}) if model in vehicle_library() else frozenset())
+
+
+def car_prior_bounds() -> HwcBounds:
+    """The HWC bounds as they were before the body-type model: PASCAL3D+ cars at 2.4-3.1 m and the presets, 15 %."""
+    wireframes = [Wireframe(s * wb) for s in pascal3d_shapes() for wb in (2.4, 3.1)]
+    wireframes += [p.wireframe() for p in PRESETS.values()]
+    return HwcBounds.from_wireframes(wireframes, margin=0.15)
+
+
+def noise_variant(scenario: Scenario, outlier_rate: float | None = None, swap_rate: float | None = None,
+                  **changes) -> Scenario:
+    """The scenario with other noise: outlier and left/right swap rates, or any :class:`NoiseModel` field."""
+    changes.update({k: v for k, v in (("outlier_rate", outlier_rate), ("swap_rate", swap_rate)) if v is not None})
+    return dataclasses.replace(scenario, noise=dataclasses.replace(scenario.noise, **changes))
 
 
 def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), methods=tuple(METHODS)) -> dict[str, list[dict]]:
     """Errors of each method on every (frame, vehicle) of a simulation.
 
+    The factor graph solves each library vehicle with the shape model learnt
+    without it (:func:`held_out_model`).
+
     Returns:
-        method -> rows: ``pose_errors`` fields plus ``preset``, ``status``,
-        ``seconds``; a vehicle a method could not solve has ``status`` only and
-        counts as a failure.
+        method -> rows: ``pose_errors`` fields plus ``preset`` (the vehicle
+        model), ``body_type`` (the truth's), ``chosen_type`` (the solver's, or
+        None), ``status``, ``seconds``; a vehicle a method could not solve has
+        ``status`` only and counts as a failure.
     """
     unknown = set(methods) - set(METHODS)
     if unknown:
         raise ValueError(f"methods: unknown {sorted(unknown)}; known: {list(METHODS)}")
+    car_options = dataclasses.replace(options, estimate_noise=False)
     rows = {m: [] for m in methods}
     for f, frame in enumerate(sim.scene.frames):
         for vid in frame.vehicle_ids():
             truth = sim.truth[f][vid]
-            obs = observations_from_detections(frame.detections_of(vid), sim.scene.cameras, options.graph)
+            detections = frame.detections_of(vid)
+            obs = observations_from_detections(detections, sim.scene.cameras, options.graph)
+            hints = tuple(d.vehicle_class for d in detections if d.vehicle_class)
             for method in methods:
                 t0 = time.perf_counter()
                 if method == "factor_graph":
-                    result = solve_observations(obs, options, vid)
+                    result = solve_observations(obs, options, vid, held_out_model(truth.preset), hints=hints)
+                elif method == "car_prior":
+                    result = solve_observations(obs, car_options, vid, default_shape_prior(), car_prior_bounds())
                 elif method == "triangulation":
                     result = triangulation(obs, vid)
                 elif method == "pnp":
@@ -64,7 +116,8 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
                 else:
                     result = known_shape(obs, truth.world_T_vehicle, truth.wireframe, options.graph, vid)
                 seconds = time.perf_counter() - t0
-                row = {"frame": f, "vehicle": vid, "preset": truth.preset, "status": result.status.value, "seconds": seconds}
+                row = {"frame": f, "vehicle": vid, "preset": truth.preset, "body_type": body_type_of(truth.preset),
+                       "chosen_type": result.body_type, "status": result.status.value, "seconds": seconds}
                 if result.ok:
                     row.update(pose_errors(result.world_T_vehicle, result.keypoints_world, truth.world_T_vehicle,
                                            truth.keypoints_world))
@@ -121,15 +174,51 @@ def keypoint_table(summary: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
+def body_type_table(rows: dict[str, list[dict]], reference: str = "known_shape") -> str:
+    """Per body type: each method's rotation / translation / keypoint error, and the factor graph's ratios to ``reference``.
+
+    Also the share of vehicles whose body type the factor graph chose right
+    (PASCAL3D+ cars count as right when a car type was chosen).
+    """
+    methods = [m for m in rows if m in ("factor_graph", "car_prior", "triangulation", reference)]
+    header = "| body type | vehicles | " + " | ".join(f"{m} (deg / cm / kp cm)" for m in methods) + \
+        " | factor_graph vs reference (rot / trans / kp) | type chosen right | failed (factor graph) |"
+    lines = [header, "| --- " * (len(methods) + 5) + "|"]
+    present = [t for t in (*BODY_TYPES, "pascal3d") if any(r["body_type"] == t for r in rows["factor_graph"])]
+    car_types = ("sedan", "hatchback", "wagon", "suv")
+    for body_type in present:
+        cells, summary = [], {}
+        for m in methods:
+            s = summarise_methods({m: [r for r in rows[m] if r["body_type"] == body_type]})[m]
+            summary[m] = s
+            cells.append(f"{s['rotation_deg']:.2f} / {s['translation_cm']:.1f} / {s['keypoint_cm']:.1f}")
+        fg, ref = summary["factor_graph"], summary.get(reference)
+        ratio = "-" if ref is None else " / ".join(f"{fg[k] / ref[k]:.2f}x" for k in ("rotation_deg", "translation_cm",
+                                                                                      "keypoint_cm"))
+        mine = [r for r in rows["factor_graph"] if r["body_type"] == body_type and r.get("chosen_type")]
+        right = [r for r in mine if r["chosen_type"] == body_type or (body_type == "pascal3d" and r["chosen_type"] in car_types)]
+        share = f"{len(right)}/{len(mine)}" if mine else "-"
+        lines.append(f"| {body_type} | {fg['count']} | " + " | ".join(cells) + f" | {ratio} | {share} | {fg['failures']} |")
+    return "\n".join(lines)
+
+
 def run_accuracy(scenario: str = "accuracy_2cam", frames: int | None = None, seed: int = 0,
-                 variants=((None, None), (0.15, 0.08)), options: SolveOptions = SolveOptions()) -> list[tuple[Scenario, dict]]:
-    """The accuracy experiment of docs/results.md: each noise variant simulated and every method run."""
+                 levels=("paper", "hard"), options: SolveOptions = SolveOptions(),
+                 methods=tuple(METHODS)) -> list[tuple[Scenario, dict[str, list[dict]]]]:
+    """The accuracy experiment of docs/results.md: each noise level (:data:`NOISE_LEVELS`) simulated, every method run.
+
+    Returns:
+        (scenario variant, :func:`compare_methods` rows) per level.
+    """
     base = load_scenario(scenario)
     out = []
-    for outlier_rate, swap_rate in variants:
-        variant = noise_variant(base, outlier_rate, swap_rate)
+    for level in levels:
+        if level not in NOISE_LEVELS:
+            raise ValueError(f"noise level: expected one of {list(NOISE_LEVELS)}, got {level!r}")
+        variant = noise_variant(base, **NOISE_LEVELS[level])
+        variant = dataclasses.replace(variant, name=f"{base.name} ({level})")
         sim = simulate(variant, seed=seed, num_frames=frames)
-        out.append((variant, summarise_methods(compare_methods(sim, options))))
+        out.append((variant, compare_methods(sim, options, methods)))
     return out
 
 

@@ -431,7 +431,7 @@ ROUTE_CASES = [
     (_route_set(R0 + ["stop_time"], 1.0), "motion.routes[0].stop_time", "at most one"),
     (_route_set(["motion", "routes", 2, "stop"], False), "motion.routes[2].stop_time", "stop: false"),
     (_route_set(R0 + ["decel"], -2.0), "motion.routes[0].decel", "> 0"),
-    (_route_set(R0 + ["vehicle"], "tractor"), "motion.routes[0].vehicle", "expected one of"),
+    (_route_set(R0 + ["vehicle"], "tractor"), "motion.routes[0].vehicle", "unknown name 'tractor'"),
     (_route_set(R0 + ["stops"], []), "motion.routes[0].stops", 'only with "path"'),
     (_route_set(R0 + ["wings"], 2), "motion.routes[0].wings", "unknown key"),
     (_route_set(R0 + ["path"], {"start": [0, 0, 0], "segments": [{"straight": 5}]}), "motion.routes[0].from",

@@ -114,7 +114,7 @@ CASES = [
     (_set(["cameras", 0, "dist"], [0.1, 0.2]), "cameras[0].dist", "4 or 5"),
     (_set(["cameras", 0, "zoom"], 2), "cameras[0].zoom", "unknown key"),
     (_set(["cameras", 1, "name"], "cam0"), "cameras[1].name", "duplicate"),
-    (_set(["vehicles"], ["lincoln_mkz", "tractor"]), "vehicles[1]", "expected one of"),
+    (_set(["vehicles"], ["lincoln_mkz", "tractor"]), "vehicles[1]", "unknown name 'tractor'"),
     (_set(["vehicles"], "lincoln_mkz"), "vehicles", "non-empty list"),
     (_set(["vehicle_order"], "shuffle"), "vehicle_order", "expected one of"),
     (_set(["vehicles_per_frame"], 0), "vehicles_per_frame", ">= 1"),

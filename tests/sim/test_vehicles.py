@@ -60,7 +60,7 @@ def test_vehicle_shape_gives_presets_and_random_cars():
     assert w == PRESETS["bmw_x5"].wireframe() and radius == PRESETS["bmw_x5"].wheel_radius
     w, radius = vehicle_shape("random", rng, RandomShape(wheel_radius=0.31))
     assert radius == 0.31 and within_hwc_bounds(w)
-    with pytest.raises(ValueError, match="unknown preset"):
+    with pytest.raises(ValueError, match="unknown name"):
         vehicle_shape("tractor", rng)
 
 

@@ -57,6 +57,7 @@ from vfactor.sim.simulate import (
 )
 from vfactor.sim.truth import load_truth, save_truth, truth_from_dict, truth_to_dict, write_simulation
 from vfactor.sim.vehicles import (
+    LIBRARY,
     RANDOM,
     RandomShape,
     footprint,
@@ -65,6 +66,9 @@ from vfactor.sim.vehicles import (
     road_pose,
     symmetrised,
     vehicle_shape,
+    draw_vehicle,
+    check_vehicle_name,
+    vehicle_names,
     within_hwc_bounds,
 )
 from vfactor.sim.visibility import HUB_PUSH, VehicleBody, occluded_keypoints, self_occluded
@@ -77,10 +81,14 @@ __all__ = [
     "intersection_rig",
     # vehicles
     "RANDOM",
+    "LIBRARY",
     "RandomShape",
     "random_wireframe",
     "symmetrised",
     "vehicle_shape",
+    "draw_vehicle",
+    "check_vehicle_name",
+    "vehicle_names",
     "within_hwc_bounds",
     "road_pose",
     "footprint",

@@ -22,8 +22,7 @@ from vfactor.sim.noise import NoiseModel
 from vfactor.sim.rig import intrinsics_from_hfov, look_at
 from vfactor.sim.routes import ARMS, TURNS
 from vfactor.sim.routes import Path as RoutePath
-from vfactor.sim.vehicles import RANDOM, RandomShape
-from vfactor.wireframe import PRESETS
+from vfactor.sim.vehicles import RANDOM, RandomShape, check_vehicle_name
 
 __all__ = [
     "Motion",
@@ -48,7 +47,8 @@ SCENARIO_FIELDS: dict[str, str] = {
     "name": "scenario name (default: the file's stem)",
     "description": "free text",
     "cameras": "list of cameras (required); see CAMERA_FIELDS",
-    "vehicles": 'list of preset names and/or "random" (required)',
+    "vehicles": 'list of vehicle names (required): presets, library ids, "library", "library:<body type>" '
+    'or "random" (a random PASCAL3D+ car)',
     "vehicle_order": '"cycle" (default: frame f, slot k takes vehicles[(f * n + k) % len]) or "random"',
     "vehicles_per_frame": "integer >= 1 (default 1); ids v1, v2, ...",
     "random_shape": '{"wheelbase": [2.5, 3.0], "jitter": 0.03, "wheel_radius": 0.33}, for "random" vehicles',
@@ -104,7 +104,7 @@ ROUTE_MOTION_FIELDS: dict[str, str] = {
 
 #: Keys of one entry of ``motion.routes``; every one is optional.
 ROUTE_FIELDS: dict[str, str] = {
-    "vehicle": 'preset name or "random" (default: from "vehicles" by "vehicle_order")',
+    "vehicle": 'a vehicle name as in "vehicles" (default: from "vehicles" by "vehicle_order")',
     "from": '"west", "south", "east" or "north": the arm the vehicle comes from',
     "turn": '"straight", "left" or "right"',
     "radius": "turn radius, m",
@@ -253,7 +253,8 @@ class Scenario:
 
     Attributes:
         cameras: camera name -> :class:`Camera`, in file order.
-        vehicles: preset names and/or ``"random"``.
+        vehicles: vehicle names (:func:`vfactor.sim.vehicles.draw_vehicle`): presets, library
+            ids, ``"library"``, ``"library:<body type>"`` or ``"random"``.
         name: scenario name.
         description: free text.
         vehicle_order: ``"cycle"`` or ``"random"``: how each vehicle slot picks from ``vehicles``.
@@ -380,9 +381,9 @@ def scenario_from_dict(data: dict, default_name: str = "scenario") -> Scenario:
 
     vehicles = data["vehicles"]
     if not isinstance(vehicles, list) or not vehicles:
-        raise ScenarioError("vehicles", f'expected a non-empty list of preset names or "{RANDOM}"')
-    known = set(PRESETS) | {RANDOM}
-    kw["vehicles"] = tuple(chk.string(v, f"vehicles[{i}]", choices=known) for i, v in enumerate(vehicles))
+        raise ScenarioError("vehicles", f'expected a non-empty list of vehicle names (presets, library ids, '
+                                        f'"library", "library:<body type>" or "{RANDOM}")')
+    kw["vehicles"] = tuple(_vehicle_name(v, f"vehicles[{i}]") for i, v in enumerate(vehicles))
     if "vehicle_order" in data:
         kw["vehicle_order"] = chk.string(data["vehicle_order"], "vehicle_order", choices={"cycle", "random"})
     if "vehicles_per_frame" in data:
@@ -629,12 +630,21 @@ def _route_motion(value, field: str) -> RouteMotion:
     return RouteMotion(**kw)
 
 
+def _vehicle_name(value, field: str) -> str:
+    try:
+        return check_vehicle_name(chk.string(value, field))
+    except ValueError as exc:
+        if isinstance(exc, ScenarioError):
+            raise
+        raise ScenarioError(field, str(exc).split(": ", 1)[1]) from None
+
+
 def _route(value, field: str) -> RouteSpec:
     chk.check_mapping(value, field, ROUTE_FIELDS)
     where = lambda key: chk.join(field, key)  # noqa: E731
     kw: dict = {}
     if "vehicle" in value:
-        kw["vehicle"] = chk.string(value["vehicle"], where("vehicle"), choices=set(PRESETS) | {RANDOM})
+        kw["vehicle"] = _vehicle_name(value["vehicle"], where("vehicle"))
     for key, bounds in (("speed", _SPEED), ("wait", _WAIT), ("decel", _ACCEL), ("accel", _ACCEL)):
         if key in value:
             kw[key] = _scalar(value[key], where(key), bounds)

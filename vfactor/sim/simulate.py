@@ -25,7 +25,7 @@ from vfactor.observations import Detection, Frame, Scene
 from vfactor.sim.noise import corrupt_keypoints
 from vfactor.sim.routes import Trajectory, drive_profile, intersection_path
 from vfactor.sim.scenario import RouteMotion, RouteSpec, Scenario, load_scenario
-from vfactor.sim.vehicles import footprint, footprints_overlap, road_pose, vehicle_shape
+from vfactor.sim.vehicles import draw_vehicle, footprint, footprints_overlap, road_pose
 from vfactor.sim.visibility import VehicleBody, occluded_keypoints
 from vfactor.wireframe import Wireframe
 
@@ -45,7 +45,7 @@ class VehicleTruth:
     Attributes:
         world_T_vehicle: body -> world pose.
         wireframe: body-frame keypoints, metres.
-        preset: preset name, or ``"random"``.
+        preset: the vehicle model: preset name, library id, or ``"random"``.
         wheel_radius: hub height above the road, metres.
         speed: forward speed along body x, m/s (None for independent frames).
         yaw_rate: rad/s, counter-clockwise seen from above (None for independent frames).
@@ -256,7 +256,7 @@ def _place_frame(scenario: Scenario, rng: np.random.Generator, frame: int) -> di
     presets = _pick_presets(scenario, rng, first_slot=frame * scenario.vehicles_per_frame)
     (x0, x1), (y0, y1) = scenario.region
     for vid, name in zip(vehicle_ids(scenario.vehicles_per_frame), presets):
-        wireframe, radius = vehicle_shape(name, rng, scenario.random_shape)
+        wireframe, radius, name = draw_vehicle(name, rng, scenario.random_shape)
         for _ in range(_MAX_TRIES):
             pose = road_pose(rng.uniform(x0, x1), rng.uniform(y0, y1), rng.uniform(*scenario.yaw_range), radius)
             candidate = VehicleTruth(pose, wireframe, name, radius)
@@ -290,7 +290,7 @@ def _place_tracks(scenario: Scenario, rng: np.random.Generator, num_frames: int)
     (x0, x1), (y0, y1) = scenario.region
     frames: list[dict[str, VehicleTruth]] = [{} for _ in range(num_frames)]
     for vid, name in zip(vehicle_ids(scenario.vehicles_per_frame), presets):
-        wireframe, radius = vehicle_shape(name, rng, scenario.random_shape)
+        wireframe, radius, name = draw_vehicle(name, rng, scenario.random_shape)
         for _ in range(_MAX_TRIES):
             x, y, yaw = rng.uniform(x0, x1), rng.uniform(y0, y1), rng.uniform(*scenario.yaw_range)
             speed, yaw_rate = rng.uniform(*motion.speed), rng.uniform(*motion.yaw_rate)
@@ -320,7 +320,7 @@ def _place_routes(
         spec = motion.routes[k] if explicit else RouteSpec()
         where = f"motion.routes[{k}]" if explicit else "motion"
         name = spec.vehicle or presets[k]
-        wireframe, radius = vehicle_shape(name, rng, scenario.random_shape)
+        wireframe, radius, name = draw_vehicle(name, rng, scenario.random_shape)
         tries = _ROUTE_TRIES if _has_draws(spec, motion) else 1
         problem = ""
         for _ in range(tries):

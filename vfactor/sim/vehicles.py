@@ -1,4 +1,9 @@
-"""Simulated vehicles: shapes (presets or random PASCAL3D+ cars) and poses on the road.
+"""Simulated vehicles: shapes (library vehicles, presets or random PASCAL3D+ cars) and poses on the road.
+
+A scenario names each vehicle by a preset name, a library id
+(:mod:`vfactor.vehicle_library`), ``"library"`` (any library vehicle),
+``"library:<body type>"`` (one of that type) or ``"random"`` (a random
+PASCAL3D+ car); :func:`draw_vehicle` turns the name into a shape.
 
 A vehicle stands on the road ``z = 0`` with roll = pitch = 0. Its body origin is
 the centroid of the four wheel hubs (``DESIGN.md``), so the origin lies
@@ -15,14 +20,19 @@ import numpy as np
 
 from vfactor.keypoints import LAYERS, MIRROR_PERMUTATION
 from vfactor.shape_model import DISTANCE_PAIRS, HwcBounds, default_hwc_bounds
+from vfactor.vehicle_library import BODY_TYPES, library_ids, vehicle_library
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
 
 __all__ = [
     "RANDOM",
+    "LIBRARY",
     "RandomShape",
     "random_wireframe",
     "symmetrised",
     "vehicle_shape",
+    "draw_vehicle",
+    "check_vehicle_name",
+    "vehicle_names",
     "within_hwc_bounds",
     "road_pose",
     "footprint",
@@ -31,6 +41,8 @@ __all__ = [
 
 #: Vehicle name that asks for a random PASCAL3D+ shape instead of a preset.
 RANDOM = "random"
+#: Vehicle name that asks for a random library vehicle; ``"library:<body type>"`` for one of a type.
+LIBRARY = "library"
 
 
 @dataclass(frozen=True)
@@ -40,7 +52,9 @@ class RandomShape:
     Attributes:
         wheelbase: ``(min, max)`` of the uniform wheelbase, metres.
         jitter: standard deviation of the Gaussian noise added to every
-            keypoint coordinate (before symmetrisation), metres.
+            keypoint coordinate (before symmetrisation), metres; also added to
+            library vehicles (the lamps and window tops are placed by rules,
+            docs/vehicles.md: a real vehicle departs from them).
         wheel_radius: wheel radius (hub height above the road), metres.
         max_tries: draws before giving up on a shape inside the HWC bounds.
     """
@@ -106,23 +120,70 @@ def within_hwc_bounds(wireframe: Wireframe, bounds: HwcBounds | None = None) -> 
     return True
 
 
+def vehicle_names() -> tuple[str, ...]:
+    """Every vehicle name a scenario may use: presets, library ids, ``library``, ``library:<type>``, ``random``."""
+    return (*PRESETS, *library_ids(), LIBRARY, *(f"{LIBRARY}:{t}" for t in BODY_TYPES), RANDOM)
+
+
+def check_vehicle_name(name: str) -> str:
+    """``name`` if a scenario may use it; raises ``ValueError`` listing the kinds of name otherwise."""
+    if name in PRESETS or name in (RANDOM, LIBRARY) or name in vehicle_library():
+        return name
+    if name.startswith(f"{LIBRARY}:") and name.split(":", 1)[1] in BODY_TYPES:
+        return name
+    raise ValueError(f"vehicle: unknown name {name!r}; expected a preset ({', '.join(sorted(PRESETS))}), a library id "
+                     f"(vfactor.vehicle_library.library_ids()), {LIBRARY!r}, '{LIBRARY}:<body type>' with a body type "
+                     f"of {', '.join(BODY_TYPES)}, or {RANDOM!r}")
+
+
+def draw_vehicle(
+    name: str, rng: np.random.Generator, random_shape: RandomShape = RandomShape()
+) -> tuple[Wireframe, float, str]:
+    """Shape, wheel radius and model name of a scenario's vehicle name.
+
+    A preset is returned as it is. A library vehicle (by id, or drawn with
+    ``"library"`` / ``"library:<body type>"``) gets ``random_shape.jitter`` on
+    every keypoint, symmetrised and re-centred. ``"random"`` is a random
+    PASCAL3D+ car (:func:`random_wireframe`).
+
+    Returns:
+        (wireframe in metres, wheel radius in metres, model: the preset name,
+        the library id, or ``"random"``).
+
+    Raises:
+        ValueError: unknown name.
+    """
+    check_vehicle_name(name)
+    if name == RANDOM:
+        return random_wireframe(rng, random_shape), random_shape.wheel_radius, RANDOM
+    if name in PRESETS:
+        p = PRESETS[name]
+        return p.wireframe(), p.wheel_radius, name
+    if name == LIBRARY or name.startswith(f"{LIBRARY}:"):
+        ids = library_ids(name.split(":", 1)[1] if ":" in name else None)
+        name = ids[rng.integers(len(ids))]
+    vehicle = vehicle_library()[name]
+    points = vehicle.wireframe.vehicle_p_keypoints
+    if random_shape.jitter > 0:
+        points = symmetrised(points + rng.normal(0.0, random_shape.jitter, size=points.shape))
+        points[:4, 2] = 0.0  # the hubs stay level at the origin's height
+        points -= points[list(LAYERS["wheel"])].mean(axis=0)
+    return Wireframe(points), vehicle.wheel_radius, name
+
+
 def vehicle_shape(
     name: str, rng: np.random.Generator, random_shape: RandomShape = RandomShape()
 ) -> tuple[Wireframe, float]:
-    """Shape and wheel radius of a preset (by name) or of a random car (``"random"``).
+    """Shape and wheel radius of a vehicle name (:func:`draw_vehicle` without the model name).
 
     Returns:
         (wireframe in metres, wheel radius in metres).
 
     Raises:
-        ValueError: unknown preset name.
+        ValueError: unknown name.
     """
-    if name == RANDOM:
-        return random_wireframe(rng, random_shape), random_shape.wheel_radius
-    if name not in PRESETS:
-        raise ValueError(f"vehicle: unknown preset {name!r}; known: {sorted(PRESETS)} or {RANDOM!r}")
-    p = PRESETS[name]
-    return p.wireframe(), p.wheel_radius
+    wireframe, radius, _ = draw_vehicle(name, rng, random_shape)
+    return wireframe, radius
 
 
 def road_pose(x: float, y: float, yaw: float, wheel_radius: float) -> gtsam.Pose3:

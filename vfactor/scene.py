@@ -45,6 +45,7 @@ from vfactor.camera import Camera, check_rigid_transform
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.errors import CalibrationError, SceneError
 from vfactor.heatmaps import decode_heatmaps
+from vfactor.jsonio import NonFinite, OutOfRange, read_json, write_text_atomic
 from vfactor.keypoints import NUM_KEYPOINTS
 from vfactor.observations import DEFAULT_VEHICLE_ID, Detection, Frame, Scene, resolve_path
 from vfactor.result import FrameResult, Status, VehicleResult
@@ -697,50 +698,13 @@ def _check_symmetric(S: np.ndarray, field: str) -> None:
 
 
 # ============================================================== JSON helpers
-class _NonFinite:
-    """Stands in for the NaN / Infinity literals Python's json accepts, so that
-    validation reports them at their field."""
-
-    __slots__ = ("text",)
-
-    def __init__(self, text: str):
-        self.text = text
-
-    def __repr__(self):
-        return self.text
-
-
-def _no_duplicate_keys(pairs):
-    out = {}
-    for key, value in pairs:
-        if key in out:
-            raise _DuplicateKey(key)
-        out[key] = value
-    return out
-
-
-class _DuplicateKey(Exception):
-    pass
-
-
 def _read_json(path: Path):
-    where = str(path)
-    if not path.is_file():
-        raise SceneError(where, "file not found" if not path.exists() else "expected a file, got a directory")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(where, f"could not read the file: {exc}") from None
-    try:
-        return json.loads(text, parse_constant=_NonFinite, object_pairs_hook=_no_duplicate_keys)
-    except json.JSONDecodeError as exc:
-        raise SceneError(where, f"not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}") from None
-    except _DuplicateKey as exc:
-        raise SceneError(where, f"not valid: key {exc.args[0]!r} appears twice in one object") from None
+    return read_json(path, SceneError)
 
 
 def _write_json(path: Path, data) -> None:
-    path.write_text(_dumps(data) + "\n", encoding="utf-8")
+    """The one writer of scene and result files: atomic (:func:`vfactor.jsonio.write_text_atomic`)."""
+    write_text_atomic(path, _dumps(data) + "\n")
 
 
 def _depth(value) -> int:
@@ -781,8 +745,8 @@ def _kind(value) -> str:
     """A short description of a found value for error messages."""
     if value is None:
         return "null"
-    if isinstance(value, _NonFinite):
-        return value.text
+    if isinstance(value, (NonFinite, OutOfRange)):
+        return repr(value)
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, (int, float, np.integer, np.floating)):

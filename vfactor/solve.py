@@ -34,6 +34,7 @@ from vfactor.init import best_candidates
 from vfactor.keys import KeyScheme
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
+from vfactor.sanity import checked, summarise_error
 from vfactor.shape_model import HwcBounds, ShapePrior, default_hwc_bounds, default_shape_prior
 from vfactor.wireframe import Wireframe
 
@@ -170,7 +171,7 @@ def solve_observations(
         try:
             outcome = _optimise(graph, values, keys, options, terms, hwc)
         except RuntimeError as exc:
-            failure = str(exc)
+            failure = summarise_error(exc)
             continue
         if best is None or outcome[1] < best[1]:
             best = outcome
@@ -198,7 +199,7 @@ def solve_observations(
             result.keypoint_covariances_world = keypoint_covariances(marginals, keys, world_T_vehicle, wireframe)
         except RuntimeError as exc:
             result.message = f"covariance unavailable: {exc}"
-    return result
+    return checked(result, [obs.cameras[c] for c in np.unique(obs.camera_index)], options.covariance)  # vfactor.sanity
 
 
 def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc):
@@ -306,7 +307,7 @@ def solve_frame(frame: Frame, cameras: dict[str, Camera], options: SolveOptions 
         try:
             vehicles.append(solve_vehicle(frame.detections_of(vehicle_id), cameras, options, vehicle_id, **kwargs))
         except (InputError, RuntimeError, np.linalg.LinAlgError) as exc:
-            vehicles.append(VehicleResult(vehicle_id, Status.FAILED, message=str(exc)))
+            vehicles.append(VehicleResult(vehicle_id, Status.FAILED, message=summarise_error(exc)))
     return FrameResult(frame.t, vehicles)
 
 

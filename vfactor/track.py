@@ -47,6 +47,7 @@ from vfactor.init import best_candidates, cross_projection_cost
 from vfactor.keys import KeyScheme
 from vfactor.observations import Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
+from vfactor.sanity import checked, summarise_error
 from vfactor.shape_model import HwcBounds, ShapePrior, default_hwc_bounds, default_shape_prior
 from vfactor.solve import SolveOptions, solve_observations
 from vfactor.wireframe import Wireframe
@@ -209,12 +210,15 @@ class Tracker:
         for vid in frame.vehicle_ids():
             try:
                 obs = observations_from_detections(frame.detections_of(vid), self.cameras, self.options.solve.graph)
-                vehicles.append(self._add(vid, index, frame.t, obs))
+                result = self._add(vid, index, frame.t, obs)
+                vehicles.append(checked(result, _seen_by(frame, vid, self.cameras), self.options.covariance))
+                failed = result.ok and not vehicles[-1].ok  # garbage (vfactor.sanity): do not track on from it
             except (InputError, RuntimeError, np.linalg.LinAlgError) as exc:
-                track = self._tracks.get(vid)
-                if track is not None:  # restart this track from its next solvable frame
-                    track.smoother, track.poses, track.hwc_added = None, [], False
-                vehicles.append(VehicleResult(vid, Status.FAILED, message=str(exc)))
+                vehicles.append(VehicleResult(vid, Status.FAILED, message=summarise_error(exc)))
+                failed = True
+            track = self._tracks.get(vid)
+            if failed and track is not None:  # restart this track from its next solvable frame
+                track.smoother, track.poses, track.hwc_added, track.young_graph = None, [], False, None
         return FrameResult(frame.t, vehicles)
 
     def estimates(self, covariance: bool = False) -> dict[tuple[int, str], VehicleResult]:
@@ -446,6 +450,11 @@ def _segment_message(gap: float, max_gap: float) -> str:
             f"(TrackOptions.max_gap = {max_gap:g} s); no motion factors across the gap")
 
 
+def _seen_by(frame: Frame, vid: str, cameras: dict[str, Camera]) -> list[Camera]:
+    """The cameras that see at least one keypoint of vehicle ``vid`` in ``frame`` (for vfactor.sanity)."""
+    return [cameras[d.camera] for d in frame.detections_of(vid) if d.camera in cameras and np.any(d.confidence > 0)]
+
+
 def _camera_count(obs: KeypointObservations) -> int:
     return len(set(obs.camera_index.tolist()))
 
@@ -505,7 +514,8 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
     for vid, count in solved.items():
         if count == 1:
             messages.append(f"vehicle '{vid}' was solved in one frame only: no motion information")
-    frames = [FrameResult(f.t, [final[(i, vid)] for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
+    frames = [FrameResult(f.t, [checked(final[(i, vid)], _seen_by(f, vid, scene.cameras), options.covariance)
+                                for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
     return TrackRun(frames=frames, online=[online[i] for i in range(len(scene.frames))], messages=messages)
 
 
@@ -581,7 +591,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
             marginals = gtsam.Marginals(graph, estimate) if options.covariance else None
         except RuntimeError as exc:
             for i, _, _ in posed:
-                results[(i, vid)] = VehicleResult(vid, Status.FAILED, message=f"batch smoothing failed: {exc}")
+                results[(i, vid)] = VehicleResult(vid, Status.FAILED, message=f"batch smoothing failed: {summarise_error(exc)}")
             continue
         wireframe = wireframe_from_values(estimate, keys, index)
         hit = optimizer.iterations() >= options.solve.max_iterations
@@ -590,4 +600,5 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
                 vid, Status.MAX_ITERATIONS if hit else Status.CONVERGED, world_T_vehicle=estimate.atPose3(key),
                 wireframe=wireframe, pose_covariance=marginals.marginalCovariance(key) if marginals else None,
                 iterations=optimizer.iterations(), final_error=graph.error(estimate), message=segments.get(i, ""))
-    return [FrameResult(f.t, [results[(i, vid)] for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
+    return [FrameResult(f.t, [checked(results[(i, vid)], _seen_by(f, vid, scene.cameras), options.covariance)
+                              for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]

@@ -35,6 +35,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -89,16 +90,18 @@ _KEYPOINTS_WORLD_TOL = 1e-6
 
 
 # ====================================================================== scenes
-def load_scene(path: str | os.PathLike) -> Scene:
+def load_scene(path: str | os.PathLike, allow_outside_paths: bool = False) -> Scene:
     """Loads and validates a scene file (JSON, see ``DESIGN.md``).
 
     Relative paths in the file (``heatmaps``, ``images``) are resolved against
-    the file's folder, which becomes ``Scene.base_dir``. See
-    :func:`scene_from_dict` for what is checked and how heatmap detections are
-    decoded.
+    the file's folder, which becomes ``Scene.base_dir``; they must stay inside
+    it (see :func:`scene_from_dict`). See :func:`scene_from_dict` for what is
+    checked and how heatmap detections are decoded.
 
     Args:
         path: the scene file.
+        allow_outside_paths: accept heatmap and image paths outside the file's
+            folder (``vfactor solve --allow-outside-paths``).
 
     Returns:
         The :class:`~vfactor.observations.Scene`, with cameras and frames in file order.
@@ -110,10 +113,10 @@ def load_scene(path: str | os.PathLike) -> Scene:
     """
     path = Path(path)
     data = _read_json(path)
-    return scene_from_dict(data, base_dir=Path(os.path.abspath(path)).parent)
+    return scene_from_dict(data, base_dir=Path(os.path.abspath(path)).parent, allow_outside_paths=allow_outside_paths)
 
 
-def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
+def scene_from_dict(data: dict, base_dir: Path | None = None, allow_outside_paths: bool = False) -> Scene:
     """Validates a parsed scene file and builds a :class:`~vfactor.observations.Scene`.
 
     Checks, among others: the top level is an object with ``cameras`` (a
@@ -133,6 +136,10 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
     none; a (camera, vehicle) pair appears once per frame; ``images`` maps
     existing cameras to existing files. Frames need not be in time order.
 
+    Paths: a heatmap or image path resolves inside ``base_dir`` (after
+    following symbolic links: a link out of the folder is refused too), unless
+    ``allow_outside_paths``; the error names the field.
+
     Heatmaps: a detection with ``heatmaps`` and ``roi`` but no ``keypoints``
     keeps its ``heatmaps`` (absolute path) and ``roi``, and gets ``keypoints``,
     ``confidence`` and ``covariance`` by decoding the heatmaps with
@@ -150,6 +157,7 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
         data: the parsed JSON (``json.load``) of a scene file.
         base_dir: folder that relative paths start from; ``None``: the current
             working directory.
+        allow_outside_paths: accept heatmap and image paths outside ``base_dir``.
 
     Returns:
         The scene; ``Scene.frames`` in the order of ``data["frames"]``.
@@ -158,7 +166,7 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
         SceneError: an invalid field; ``field`` is its path (e.g.
             ``cameras[1].K``), the message says what was expected and found.
     """
-    base = Path(os.path.abspath(base_dir if base_dir is not None else os.getcwd()))
+    base = _Folder(Path(os.path.abspath(base_dir if base_dir is not None else os.getcwd())), allow_outside_paths)
     top = _object(data, "", _TOP_KEYS, required=_REQUIRED_TOP_KEYS)
     cameras_data = _list(top["cameras"], "cameras", "a non-empty list of cameras")
     if not cameras_data:
@@ -176,7 +184,7 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
     frames = [
         _frame_from_dict(item, f"frames[{i}]", cameras, base) for i, item in enumerate(_list(top["frames"], "frames"))
     ]
-    return Scene(cameras=cameras, frames=frames, base_dir=base, ground_plane=_ground_plane(top.get("ground_plane")))
+    return Scene(cameras=cameras, frames=frames, base_dir=base.path, ground_plane=_ground_plane(top.get("ground_plane")))
 
 
 def _ground_plane(value) -> GroundPlane | None:
@@ -271,7 +279,15 @@ def _camera_from_dict(data, path: str) -> Camera:
         raise SceneError(err.field, err.problem) from None
 
 
-def _frame_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) -> Frame:
+@dataclass(frozen=True)
+class _Folder:
+    """The folder a scene's paths start from, and whether they may leave it."""
+
+    path: Path
+    allow_outside: bool = False
+
+
+def _frame_from_dict(data, path: str, cameras: dict[str, Camera], base: _Folder) -> Frame:
     frame = _object(data, path, _FRAME_KEYS, required=("t", "detections"))
     t = _number(frame["t"], f"{path}.t", "a finite number of seconds")
     items = _list(frame["detections"], f"{path}.detections")
@@ -302,7 +318,7 @@ def _frame_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) ->
     return Frame(t=t, detections=[det for det, _ in parsed], images=images)
 
 
-def _images_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) -> dict[str, str]:
+def _images_from_dict(data, path: str, cameras: dict[str, Camera], base: _Folder) -> dict[str, str]:
     if not isinstance(data, dict):
         raise SceneError(path, f"expected an object mapping camera names to image paths, got {_kind(data)}")
     images = {}
@@ -314,7 +330,7 @@ def _images_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) -
     return images
 
 
-def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: Path,
+def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Folder,
                          images: dict[str, str]) -> tuple[Detection, bool]:
     det = _object(data, path, _DETECTION_KEYS, required=("camera",))
     from_image = False
@@ -836,13 +852,26 @@ def _matrix(value, path: str, shape: tuple[int, int], what: str | None = None) -
     return np.array(value, dtype=float)
 
 
-def _existing_file(value, path: str, base: Path, what: str) -> str:
-    if not isinstance(value, str) or not value:
+def _existing_file(value, path: str, base: _Folder, what: str) -> str:
+    if not isinstance(value, str) or not value or "\x00" in value:
         raise SceneError(path, f"expected {what} (a string), got {_kind(value)}")
-    resolved = str(resolve_path(value, base))
+    resolved = str(resolve_path(value, base.path))
+    if not base.allow_outside:
+        inside = _inside(resolved, str(base.path))
+        if not inside or not _inside(os.path.realpath(resolved), os.path.realpath(base.path)):
+            how = "is" if not inside else f"is a symbolic link to {os.path.realpath(resolved)},"
+            raise SceneError(path, f"{value!r} {how} outside the scene's folder {base.path} (allow it with "
+                             "--allow-outside-paths, or load_scene(..., allow_outside_paths=True))")
     if not os.path.isfile(resolved):
         raise SceneError(path, f"file not found: {resolved}")
     return resolved
+
+
+def _inside(path: str, folder: str) -> bool:
+    try:
+        return os.path.commonpath([folder, path]) == folder
+    except ValueError:  # another drive (Windows)
+        return False
 
 
 def _path_out(path_str: str, scene_base: Path | None, out_base: Path | None) -> str:

@@ -8,15 +8,22 @@ reported ``degenerate`` ...).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+import os
 import re
+from pathlib import Path
 
+import gtsam
+import numpy as np
 import pytest
 
-from vfactor.cli import EXIT_INPUT, EXIT_OK, main
+from vfactor.cli import EXIT_CODES, EXIT_INPUT, EXIT_OK, EXIT_UNSOLVED, main
 from vfactor.errors import ScenarioError, SceneError
-from vfactor.jsonio import MAX_DEPTH, parse_json
+from vfactor.jsonio import MAX_DEPTH, parse_json, write_text_atomic
+from vfactor.result import Status, VehicleResult
+from vfactor.sanity import check_estimate, checked, one_line, summarise_error
 from vfactor.scene import load_results, load_scene
 from vfactor.sim import load_scenario
 from vfactor.solve import SolveOptions
@@ -146,3 +153,164 @@ def test_gap_within_max_gap_keeps_one_segment(tmp_path, track_text):
         assert all(v.ok and "segment" not in v.message for f in frames for v in f.vehicles)
     with pytest.raises(ValueError, match="TrackOptions.max_gap"):
         TrackOptions(max_gap=0)
+
+
+# ------------------------------------------------------------------ 3. garbage reported as converged
+def one_camera_one_pixel(scene_text: str) -> dict:
+    """One camera, every keypoint at the same pixel: nothing fixes the depth (used to be 'converged' at 1e15 m)."""
+    data = json.loads(scene_text)
+    data["frames"] = data["frames"][:1]
+    det = data["frames"][0]["detections"][0]
+    det.pop("keypoint_covariances", None)
+    det["keypoints"] = [[500.0, 300.0, 0.9]] * 12
+    data["frames"][0]["detections"] = [det]
+    return data
+
+
+@pytest.mark.parametrize("extra", [[], ["--no-covariance"]])
+def test_unconstrained_vehicle_is_degenerate_not_converged(tmp_path, capsys, scene_text, extra):
+    path = tmp_path / "pixel.json"
+    path.write_text(json.dumps(one_camera_one_pixel(scene_text)))
+    out = tmp_path / "r.json"
+    code, err = run_cli(capsys, "solve", str(path), "--out", str(out), *extra)
+    assert code == EXIT_UNSOLVED
+    (vehicle,) = load_results(out)[0].vehicles
+    assert vehicle.status.value == "degenerate" and vehicle.world_T_vehicle is None
+    assert "farther than 1000 m" in vehicle.message and "\n" not in vehicle.message
+    assert "degenerate: the estimate lies" in one_line_error(err)
+
+
+def test_sanity_check_of_estimates(cameras, prius, world_T_vehicle):
+    cams = list(cameras.values())
+    good = VehicleResult("v", Status.CONVERGED, world_T_vehicle=world_T_vehicle, wireframe=prius,
+                         pose_covariance=np.eye(6))
+    assert check_estimate(good, cams, covariance=True) == (Status.CONVERGED, "")
+    far = dataclasses.replace(good, world_T_vehicle=gtsam.Pose3(gtsam.Rot3(), np.array([5e3, 0.0, 0.0])))
+    assert check_estimate(far, cams)[0] == Status.DEGENERATE
+    behind = dataclasses.replace(good, world_T_vehicle=gtsam.Pose3(gtsam.Rot3(), np.array([30.0, 20.0, 7.0])))
+    status, message = check_estimate(behind, cams)
+    assert status == Status.FAILED and "behind camera 'cam0'" in message
+    nan = dataclasses.replace(good, world_T_vehicle=gtsam.Pose3(gtsam.Rot3(), np.array([np.nan, 0.0, 0.0])))
+    assert check_estimate(nan, cams)[0] == Status.FAILED
+    no_cov = dataclasses.replace(good, pose_covariance=None, message="covariance unavailable: " + GTSAM_TEXT)
+    status, message = check_estimate(no_cov, cams, covariance=True)
+    assert status == Status.DEGENERATE
+    assert message == ("no pose covariance (indeterminate linear system at the light layer of the shape: the views "
+                       "do not constrain it)")
+    assert check_estimate(no_cov, cams, covariance=False)[0] == Status.CONVERGED
+    bad = checked(far, cams)
+    assert bad.world_T_vehicle is None and bad.wireframe is None and not bad.ok
+
+
+GTSAM_TEXT = """
+Indeterminate linear system detected while working near variable
+7782220156096217088 (Symbol: l0).
+
+Thrown when a linear system is ill-posed.  The most common cause for this
+error is having underconstrained variables, but the exception is also raised
+for nearly indeterminate systems that are too poorly conditioned to solve
+reliably."""
+
+
+def test_messages_are_one_line_without_escapes():
+    assert summarise_error(GTSAM_TEXT) == "indeterminate linear system at the light layer of the shape: the views do " \
+                                          "not constrain it"
+    assert summarise_error("boom\nsecond line") == "boom"
+    assert one_line("a\x1b[31mred\x1b[0m\nb\tc\x07") == "ared b c"
+    assert len(one_line("x" * 1000)) == 300
+
+
+def test_cli_prints_one_line_for_a_field_with_escapes_and_newlines(tmp_path, capsys, scene_text):
+    data = json.loads(scene_text)
+    data["cameras"][0]["\x1b[2Jname\nnext"] = 1
+    path = tmp_path / "esc.json"
+    path.write_text(json.dumps(data))
+    code, err = run_cli(capsys, "solve", str(path), "--out", str(tmp_path / "r.json"))
+    line = one_line_error(err)
+    assert code == EXIT_INPUT and "\x1b" not in line and "unknown key" in line
+
+
+# ------------------------------------------------------------------ 6. paths stay in the scene's folder
+def scene_with_image(tmp_path, scene_text, image_value: str) -> Path:
+    data = json.loads(scene_text)
+    data["frames"][0]["images"] = {"cam0": image_value}
+    path = tmp_path / "scenes" / "scene.json"
+    path.parent.mkdir(exist_ok=True)
+    path.write_text(json.dumps(data))
+    return path
+
+
+def test_paths_outside_the_scene_folder_are_refused_unless_allowed(tmp_path, capsys, scene_text):
+    (tmp_path / "outside.png").write_bytes(b"png")
+    path = scene_with_image(tmp_path, scene_text, "../outside.png")
+    with pytest.raises(SceneError, match=r"frames\[0\]\.images\.cam0: '../outside.png' is outside the scene's folder"):
+        load_scene(path)
+    assert load_scene(path, allow_outside_paths=True).frames[0].images["cam0"] == str(tmp_path / "outside.png")
+    code, err = run_cli(capsys, "solve", str(path), "--out", str(tmp_path / "r.json"))
+    assert code == EXIT_INPUT and "--allow-outside-paths" in one_line_error(err)
+    code, _ = run_cli(capsys, "solve", str(path), "--out", str(tmp_path / "r.json"), "--allow-outside-paths")
+    assert code == EXIT_OK
+    absolute = scene_with_image(tmp_path, scene_text, str(tmp_path / "outside.png"))
+    with pytest.raises(SceneError, match="is outside the scene's folder"):
+        load_scene(absolute)
+
+
+def test_symlinks_out_of_the_scene_folder_are_refused(tmp_path, scene_text):
+    (tmp_path / "outside.png").write_bytes(b"png")
+    path = scene_with_image(tmp_path, scene_text, "link.png")
+    (path.parent / "link.png").symlink_to(tmp_path / "outside.png")
+    with pytest.raises(SceneError, match=r"images\.cam0: 'link.png' is a symbolic link to .*outside.png, outside"):
+        load_scene(path)
+    (path.parent / "inside.png").write_bytes(b"png")
+    (path.parent / "link_in.png").symlink_to(path.parent / "inside.png")
+    inside = scene_with_image(tmp_path, scene_text, "link_in.png")
+    assert load_scene(inside).frames[0].images["cam0"].endswith("link_in.png")
+
+
+# ------------------------------------------------------------------ 7. atomic results, --out checked first
+def test_out_is_checked_before_the_work(tmp_path, capsys, scene_text):
+    scene = tmp_path / "scene.json"
+    scene.write_text(scene_text)
+    before = scene.read_text()
+    code, err = run_cli(capsys, "solve", str(scene), "--out", str(scene))
+    assert code == EXIT_INPUT and "--out" in one_line_error(err) and "scene file itself" in err
+    assert scene.read_text() == before
+    code, err = run_cli(capsys, "track", str(scene), "--out", str(tmp_path))
+    assert code == EXIT_INPUT and "is a folder" in one_line_error(err)
+    (tmp_path / "file").write_text("x")
+    code, err = run_cli(capsys, "solve", str(scene), "--out", str(tmp_path / "file" / "r.json"))
+    assert code == EXIT_INPUT and "is not a folder" in one_line_error(err)
+    code, err = run_cli(capsys, "simulate", "intersection_2cam", "--out", str(tmp_path / "a.json"),
+                        "--truth", str(tmp_path / "a.json"))
+    assert code == EXIT_INPUT and "--truth" in one_line_error(err)
+
+
+def test_results_are_written_atomically(tmp_path, monkeypatch):
+    target = tmp_path / "r.json"
+    target.write_text("old")
+    write_text_atomic(target, "new")
+    assert target.read_text() == "new" and [p.name for p in tmp_path.iterdir()] == ["r.json"]
+
+    def full_disk(fd):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full_disk)  # the disk fills up while writing: the old file stays whole
+    with pytest.raises(OSError):
+        write_text_atomic(target, "newer")
+    assert target.read_text() == "new" and [p.name for p in tmp_path.iterdir()] == ["r.json"]
+
+
+# ------------------------------------------------------------------ 8. exit codes
+def test_exit_codes_are_documented_in_help(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    assert "exit codes:" in out and all(f"  {code} " in out for code in EXIT_CODES)
+    assert EXIT_UNSOLVED == 3 and EXIT_UNSOLVED not in (EXIT_OK, EXIT_INPUT)
+
+
+def test_usage_errors_are_one_line(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["solve"])
+    assert info.value.code == EXIT_INPUT
+    assert "the following arguments are required" in one_line_error(capsys.readouterr().err)

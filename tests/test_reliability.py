@@ -19,8 +19,9 @@ import gtsam
 import numpy as np
 import pytest
 
+from vfactor.camera import Camera
 from vfactor.cli import EXIT_CODES, EXIT_INPUT, EXIT_OK, EXIT_UNSOLVED, main
-from vfactor.errors import ScenarioError, SceneError
+from vfactor.errors import CalibrationError, ScenarioError, SceneError
 from vfactor.jsonio import MAX_DEPTH, parse_json, write_text_atomic
 from vfactor.result import Status, VehicleResult
 from vfactor.sanity import check_estimate, checked, one_line, summarise_error
@@ -314,3 +315,47 @@ def test_usage_errors_are_one_line(capsys):
         main(["solve"])
     assert info.value.code == EXIT_INPUT
     assert "the following arguments are required" in one_line_error(capsys.readouterr().err)
+
+
+# ------------------------------------------------------------------ 9. calibration files (Camera.from_opencv_file)
+CALIBRATION = """%YAML:1.0
+---
+camera_matrix: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 900., 0., 640., 0., 900., 360., 0., 0., 1. ]
+world_T_camera: !!opencv-matrix
+   rows: 4
+   cols: 4
+   dt: d
+   data: [ 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1. ]
+image_width: 1280
+image_height: 720
+"""
+K_NODE = "camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 900., 0., 640., 0., 900., 360., 0., 0., 1. ]"
+
+
+@pytest.mark.parametrize(
+    "old, new, field, problem",
+    [
+        (K_NODE, 'camera_matrix: "hello"', "camera_matrix", "got the string 'hello'"),  # was cv2.error
+        (K_NODE, "camera_matrix: [ 1, 2, 3 ]", "camera_matrix", "got a list of 3"),  # was cv2.error
+        ("rows: 3", "rows: 4", "camera_matrix", "data: expected 4 x 3 = 12 numbers, got a list of 9"),  # cv2.error
+        ("rows: 3", "rows: 100000", "camera_matrix", "rows: expected an integer from 1 to 16"),  # 80 GB allocation
+        ("data: [ 900.", "data: [ a,", "", "not a readable OpenCV FileStorage file"),  # the parser stops: the file
+        ("image_width: 1280", "image_width: .nan", "image_width", "got nan"),  # was ValueError
+        ("image_width: 1280", "image_width: .inf", "image_width", "got inf"),  # was OverflowError
+        ("image_width: 1280", 'image_width: "wide"', "image_width", "got the string 'wide'"),  # was 1.8e308
+        ("image_height: 720", "image_height: 720.5", "image_height", "got 720.5"),
+    ],
+)
+def test_malformed_calibration_files_raise_a_calibration_error_naming_the_node(tmp_path, old, new, field, problem):
+    path = tmp_path / "calib.yaml"
+    assert old in CALIBRATION
+    path.write_text(CALIBRATION.replace(old, new, 1))
+    with pytest.raises(CalibrationError) as info:
+        Camera.from_opencv_file(path)
+    assert info.value.field == (f"{path}:{field}" if field else str(path)) and problem in info.value.problem
+    path.write_text(CALIBRATION)
+    assert Camera.from_opencv_file(path).image_size == (1280, 720)

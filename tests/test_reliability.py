@@ -359,3 +359,23 @@ def test_malformed_calibration_files_raise_a_calibration_error_naming_the_node(t
     assert info.value.field == (f"{path}:{field}" if field else str(path)) and problem in info.value.problem
     path.write_text(CALIBRATION)
     assert Camera.from_opencv_file(path).image_size == (1280, 720)
+
+
+# ------------------------------------------------------------------ 4. boxes far outside the image
+@pytest.mark.parametrize("roi", [["0", "0", "1e7", "1e7"], ["5000", "5000", "5100", "5100"], ["-900", "0", "100", "10"]])
+def test_detect_refuses_a_box_mostly_outside_the_image(tmp_path, capsys, roi):
+    pytest.importorskip("torch")
+    import cv2
+
+    image = tmp_path / "image.png"
+    cv2.imwrite(str(image), np.zeros((72, 128, 3), np.uint8))
+    code, err = run_cli(capsys, "detect", str(image), "--roi", *roi)  # 1e7: was MemoryError / a traceback
+    assert code == EXIT_INPUT and "leaves the 128x72 image" in one_line_error(err)
+
+
+def test_box_partly_outside_the_image_is_accepted():
+    from vfactor.net.crop import check_roi_in_image
+
+    assert check_roi_in_image([-10, -10, 50, 50], 128, 72) == (-10.0, -10.0, 50.0, 50.0)
+    with pytest.raises(ValueError, match="0.00% of it is inside"):
+        check_roi_in_image([200, 0, 300, 50], 128, 72)

@@ -43,3 +43,15 @@ def prius():
 @pytest.fixture
 def world_T_vehicle():
     return gtsam.Pose3(gtsam.Rot3.Yaw(0.7), np.array([1.0, -0.5, 0.32]))
+
+
+# ----------------------------------------------------------------------------- fuzzing profiles (tests/test_fuzz.py)
+def pytest_addoption(parser):
+    parser.addoption("--fuzz-long", action="store_true", default=False,
+                     help="run the long fuzzing profile (over 5,000 cases; also VFACTOR_FUZZ=long)")
+
+
+def pytest_configure(config):
+    from tests import fuzzing
+
+    fuzzing.configure(long=config.getoption("--fuzz-long"))

@@ -81,13 +81,13 @@ def test_missing_and_malformed_files(tmp_path, capsys):
     assert code == 2 and "bad.json" in err
 
 
-def test_vehicle_behind_a_camera_is_reported_with_exit_2(simulated, tmp_path, capsys):
+def test_vehicle_behind_a_camera_is_reported_with_exit_3(simulated, tmp_path, capsys):
     data = base_scene(simulated)
     T = np.array(data["cameras"][1]["world_T_camera"])
     T[:3, :3] = T[:3, :3] @ np.diag([-1.0, 1.0, -1.0])  # turned around: looks away from the road
     data["cameras"][1]["world_T_camera"] = T.tolist()
     code, err = run_bad(tmp_path, capsys, data)
-    assert code == 2
+    assert code == 3  # EXIT_UNSOLVED: good input, a vehicle that cannot be solved
     assert "cameras[1]" in err and "world_T_camera" in err
     frames = load_results(tmp_path / "r.json")  # the result is still written, with statuses
     assert len(frames) == 3

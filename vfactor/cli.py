@@ -1,13 +1,20 @@
 """The ``vfactor`` command: solve scene files, simulate scenarios, run the demo and the accuracy evaluation.
 
-Exit codes: 0 success; 2 bad input (a malformed or contradictory scene,
-scenario or calibration: the message names the field) or a vehicle reported
-``failed``; 1 an internal error (run again with ``--debug`` for the traceback).
+Exit codes (:data:`EXIT_CODES`, docs/reliability.md): 0 success (every vehicle
+solved); 2 bad input (a malformed or contradictory scene, scenario or
+calibration, or a bad option: one line naming the field); 3 the input was
+good but some vehicles could not be solved (each reported ``degenerate`` or
+``failed`` in the result file and on stderr); 1 an internal error (run again
+with ``--debug`` for the traceback); 130 interrupted.
+
+Everything printed as a message (errors, notes, unsolved vehicles) goes
+through :func:`vfactor.sanity.one_line`: one line, no terminal escapes.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -15,10 +22,20 @@ from pathlib import Path
 import numpy as np
 
 from vfactor.errors import InputError
+from vfactor.jsonio import write_text_atomic
+from vfactor.sanity import one_line
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "EXIT_CODES", "EXIT_OK", "EXIT_INTERNAL", "EXIT_INPUT", "EXIT_UNSOLVED"]
 
-EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
+EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_UNSOLVED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+#: Exit code -> meaning (the epilog of ``vfactor --help`` and docs/reliability.md).
+EXIT_CODES = {
+    EXIT_OK: "success: every vehicle solved",
+    EXIT_INTERNAL: "internal error (a bug: run again with --debug for the traceback)",
+    EXIT_INPUT: "bad input: a malformed scene, scenario, calibration or option (one line names the field)",
+    EXIT_UNSOLVED: "some vehicles could not be solved: reported degenerate or failed (result file and stderr)",
+    EXIT_INTERRUPTED: "interrupted",
+}
 
 _DESCRIPTION = """\
 vfactor estimates each vehicle's 6-DoF pose (world_T_vehicle), its 12-keypoint
@@ -35,15 +52,25 @@ Start here:
   vfactor eval                          accuracy against ground truth, beside baselines
 
 Scene and result formats, conventions and the factors' maths: docs/ in the
-repository (conventions.md, factors.md, tutorial.md)."""
+repository (conventions.md, factors.md, tutorial.md); limits and exit codes:
+docs/reliability.md."""
+
+_EPILOG = "exit codes:\n" + "\n".join(f"  {code:<4}{text}" for code, text in EXIT_CODES.items())
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors (exit 2)."""
+
+    def error(self, message):
+        self.exit(EXIT_INPUT, f"{self.prog}: error: {one_line(message)} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="vfactor", description=_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
+    parser = _Parser(
+        prog="vfactor", description=_DESCRIPTION, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     p = sub.add_parser(
         "solve", help="estimate every vehicle of every frame of a scene file (frames solved one by one)",
@@ -54,7 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
         "keypoint network first (needs torch).",
     )
     p.add_argument("scene", help="scene file (JSON, see docs/conventions.md and DESIGN.md)")
-    p.add_argument("--out", required=True, help="result file to write (JSON)")
+    p.add_argument("--out", required=True, help="result file to write (JSON; written atomically)")
+    p.add_argument("--allow-outside-paths", action="store_true",
+                   help="accept heatmap and image paths outside the scene file's folder (refused by default)")
     p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
     p.add_argument("--loss", default="cauchy", choices=("none", "huber", "cauchy", "geman_mcclure"),
                    help="robust loss per keypoint (default: cauchy)")
@@ -73,7 +102,9 @@ def build_parser() -> argparse.ArgumentParser:
         "of time order are tracked in time order and reported.",
     )
     p.add_argument("scene", help="scene file (JSON) with track ids in the detections' 'vehicle'")
-    p.add_argument("--out", required=True, help="result file to write (JSON)")
+    p.add_argument("--out", required=True, help="result file to write (JSON; written atomically)")
+    p.add_argument("--allow-outside-paths", action="store_true",
+                   help="accept heatmap and image paths outside the scene file's folder (refused by default)")
     p.add_argument("--lag", type=float, help="fixed lag in seconds: bounded memory and time per frame for long streams")
     p.add_argument("--batch", action="store_true", help="offline batch smoothing (Levenberg-Marquardt over each whole track)")
     p.add_argument("--online", action="store_true", help="write the estimates as each frame arrived (filtered)")
@@ -156,31 +187,44 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """Runs the ``vfactor`` command on ``argv`` (default: ``sys.argv[1:]``); returns the exit code (:data:`EXIT_CODES`)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] in ("train", "detect"):  # the network's own parser; torch is imported only here
-        return _net(argv)
+        return _guarded(argv[0], lambda: _net(argv), debug="--debug" in argv)
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_help()
         return EXIT_OK
     handlers = {"solve": _solve, "track": _track, "simulate": _simulate, "demo": _demo, "eval": _eval}
+    return _guarded(args.command, lambda: handlers[args.command](args), args.debug)
+
+
+def _say(text: str) -> None:
+    """Prints a message on stderr: the one place where messages are made one line without escapes."""
+    print(one_line(text, limit=2000), file=sys.stderr)
+
+
+def _guarded(command: str, run, debug: bool) -> int:
+    """Runs a command; any failure becomes one line on stderr and its exit code, never a traceback."""
     try:
-        return handlers[args.command](args)
+        return run()
     except InputError as exc:
-        print(f"vfactor {args.command}: error: {exc}", file=sys.stderr)
+        _say(f"vfactor {command}: error: {exc}")
         return EXIT_INPUT
     except OSError as exc:
-        print(f"vfactor {args.command}: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
+        _say(f"vfactor {command}: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "))
+        return EXIT_INPUT
+    except MemoryError:
+        _say(f"vfactor {command}: error: out of memory (is an input far larger than it should be?)")
         return EXIT_INPUT
     except KeyboardInterrupt:
-        print("vfactor: interrupted", file=sys.stderr)
-        return 130
+        _say("vfactor: interrupted")
+        return EXIT_INTERRUPTED
     except Exception as exc:  # noqa: BLE001 - the CLI reports, never dumps a bare traceback
-        if args.debug:
+        if debug:
             raise
-        print(f"vfactor {args.command}: internal error: {type(exc).__name__}: {exc} (run with --debug for details)",
-              file=sys.stderr)
+        _say(f"vfactor {command}: internal error: {type(exc).__name__}: {exc} (run with --debug for details)")
         return EXIT_INTERNAL
 
 
@@ -189,8 +233,7 @@ def _net(argv: list[str]) -> int:
     try:
         from vfactor.net.commands import main as net_main
     except ImportError as exc:
-        print(f"vfactor {argv[0]}: error: {_missing_extra('', exc, 'net')}", file=sys.stderr)
-        return EXIT_INPUT
+        raise _missing_extra("", exc, "net") from None
     return net_main(argv, prog="vfactor")
 
 
@@ -216,6 +259,29 @@ def _check_positive(value, name):
     return value
 
 
+def _check_out_file(value, option: str, inputs=()) -> Path:
+    """Checks an output file option before the work starts: not a folder, not one of ``inputs``,
+    and in a folder that exists (or can be made) and is writable.
+
+    Raises:
+        InputError: (field: ``option``) what is wrong.
+    """
+    path = Path(value)
+    if path.is_dir() or str(value).endswith(("/", os.sep)):
+        raise InputError(option, f"{value} is a folder; give a file name")
+    for name, given in inputs:
+        if given is not None and Path(given).exists() and path.exists() and os.path.samefile(path, given):
+            raise InputError(option, f"{value} is the {name} itself; write the output to another file")
+    folder = path.absolute().parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise InputError(option, f"cannot create {path.parent}: {folder} is not a folder")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(option, f"cannot write into {folder}: permission denied")
+    return path
+
+
 def _check_out_dir(path: Path) -> Path:
     if path.exists() and not path.is_dir():
         raise InputError("--out", f"{path} exists and is not a folder")
@@ -224,7 +290,7 @@ def _check_out_dir(path: Path) -> Path:
 
 
 def _report_unsolved(results, scene, quiet: bool) -> int:
-    """Prints a line per vehicle that was not solved; returns the exit code."""
+    """Prints a line per vehicle that was not solved; returns the exit code (3 when any, else 0)."""
     code = EXIT_OK
     camera_index = {name: i for i, name in enumerate(scene.cameras)}
     for f, frame in enumerate(results):
@@ -234,9 +300,8 @@ def _report_unsolved(results, scene, quiet: bool) -> int:
             message = v.message
             for name, i in camera_index.items():
                 message = message.replace(f"camera '{name}'", f"camera '{name}' (cameras[{i}])")
-            print(f"frames[{f}] vehicle '{v.id}': {v.status.value}: {message}", file=sys.stderr)
-            if v.status.value == "failed":
-                code = EXIT_INPUT
+            _say(f"frames[{f}] vehicle '{v.id}': {v.status.value}: {message}")
+            code = EXIT_UNSOLVED
     return code
 
 
@@ -246,7 +311,7 @@ def _detect(scene, args):
     pending = scene.undetected()
     if not pending:
         if args.weights and not args.quiet:
-            print("note: every detection gives keypoints; --weights is not used", file=sys.stderr)
+            _say("note: every detection gives keypoints; --weights is not used")
         if args.save_detections:
             raise InputError("--save-detections", "no detection of the scene needs the keypoint network")
         return scene
@@ -276,17 +341,27 @@ def _detect(scene, args):
     return scene
 
 
+def _check_outputs(args) -> None:
+    """``solve`` and ``track``: --out and --save-detections checked before any work."""
+    _check_out_file(args.out, "--out", [("scene file", args.scene)])
+    if args.save_detections:
+        _check_out_file(args.save_detections, "--save-detections",
+                        [("scene file", args.scene), ("result file --out", args.out)])
+        if os.path.abspath(args.save_detections) == os.path.abspath(args.out):
+            raise InputError("--save-detections", f"{args.save_detections} is also --out; give another file")
+
+
 def _solve(args) -> int:
     from vfactor.factors.robust import RobustLoss
     from vfactor.graph import GraphConfig
     from vfactor.scene import load_scene, save_results
     from vfactor.solve import SolveOptions, solve_scene
 
-    scene = _detect(load_scene(args.scene), args)
+    _check_outputs(args)
+    scene = _detect(load_scene(args.scene, allow_outside_paths=args.allow_outside_paths), args)
     options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
     t0 = time.perf_counter()
     results = solve_scene(scene, options, progress=_progress("solving", not args.quiet))
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     save_results(args.out, results)
     vehicles = [v for fr in results for v in fr.vehicles]
     solved = sum(v.ok for v in vehicles)
@@ -305,7 +380,10 @@ def _track(args) -> int:
         raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
     if args.batch and (args.lag is not None or args.online):
         raise InputError("--batch", "batch smoothing uses every frame: it takes neither --lag nor --online")
-    scene = _detect(load_scene(args.scene), args)
+    _check_outputs(args)
+    if args.plot:
+        _check_out_file(args.plot, "--plot", [("scene file", args.scene), ("result file --out", args.out)])
+    scene = _detect(load_scene(args.scene, allow_outside_paths=args.allow_outside_paths), args)
     options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance)
     t0 = time.perf_counter()
     if args.batch:
@@ -313,10 +391,9 @@ def _track(args) -> int:
     else:
         run = track_scene(scene, options, progress=_progress("tracking", not args.quiet))
         results, messages = (run.online if args.online else run.frames), run.messages
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     save_results(args.out, results)
     for message in messages:
-        print(f"note: {message}", file=sys.stderr)
+        _say(f"note: {message}")
     vehicles = [v for fr in results for v in fr.vehicles]
     tracks = {v.id for v in vehicles}
     if not args.quiet:
@@ -341,11 +418,12 @@ def _simulate(args) -> int:
         return EXIT_OK
     if not args.scenario or not args.out:
         raise InputError("", "give a SCENARIO and --out SCENE.json (or --list)")
+    out = _check_out_file(args.out, "--out", [("scenario file", args.scenario)])
+    truth = _check_out_file(args.truth if args.truth else out.with_name(out.stem + "_truth.json"), "--truth",
+                            [("scenario file", args.scenario), ("scene file --out", args.out)])
+    if os.path.abspath(out) == os.path.abspath(truth):
+        raise InputError("--truth", f"{truth} is also --out; give another file")
     sim = simulate(load_scenario(args.scenario), seed=args.seed, num_frames=_check_positive(args.frames, "--frames"))
-    out = Path(args.out)
-    truth = Path(args.truth) if args.truth else out.with_name(out.stem + "_truth.json")
-    for path in (out, truth):
-        path.parent.mkdir(parents=True, exist_ok=True)
     write_simulation(sim, out, truth)
     ids = {vid for f in sim.scene.frames for vid in f.vehicle_ids()}
     print(f"wrote {out} ({len(sim.scene.frames)} frames, {len(ids)} vehicle ids, {len(sim.scene.cameras)} cameras) "
@@ -446,6 +524,8 @@ def _error_cells(errors: dict | None, widths) -> str:
 
 def _eval(args) -> int:
     t0 = time.perf_counter()
+    if args.markdown:
+        _check_out_file(args.markdown, "--markdown")
     frames = _check_positive(args.frames, "--frames")
     _check_positive(args.seeds, "--seeds")
     if args.draws < 0:
@@ -478,7 +558,7 @@ def _eval(args) -> int:
         print(section)
     print(f"({command}; {time.perf_counter() - t0:.1f} s)")
     if args.markdown:
-        Path(args.markdown).write_text(f"<!-- made by: {command} -->\n\n" + "\n".join(sections), encoding="utf-8")
+        write_text_atomic(args.markdown, f"<!-- made by: {command} -->\n\n" + "\n".join(sections))
     return EXIT_OK
 
 

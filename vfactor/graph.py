@@ -58,7 +58,8 @@ class GraphConfig:
     Attributes:
         relative_pixel_sigma: keypoint pixel sigma at confidence 1, as a fraction
             of the detection's box diagonal (the sigma is divided by the confidence).
-        min_pixel_sigma: lower bound of that sigma, pixels.
+        min_pixel_sigma: lower bound of that sigma, pixels, also when the solver
+            scales the sigmas by the estimated noise scale.
         loss: robust loss per keypoint observation.
         symmetry_sigma: left/right asymmetry allowed per coordinate, metres.
         body_frame_sigma: gauge tightness (hub centroid at the origin, hubs level), metres.
@@ -171,6 +172,7 @@ def observations_from_detections(
         uv=np.array(uv, dtype=float).reshape(-1, 2),
         sqrt_information=np.array(sqrt_info, dtype=float).reshape(-1, 2, 2),
         window=np.array(window, dtype=float).reshape(-1, 4),
+        min_sigma=config.min_pixel_sigma,
     )
 
 

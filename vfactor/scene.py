@@ -35,6 +35,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +46,7 @@ from vfactor.camera import Camera, check_rigid_transform
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.errors import CalibrationError, SceneError
 from vfactor.heatmaps import decode_heatmaps
+from vfactor.jsonio import NonFinite, OutOfRange, read_json, write_text_atomic
 from vfactor.keypoints import NUM_KEYPOINTS
 from vfactor.observations import DEFAULT_VEHICLE_ID, Detection, Frame, Scene, resolve_path
 from vfactor.result import FrameResult, Status, VehicleResult
@@ -90,16 +92,18 @@ _KEYPOINTS_WORLD_TOL = 1e-6
 
 
 # ====================================================================== scenes
-def load_scene(path: str | os.PathLike) -> Scene:
+def load_scene(path: str | os.PathLike, allow_outside_paths: bool = False) -> Scene:
     """Loads and validates a scene file (JSON, see ``DESIGN.md``).
 
     Relative paths in the file (``heatmaps``, ``images``) are resolved against
-    the file's folder, which becomes ``Scene.base_dir``. See
-    :func:`scene_from_dict` for what is checked and how heatmap detections are
-    decoded.
+    the file's folder, which becomes ``Scene.base_dir``; they must stay inside
+    it (see :func:`scene_from_dict`). See :func:`scene_from_dict` for what is
+    checked and how heatmap detections are decoded.
 
     Args:
         path: the scene file.
+        allow_outside_paths: accept heatmap and image paths outside the file's
+            folder (``vfactor solve --allow-outside-paths``).
 
     Returns:
         The :class:`~vfactor.observations.Scene`, with cameras and frames in file order.
@@ -111,10 +115,10 @@ def load_scene(path: str | os.PathLike) -> Scene:
     """
     path = Path(path)
     data = _read_json(path)
-    return scene_from_dict(data, base_dir=Path(os.path.abspath(path)).parent)
+    return scene_from_dict(data, base_dir=Path(os.path.abspath(path)).parent, allow_outside_paths=allow_outside_paths)
 
 
-def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
+def scene_from_dict(data: dict, base_dir: Path | None = None, allow_outside_paths: bool = False) -> Scene:
     """Validates a parsed scene file and builds a :class:`~vfactor.observations.Scene`.
 
     Checks, among others: the top level is an object with ``cameras`` (a
@@ -134,6 +138,10 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
     none; a (camera, vehicle) pair appears once per frame; ``images`` maps
     existing cameras to existing files. Frames need not be in time order.
 
+    Paths: a heatmap or image path resolves inside ``base_dir`` (after
+    following symbolic links: a link out of the folder is refused too), unless
+    ``allow_outside_paths``; the error names the field.
+
     Heatmaps: a detection with ``heatmaps`` and ``roi`` but no ``keypoints``
     keeps its ``heatmaps`` (absolute path) and ``roi``, and gets ``keypoints``,
     ``confidence`` and ``covariance`` by decoding the heatmaps with
@@ -151,6 +159,7 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
         data: the parsed JSON (``json.load``) of a scene file.
         base_dir: folder that relative paths start from; ``None``: the current
             working directory.
+        allow_outside_paths: accept heatmap and image paths outside ``base_dir``.
 
     Returns:
         The scene; ``Scene.frames`` in the order of ``data["frames"]``.
@@ -159,7 +168,7 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
         SceneError: an invalid field; ``field`` is its path (e.g.
             ``cameras[1].K``), the message says what was expected and found.
     """
-    base = Path(os.path.abspath(base_dir if base_dir is not None else os.getcwd()))
+    base = _Folder(Path(os.path.abspath(base_dir if base_dir is not None else os.getcwd())), allow_outside_paths)
     top = _object(data, "", _TOP_KEYS, required=_REQUIRED_TOP_KEYS)
     cameras_data = _list(top["cameras"], "cameras", "a non-empty list of cameras")
     if not cameras_data:
@@ -177,7 +186,7 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
     frames = [
         _frame_from_dict(item, f"frames[{i}]", cameras, base) for i, item in enumerate(_list(top["frames"], "frames"))
     ]
-    return Scene(cameras=cameras, frames=frames, base_dir=base, ground_plane=_ground_plane(top.get("ground_plane")))
+    return Scene(cameras=cameras, frames=frames, base_dir=base.path, ground_plane=_ground_plane(top.get("ground_plane")))
 
 
 def _ground_plane(value) -> GroundPlane | None:
@@ -272,7 +281,15 @@ def _camera_from_dict(data, path: str) -> Camera:
         raise SceneError(err.field, err.problem) from None
 
 
-def _frame_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) -> Frame:
+@dataclass(frozen=True)
+class _Folder:
+    """The folder a scene's paths start from, and whether they may leave it."""
+
+    path: Path
+    allow_outside: bool = False
+
+
+def _frame_from_dict(data, path: str, cameras: dict[str, Camera], base: _Folder) -> Frame:
     frame = _object(data, path, _FRAME_KEYS, required=("t", "detections"))
     t = _number(frame["t"], f"{path}.t", "a finite number of seconds")
     items = _list(frame["detections"], f"{path}.detections")
@@ -303,7 +320,7 @@ def _frame_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) ->
     return Frame(t=t, detections=[det for det, _ in parsed], images=images)
 
 
-def _images_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) -> dict[str, str]:
+def _images_from_dict(data, path: str, cameras: dict[str, Camera], base: _Folder) -> dict[str, str]:
     if not isinstance(data, dict):
         raise SceneError(path, f"expected an object mapping camera names to image paths, got {_kind(data)}")
     images = {}
@@ -315,7 +332,7 @@ def _images_from_dict(data, path: str, cameras: dict[str, Camera], base: Path) -
     return images
 
 
-def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: Path,
+def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Folder,
                          images: dict[str, str]) -> tuple[Detection, bool]:
     det = _object(data, path, _DETECTION_KEYS, required=("camera",))
     from_image = False
@@ -719,50 +736,13 @@ def _check_symmetric(S: np.ndarray, field: str) -> None:
 
 
 # ============================================================== JSON helpers
-class _NonFinite:
-    """Stands in for the NaN / Infinity literals Python's json accepts, so that
-    validation reports them at their field."""
-
-    __slots__ = ("text",)
-
-    def __init__(self, text: str):
-        self.text = text
-
-    def __repr__(self):
-        return self.text
-
-
-def _no_duplicate_keys(pairs):
-    out = {}
-    for key, value in pairs:
-        if key in out:
-            raise _DuplicateKey(key)
-        out[key] = value
-    return out
-
-
-class _DuplicateKey(Exception):
-    pass
-
-
 def _read_json(path: Path):
-    where = str(path)
-    if not path.is_file():
-        raise SceneError(where, "file not found" if not path.exists() else "expected a file, got a directory")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(where, f"could not read the file: {exc}") from None
-    try:
-        return json.loads(text, parse_constant=_NonFinite, object_pairs_hook=_no_duplicate_keys)
-    except json.JSONDecodeError as exc:
-        raise SceneError(where, f"not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}") from None
-    except _DuplicateKey as exc:
-        raise SceneError(where, f"not valid: key {exc.args[0]!r} appears twice in one object") from None
+    return read_json(path, SceneError)
 
 
 def _write_json(path: Path, data) -> None:
-    path.write_text(_dumps(data) + "\n", encoding="utf-8")
+    """The one writer of scene and result files: atomic (:func:`vfactor.jsonio.write_text_atomic`)."""
+    write_text_atomic(path, _dumps(data) + "\n")
 
 
 def _depth(value) -> int:
@@ -803,8 +783,8 @@ def _kind(value) -> str:
     """A short description of a found value for error messages."""
     if value is None:
         return "null"
-    if isinstance(value, _NonFinite):
-        return value.text
+    if isinstance(value, (NonFinite, OutOfRange)):
+        return repr(value)
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, (int, float, np.integer, np.floating)):
@@ -894,13 +874,26 @@ def _matrix(value, path: str, shape: tuple[int, int], what: str | None = None) -
     return np.array(value, dtype=float)
 
 
-def _existing_file(value, path: str, base: Path, what: str) -> str:
-    if not isinstance(value, str) or not value:
+def _existing_file(value, path: str, base: _Folder, what: str) -> str:
+    if not isinstance(value, str) or not value or "\x00" in value:
         raise SceneError(path, f"expected {what} (a string), got {_kind(value)}")
-    resolved = str(resolve_path(value, base))
+    resolved = str(resolve_path(value, base.path))
+    if not base.allow_outside:
+        inside = _inside(resolved, str(base.path))
+        if not inside or not _inside(os.path.realpath(resolved), os.path.realpath(base.path)):
+            how = "is" if not inside else f"is a symbolic link to {os.path.realpath(resolved)},"
+            raise SceneError(path, f"{value!r} {how} outside the scene's folder {base.path} (allow it with "
+                             "--allow-outside-paths, or load_scene(..., allow_outside_paths=True))")
     if not os.path.isfile(resolved):
         raise SceneError(path, f"file not found: {resolved}")
     return resolved
+
+
+def _inside(path: str, folder: str) -> bool:
+    try:
+        return os.path.commonpath([folder, path]) == folder
+    except ValueError:  # another drive (Windows)
+        return False
 
 
 def _path_out(path_str: str, scene_base: Path | None, out_base: Path | None) -> str:

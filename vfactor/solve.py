@@ -35,7 +35,8 @@ from vfactor.init import best_candidates
 from vfactor.keys import KeyScheme
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
-from vfactor.shape_evidence import choose_body_type, linearise, noise_scale, shape_information
+from vfactor.sanity import checked, summarise_error
+from vfactor.shape_evidence import NOISE_SCALE_RANGE, choose_body_type, linearise, noise_scale, shape_information
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, default_shape_model
 from vfactor.wireframe import Wireframe
 
@@ -190,7 +191,7 @@ def solve_observations(
         try:
             outcome = _optimise(graph, values, keys, options, terms, hwc)
         except RuntimeError as exc:
-            failure = str(exc)
+            failure = summarise_error(exc)
             continue
         if best is None or outcome[1] < best[1]:
             best = outcome
@@ -231,7 +232,7 @@ def solve_observations(
             result.keypoint_covariances_world = keypoint_covariances(marginals, keys, world_T_vehicle, wireframe)
         except RuntimeError as exc:
             result.message = f"covariance unavailable: {exc}"
-    return result
+    return checked(result, [obs.cameras[c] for c in np.unique(obs.camera_index)], options.covariance)  # vfactor.sanity
 
 
 def _refine(first, obs: KeypointObservations, options: SolveOptions, model: ShapeModel | None, first_prior: ShapePrior,
@@ -266,7 +267,7 @@ def _refine(first, obs: KeypointObservations, options: SolveOptions, model: Shap
             world_T_vehicle = estimate.atPose3(keys.pose_key())
             points = wireframe_from_values(estimate, keys).vehicle_p_keypoints
             relative, p_eff = noise_scale(whitened_residuals(obs.scaled(scale), world_T_vehicle, points), lin)
-            new_scale = scale * relative
+            new_scale = float(np.clip(scale * relative, *NOISE_SCALE_RANGE))
             extras.update(effective_parameters=p_eff)
         if model is not None:
             information, eta = shape_information(lin, (scale / new_scale) ** 2)
@@ -395,7 +396,7 @@ def solve_frame(frame: Frame, cameras: dict[str, Camera], options: SolveOptions 
         try:
             vehicles.append(solve_vehicle(frame.detections_of(vehicle_id), cameras, options, vehicle_id, **kwargs))
         except (InputError, RuntimeError, np.linalg.LinAlgError) as exc:
-            vehicles.append(VehicleResult(vehicle_id, Status.FAILED, message=str(exc)))
+            vehicles.append(VehicleResult(vehicle_id, Status.FAILED, message=summarise_error(exc)))
     return FrameResult(frame.t, vehicles)
 
 

@@ -19,7 +19,6 @@ gives a road plane, the ground-plane factor on every pose.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -46,6 +45,7 @@ from vfactor.init import best_candidates, cross_projection_cost
 from vfactor.keys import KeyScheme
 from vfactor.observations import Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
+from vfactor.sanity import checked, summarise_error
 from vfactor.shape_evidence import track_shape
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, default_shape_model
 from vfactor.solve import SolveOptions, solve_observations
@@ -69,6 +69,13 @@ class TrackOptions:
         motion: the vehicle motion model.
         lag: fixed lag in seconds (poses older than this are marginalised out,
             so memory and time per frame stay flat); ``None`` keeps every pose.
+        max_gap: seconds between two frames of a track beyond which the motion
+            model says nothing (a constant-twist step over more than a few
+            seconds is no prediction, and the motion factors' noise grows with the
+            step until they hold nothing): a longer gap starts a new segment of the
+            track, with no motion factors across the gap (the tracker restarts the
+            track's smoother; batch smoothing keeps the shape), and the first
+            result after it says so in its message. ``math.inf``: never.
         The road plane of the ground-plane factor is ``solve.ground_plane``
         (``track_scene`` and ``smooth_scene`` fill it from the scene when it gives
         one); its settings are ``solve.graph``'s ``hub_height``,
@@ -95,6 +102,7 @@ class TrackOptions:
     shape_prior_loss: RobustLoss = field(default_factory=lambda: RobustLoss("cauchy", 3.0))
     motion: MotionModel = field(default_factory=MotionModel)
     lag: float | None = None
+    max_gap: float = 10.0
     max_updates: int = 10
     update_tolerance: float = 1e-4
     relinearize_threshold: float = 1e-4
@@ -105,6 +113,8 @@ class TrackOptions:
     def __post_init__(self):
         if self.lag is not None and (not np.isfinite(self.lag) or self.lag <= 0):
             raise ValueError(f"TrackOptions.lag: expected a positive number of seconds or None, got {self.lag!r}")
+        if not isinstance(self.max_gap, (int, float)) or isinstance(self.max_gap, bool) or not self.max_gap > 0:
+            raise ValueError(f"TrackOptions.max_gap: expected a positive number of seconds, got {self.max_gap!r}")
         if self.optimizer not in ("dogleg", "gn"):
             raise ValueError(f"TrackOptions.optimizer: expected 'dogleg' or 'gn', got {self.optimizer!r}")
         if not isinstance(self.max_updates, int) or self.max_updates < 0:
@@ -140,6 +150,7 @@ class _TrackState:
     body_type: str | None = None
     body_type_probability: float | None = None
     noise_scale: float = 1.0  # multiplies the detections' pixel sigmas
+    notes: dict = field(default_factory=dict)  # pose key -> message of every result of it (a new segment)
 
 
 def frame_order(scene: Scene) -> list[int]:
@@ -210,12 +221,15 @@ class Tracker:
         for vid in frame.vehicle_ids():
             try:
                 obs = observations_from_detections(frame.detections_of(vid), self.cameras, self.options.solve.graph)
-                vehicles.append(self._add(vid, index, frame.t, obs))
+                result = self._add(vid, index, frame.t, obs)
+                vehicles.append(checked(result, _seen_by(frame, vid, self.cameras), self.options.covariance))
+                failed = result.ok and not vehicles[-1].ok  # garbage (vfactor.sanity): do not track on from it
             except (InputError, RuntimeError, np.linalg.LinAlgError) as exc:
-                track = self._tracks.get(vid)
-                if track is not None:  # restart this track from its next solvable frame
-                    track.smoother, track.poses, track.hwc_added = None, [], False
-                vehicles.append(VehicleResult(vid, Status.FAILED, message=str(exc)))
+                vehicles.append(VehicleResult(vid, Status.FAILED, message=summarise_error(exc)))
+                failed = True
+            track = self._tracks.get(vid)
+            if failed and track is not None:  # restart this track from its next solvable frame
+                track.smoother, track.poses, track.hwc_added, track.young, track.young_frames = None, [], False, False, []
         return FrameResult(frame.t, vehicles)
 
     def estimates(self, covariance: bool = False) -> dict[tuple[int, str], VehicleResult]:
@@ -258,8 +272,8 @@ class Tracker:
 
     def _result(self, track, estimate, key, wireframe, covariance=None, message="") -> VehicleResult:
         result = VehicleResult(track.id, Status.CONVERGED, world_T_vehicle=estimate.atPose3(key), wireframe=wireframe,
-                               pose_covariance=covariance, message=message, body_type=track.body_type,
-                               body_type_probability=track.body_type_probability)
+                               pose_covariance=covariance, message=track.notes.get(key, message),
+                               body_type=track.body_type, body_type_probability=track.body_type_probability)
         result.extras["noise_scale"] = track.noise_scale
         return result
 
@@ -358,12 +372,17 @@ class Tracker:
         if len(obs) == 0:
             return VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen in this frame")
         track.frames_seen += 1
+        gap = t - track.poses[-1][1] if track.smoother is not None and track.poses else 0.0
+        if gap > self.options.max_gap:  # beyond the motion model: a new segment, from a new smoother
+            track.smoother, track.poses, track.hwc_added, track.young, track.young_frames = None, [], False, False, []
         if track.smoother is None:
+            if gap > self.options.max_gap:
+                track.notes[self.keys.pose_key(track.index, frame_index)] = _segment_message(gap, self.options.max_gap)
             return self._start(track, frame_index, t, obs)
         raw, obs = obs, obs.scaled(track.noise_scale)
         options = self.options.solve
         # once both motion factors fix the pose any keypoint helps, as in smooth_scene; a younger track needs three
-        fixed_by_motion = _acceleration_applies(track.poses, t, self.options.lag)
+        fixed_by_motion = _acceleration_applies(track.poses, t, self.options)
         if len(obs) < options.min_observations and len(obs) < 3 and not fixed_by_motion:
             return VehicleResult(vid, Status.DEGENERATE, message=f"only {len(obs)} keypoints seen in this frame")
         estimate = track.smoother.calculateEstimate()
@@ -399,9 +418,8 @@ class Tracker:
                 one, so the cost does not grow with the track); None checks them all.
         """
         smoother = track.smoother
-        if self.options.lag is not None:  # forget poses the smoother has marginalised
-            held = smoother.timestamps()
-            track.poses = [p for p in track.poses if p[2] in held]
+        held = smoother.timestamps()  # forget poses the smoother has marginalised (with or without a lag)
+        track.poses = [p for p in track.poses if p[2] in held]
         keys = [key for _, _, key in track.poses[-recent if recent else 0:]]
         before = [smoother.calculateEstimatePose3(k) for k in keys]
         for _ in range(max_updates):
@@ -446,24 +464,37 @@ def _add_pose_factors(graph: gtsam.NonlinearFactorGraph, poses, key: int, t: flo
     ``(frame index, t, key)`` in time order. The tracker and batch smoothing
     both build their graphs with it.
     """
-    if poses:
+    if poses and t - poses[-1][1] <= options.max_gap:
         _, t1, k1 = poses[-1]
         graph.add(nonholonomic_factor(k1, key, t - t1, options.motion))
-        if _acceleration_applies(poses, t, options.lag):
+        if _acceleration_applies(poses, t, options):
             _, t0, k0 = poses[-2]
             graph.add(acceleration_factor(k0, k1, key, t1 - t0, t - t1, options.motion))
     if options.solve.ground_plane is not None:
         graph.add(ground_factor(key, options.solve.ground_plane, options.solve.graph))
 
 
-def _acceleration_applies(poses, t: float, lag: float | None) -> bool:
-    """Whether a new pose at ``t`` gets both motion factors (two earlier poses, both inside the lag).
+def _acceleration_applies(poses, t: float, options: TrackOptions) -> bool:
+    """Whether a new pose at ``t`` gets both motion factors (two earlier poses, both inside the lag,
+    neither step longer than ``options.max_gap``).
 
     From a track's third pose on these alone fix a pose (lateral, vertical and
     tilt by the non-holonomic factor; speed and yaw rate by the acceleration
     factor).
     """
-    return len(poses) >= 2 and (lag is None or t - poses[-2][1] < lag)
+    if len(poses) < 2 or max(t - poses[-1][1], poses[-1][1] - poses[-2][1]) > options.max_gap:
+        return False
+    return options.lag is None or t - poses[-2][1] < options.lag
+
+
+def _segment_message(gap: float, max_gap: float) -> str:
+    return (f"new segment of the track: {gap:.3g} s since its previous frame exceed the motion model's reach "
+            f"(TrackOptions.max_gap = {max_gap:g} s); no motion factors across the gap")
+
+
+def _seen_by(frame: Frame, vid: str, cameras: dict[str, Camera]) -> list[Camera]:
+    """The cameras that see at least one keypoint of vehicle ``vid`` in ``frame`` (for vfactor.sanity)."""
+    return [cameras[d.camera] for d in frame.detections_of(vid) if d.camera in cameras and np.any(d.confidence > 0)]
 
 
 def _camera_count(obs: KeypointObservations) -> int:
@@ -525,7 +556,8 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
     for vid, count in solved.items():
         if count == 1:
             messages.append(f"vehicle '{vid}' was solved in one frame only: no motion information")
-    frames = [FrameResult(f.t, [final[(i, vid)] for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
+    frames = [FrameResult(f.t, [checked(final[(i, vid)], _seen_by(f, vid, scene.cameras), options.covariance)
+                                for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
     return TrackRun(frames=frames, online=[online[i] for i in range(len(scene.frames))], messages=messages)
 
 
@@ -574,7 +606,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
         track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         add_shape_factors(graph, keys, index, config, track_prior, bounds)
-        posed, best = [], -1
+        posed, best, segments = [], -1, {}
         for (i, t, obs), first in zip(items, firsts):
             obs = obs.scaled(scale)
             if first is None or not first.ok:
@@ -588,6 +620,8 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
                     best = len(obs)
                     insert_vehicle_values(values, keys, None, first.wireframe, index)
             key = keys.pose_key(index, i)
+            if posed and t - posed[-1][1] > options.max_gap:
+                segments[i] = _segment_message(t - posed[-1][1], options.max_gap)
             add_observation_factor(graph, keys, obs, index, i, config)
             _add_pose_factors(graph, posed, key, t, options)
             values.insert(key, guess)
@@ -606,7 +640,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
             marginals = gtsam.Marginals(graph, estimate) if options.covariance else None
         except RuntimeError as exc:
             for i, _, _ in posed:
-                results[(i, vid)] = VehicleResult(vid, Status.FAILED, message=f"batch smoothing failed: {exc}")
+                results[(i, vid)] = VehicleResult(vid, Status.FAILED, message=f"batch smoothing failed: {summarise_error(exc)}")
             continue
         wireframe = wireframe_from_values(estimate, keys, index)
         hit = optimizer.iterations() >= options.solve.max_iterations
@@ -614,7 +648,8 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
             results[(i, vid)] = VehicleResult(
                 vid, Status.MAX_ITERATIONS if hit else Status.CONVERGED, world_T_vehicle=estimate.atPose3(key),
                 wireframe=wireframe, pose_covariance=marginals.marginalCovariance(key) if marginals else None,
-                iterations=optimizer.iterations(), final_error=graph.error(estimate), body_type=body_type,
-                body_type_probability=probability)
+                iterations=optimizer.iterations(), final_error=graph.error(estimate), message=segments.get(i, ""),
+                body_type=body_type, body_type_probability=probability)
             results[(i, vid)].extras["noise_scale"] = scale
-    return [FrameResult(f.t, [results[(i, vid)] for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
+    return [FrameResult(f.t, [checked(results[(i, vid)], _seen_by(f, vid, scene.cameras), options.covariance)
+                              for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]

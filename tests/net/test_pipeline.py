@@ -100,7 +100,7 @@ def test_images_of_the_wrong_size_or_unreadable_are_named(rendered, detector, tm
         edited["frames"][1]["images"]["cam1"] = str(path)
         scene_path = tmp_path / "scene.json"
         scene_path.write_text(json.dumps(edited))
-        scene = load_scene(scene_path)
+        scene = load_scene(scene_path, allow_outside_paths=True)  # the images are the fixture's
         with pytest.raises(SceneError) as info:
             detect_scene(scene, detector)
         assert info.value.field == "frames[1].images.cam1" and message in str(info.value)

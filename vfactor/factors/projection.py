@@ -58,6 +58,8 @@ class KeypointObservations:
             region outside which the detector loses a keypoint (the image:
             ``[-0.5, -0.5, width - 0.5, height - 0.5]``); NaN rows, or None, for
             measurements that are not truncated.
+        min_sigma: no pixel sigma goes below this when the observations are
+            :meth:`scaled` (``GraphConfig.min_pixel_sigma``), pixels.
     """
 
     cameras: tuple[Camera, ...]
@@ -66,6 +68,7 @@ class KeypointObservations:
     uv: np.ndarray
     sqrt_information: np.ndarray
     window: np.ndarray | None = None
+    min_sigma: float = 0.0
 
     def __post_init__(self):
         n = len(self.camera_index)
@@ -102,15 +105,25 @@ class KeypointObservations:
     def subset(self, mask: np.ndarray) -> "KeypointObservations":
         return KeypointObservations(
             self.cameras, self.camera_index[mask], self.keypoint_index[mask], self.uv[mask], self.sqrt_information[mask],
-            None if self.window is None else self.window[mask],
+            None if self.window is None else self.window[mask], self.min_sigma,
         )
 
     def scaled(self, noise_scale: float) -> "KeypointObservations":
-        """The same observations with every pixel sigma multiplied by ``noise_scale`` (> 0)."""
+        """The same observations with every pixel sigma multiplied by ``noise_scale`` (> 0).
+
+        An observation whose smallest sigma would fall below :attr:`min_sigma`
+        is scaled only down to it (noise-free keypoints would otherwise make
+        the information unbounded).
+        """
         if not noise_scale > 0:
             raise ValueError(f"noise_scale: expected > 0, got {noise_scale}")
+        L = np.asarray(self.sqrt_information, dtype=float)
+        factor = np.full(len(L), float(noise_scale))
+        if self.min_sigma > 0 and len(L):
+            smallest_sigma = 1.0 / np.linalg.norm(L, ord=2, axis=(1, 2))
+            factor = np.maximum(factor, self.min_sigma / smallest_sigma)
         return KeypointObservations(self.cameras, self.camera_index, self.keypoint_index, self.uv,
-                                    np.asarray(self.sqrt_information) / noise_scale, self.window)
+                                    L / factor[:, None, None], self.window, self.min_sigma)
 
     def expected_pixels(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """What the detector is expected to measure for predicted pixels ``uv`` (n, 2), and the slope.

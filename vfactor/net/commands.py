@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from vfactor.errors import InputError
+from vfactor.jsonio import read_json, write_text_atomic
 from vfactor.keypoints import KEYPOINT_NAMES
 
 __all__ = ["main", "build_parser", "run_train", "run_detect", "run_calibrate", "run_score"]
@@ -176,10 +177,7 @@ def _train_config(args):
 
     base: dict = {}
     if args.config:
-        try:
-            base = json.loads(Path(args.config).read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as exc:
-            raise InputError("--config", f"cannot read {args.config}: {exc}") from None
+        base = read_json(args.config, InputError)
     for key, value in vars(args).items():
         if key.startswith("cfg_") and value is not None:
             base[key[4:]] = value
@@ -247,7 +245,7 @@ def run_detect(args: argparse.Namespace) -> int:
         doc["images"].append(entry)
     text = json.dumps(doc, indent=1)
     if args.out:
-        Path(args.out).write_text(text + "\n", encoding="utf-8")
+        write_text_atomic(args.out, text + "\n")
     else:
         print(text)
     if args.heatmaps:
@@ -268,10 +266,7 @@ def _boxes(args) -> dict[str, list]:
     if args.rois and args.roi:
         raise InputError("--roi", "give either --roi boxes or a --rois file, not both")
     if args.rois:
-        try:
-            table = json.loads(Path(args.rois).read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as exc:
-            raise InputError("--rois", f"cannot read {args.rois}: {exc}") from None
+        table = read_json(args.rois, InputError)
         if not isinstance(table, dict):
             raise InputError("--rois", "expected a JSON object {image path: [[x0, y0, x1, y1], ...]}")
         missing = [name for name in args.images if name not in table]

@@ -14,7 +14,28 @@ import numpy as np
 
 from vfactor.heatmaps import heatmap_to_image, image_to_heatmap
 
-__all__ = ["crop_roi", "expand_roi", "image_to_crop", "crop_to_image"]
+__all__ = ["crop_roi", "expand_roi", "image_to_crop", "crop_to_image", "check_roi_in_image", "MIN_ROI_INSIDE"]
+
+#: Least fraction of a given box's area that must lie inside the image (docs/reliability.md). A box may reach
+#: outside (a vehicle at the border: zero padding, as in training), but a box mostly or wholly outside holds no
+#: vehicle, and a huge one (``--roi 0 0 1e7 1e7``) would make a crop buffer of terabytes.
+MIN_ROI_INSIDE = 0.25
+
+
+def check_roi_in_image(roi, width: int, height: int) -> tuple[float, float, float, float]:
+    """Checks that a box lies enough inside a ``width x height`` image; returns it as floats.
+
+    Raises:
+        ValueError: the box is malformed, or less than :data:`MIN_ROI_INSIDE` of its area (or less than one
+            pixel across) lies inside the image; the message says how much does.
+    """
+    x0, y0, x1, y1 = _check_roi(roi)
+    w, h = min(x1, width) - max(x0, 0.0), min(y1, height) - max(y0, 0.0)
+    inside = max(w, 0.0) * max(h, 0.0) / ((x1 - x0) * (y1 - y0))
+    if w < 1 or h < 1 or not inside >= MIN_ROI_INSIDE:
+        raise ValueError(f"the box [{x0:g}, {y0:g}, {x1:g}, {y1:g}] leaves the {width}x{height} image: "
+                         f"{inside:.2%} of it is inside, at least {MIN_ROI_INSIDE:.0%} (and a pixel across) is needed")
+    return x0, y0, x1, y1
 
 
 def expand_roi(roi, margin: float = 0.0, square: bool = False) -> tuple[float, float, float, float]:

@@ -25,7 +25,7 @@ import torch
 from vfactor.heatmaps import DecodedKeypoints, decode_heatmaps
 from vfactor.keypoints import MIRROR_PERMUTATION
 from vfactor.net.calibrate import CovarianceCalibration
-from vfactor.net.crop import crop_roi, expand_roi
+from vfactor.net.crop import check_roi_in_image, crop_roi, expand_roi
 from vfactor.net.model import StackedHourglass, load_weights
 
 #: Left/right swap of the heatmap channels, as a tensor index.
@@ -177,6 +177,7 @@ class KeypointDetector:
                 raise ValueError(f"images[{i}]: expected dtype uint8, got {img.dtype}")
             for j, roi in enumerate(boxes_i):
                 try:
+                    check_roi_in_image(roi, img.shape[1], img.shape[0])
                     box = self.crop_box(roi)
                 except ValueError as exc:
                     raise ValueError(f"rois[{i}][{j}]: {exc}") from None

@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 
 from vfactor.errors import SceneError
+from vfactor.net.crop import check_roi_in_image
 from vfactor.observations import Scene, resolve_path
 
 __all__ = ["detect_scene", "read_image"]
@@ -110,6 +111,12 @@ def detect_scene(
                                      "missing: detections of this camera give only a box")
                 images.append(read_image(resolve_path(image, scene.base_dir), f"frames[{f}].images.{name}",
                                           scene.cameras[name].image_size))
+            for j in pending:  # a box mostly outside its image is bad input, named here
+                det, image = frame.detections[j], images[cams.index(frame.detections[j].camera)]
+                try:
+                    check_roi_in_image(det.roi, image.shape[1], image.shape[0])
+                except ValueError as exc:
+                    raise SceneError(f"frames[{f}].detections[{j}].roi", str(exc)) from None
             rois = [[frame.detections[j].roi for j in pending if frame.detections[j].camera == name] for name in cams]
             found = detector.detect_batch(images, rois)
             queue = {name: list(dets) for name, dets in zip(cams, found)}

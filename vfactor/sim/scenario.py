@@ -9,7 +9,6 @@ load; every problem raises :class:`vfactor.errors.ScenarioError` whose
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from importlib import resources
@@ -17,6 +16,7 @@ from pathlib import Path
 
 from vfactor.camera import Camera
 from vfactor.errors import CalibrationError, ScenarioError
+from vfactor.jsonio import read_json
 from vfactor.sim import _checks as chk
 from vfactor.sim.noise import NoiseModel
 from vfactor.sim.rig import intrinsics_from_hfov, look_at
@@ -346,10 +346,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         ScenarioError: the file is missing, not JSON, or a field is wrong (the error names it).
     """
     path = scenario_path(name_or_path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise ScenarioError("", f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    data = read_json(path, ScenarioError)  # vfactor.jsonio: numbers out of range and deep nesting are input errors
     return scenario_from_dict(data, default_name=path.stem)
 
 

@@ -28,6 +28,7 @@ import numpy as np
 
 from vfactor.camera import as_pose3, check_rigid_transform
 from vfactor.errors import CalibrationError, SceneError
+from vfactor.jsonio import read_json, write_text_atomic
 from vfactor.sim.simulate import Simulation, VehicleTruth
 from vfactor.wireframe import Wireframe
 
@@ -116,7 +117,7 @@ def truth_from_dict(data: dict) -> list[dict[str, VehicleTruth]]:
 
 def save_truth(sim: Simulation, path: str | Path) -> None:
     """Writes the ground truth of a simulation as JSON."""
-    Path(path).write_text(json.dumps(truth_to_dict(sim), indent=1) + "\n", encoding="utf-8")
+    write_text_atomic(path, json.dumps(truth_to_dict(sim), indent=1) + "\n")
 
 
 def load_truth(path: str | Path) -> list[dict[str, VehicleTruth]]:
@@ -125,14 +126,7 @@ def load_truth(path: str | Path) -> list[dict[str, VehicleTruth]]:
     Raises:
         SceneError: the file is missing, not JSON, or malformed (the field is named).
     """
-    path = Path(path)
-    if not path.is_file():
-        raise SceneError(str(path), "file not found")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise SceneError(str(path), f"not valid JSON (line {exc.lineno}: {exc.msg})") from None
-    return truth_from_dict(data)
+    return truth_from_dict(read_json(path, SceneError))  # vfactor.jsonio: the one reader of user JSON
 
 
 def write_simulation(sim: Simulation, scene_path: str | Path, truth_path: str | Path) -> None:

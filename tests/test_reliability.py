@@ -1,0 +1,381 @@
+"""Regression tests of docs/reliability.md: one per finding of the reliability review that was fixed.
+
+Each test feeds the input that used to end in an internal error, a traceback or
+garbage reported as converged, and checks the documented outcome (exit code 2
+with a one-line message naming the field, a new track segment, a vehicle
+reported ``degenerate`` ...).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import re
+from pathlib import Path
+
+import gtsam
+import numpy as np
+import pytest
+
+from vfactor.camera import Camera
+from vfactor.cli import EXIT_CODES, EXIT_INPUT, EXIT_OK, EXIT_UNSOLVED, main
+from vfactor.errors import CalibrationError, ScenarioError, SceneError
+from vfactor.jsonio import MAX_DEPTH, parse_json, write_text_atomic
+from vfactor.result import Status, VehicleResult
+from vfactor.sanity import check_estimate, checked, one_line, summarise_error
+from vfactor.scene import load_results, load_scene
+from vfactor.sim import load_scenario
+from vfactor.solve import SolveOptions
+from vfactor.track import TrackOptions, smooth_scene, track_scene
+
+
+@pytest.fixture(scope="module")
+def scene_text(tmp_path_factory):
+    """A simulated two-camera scene of 3 frames (one vehicle each), as text."""
+    path = tmp_path_factory.mktemp("scene") / "scene.json"
+    assert main(["simulate", "intersection_2cam", "--out", str(path), "--frames", "3", "--seed", "4"]) == 0
+    return path.read_text()
+
+
+@pytest.fixture(scope="module")
+def track_text(tmp_path_factory):
+    """A simulated track of 6 frames, 0.1 s apart, as text."""
+    path = tmp_path_factory.mktemp("track") / "track.json"
+    assert main(["simulate", "intersection_2cam_track", "--out", str(path), "--frames", "6", "--seed", "0"]) == 0
+    return path.read_text()
+
+
+def run_cli(capsys, *argv):
+    """Runs the CLI in-process; returns (exit code, stderr) and checks that stderr holds no traceback."""
+    code = main(list(argv))
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return code, err
+
+
+def one_line_error(err: str) -> str:
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+# ------------------------------------------------------------------ 1. numbers JSON allows but a float cannot hold
+@pytest.mark.parametrize("command", ["solve", "track"])
+@pytest.mark.parametrize(
+    "value, found",
+    [
+        ("1" + "0" * 400, "integer of 401 digits"),  # used to be OverflowError
+        ("1" + "0" * 5000, "integer of 5001 digits"),  # used to be ValueError (Python's int digit limit)
+        ("1e400", "too large for a float (1e400)"),
+        ("-1.5E+999", "too large for a float"),
+    ],
+)
+def test_numbers_beyond_a_float_are_input_errors_at_their_field(tmp_path, capsys, scene_text, command, value, found):
+    path = tmp_path / "big.json"
+    path.write_text(re.sub(r'"t": [-0-9.e+]+', f'"t": {value}', scene_text, count=1))
+    code, err = run_cli(capsys, command, str(path), "--out", str(tmp_path / "r.json"))
+    line = one_line_error(err)
+    assert code == EXIT_INPUT and "frames[0].t: expected a finite number" in line and found in line
+
+
+def test_deep_nesting_is_an_input_error(tmp_path, capsys):
+    path = tmp_path / "deep.json"
+    path.write_text("[" * 100000 + "]" * 100000)  # used to be RecursionError
+    code, err = run_cli(capsys, "solve", str(path), "--out", str(tmp_path / "r.json"))
+    assert code == EXIT_INPUT and f"nested deeper than {MAX_DEPTH} levels" in one_line_error(err)
+    with pytest.raises(SceneError, match=r"nested deeper than 64 levels at cameras\[0\]\[0\]"):
+        parse_json('{"cameras": ' + "[" * 70 + "]" * 70 + "}", "x.json")
+    assert parse_json("[" * MAX_DEPTH + "]" * MAX_DEPTH, "x.json") is not None
+
+
+def test_integers_keep_their_type_up_to_18_digits_then_become_floats():
+    data = parse_json('[123456789012345678, 1234567890123456789, -5]', "x.json")
+    assert data == [123456789012345678, 1.234567890123456789e18, -5]
+    assert isinstance(data[0], int) and isinstance(data[1], float)
+
+
+def test_result_and_scenario_readers_refuse_huge_numbers_at_their_field(tmp_path):
+    result = tmp_path / "result.json"
+    result.write_text('{"frames": [{"t": 1' + "0" * 400 + ', "vehicles": []}]}')
+    with pytest.raises(SceneError, match=r"frames\[0\]\.t: expected a finite number"):
+        load_results(result)
+    scenario = tmp_path / "scenario.json"
+    data = json.loads(load_scenario_text())
+    text = json.dumps(data).replace(f'"seed": {data["seed"]}', '"seed": 1' + "0" * 5000, 1)
+    scenario.write_text(text)
+    with pytest.raises(ScenarioError, match=r"seed: expected an integer, got a number too large for a float"):
+        load_scenario(scenario)
+
+
+def load_scenario_text() -> str:
+    from vfactor.sim.scenario import scenario_path
+
+    return scenario_path("intersection_2cam").read_text()
+
+
+# ------------------------------------------------------------------ 2. tracking over long time gaps
+def gapped(track_text: str, gap: float) -> dict:
+    data = json.loads(track_text)
+    for i, frame in enumerate(data["frames"]):
+        if i >= 3:
+            frame["t"] += gap
+    return data
+
+
+@pytest.mark.parametrize("extra", [[], ["--lag", "1"], ["--batch"]])
+def test_track_over_a_gap_beyond_the_motion_model_starts_a_new_segment(tmp_path, capsys, track_text, extra):
+    path = tmp_path / "gap.json"
+    path.write_text(json.dumps(gapped(track_text, 2e12)))  # used to be IndexError: 'x0' not in VectorValues
+    out = tmp_path / "r.json"
+    code, _ = run_cli(capsys, "track", str(path), "--out", str(out), "--no-covariance", *extra)
+    assert code == EXIT_OK
+    frames = load_results(out)
+    assert all(v.status.value == "converged" for f in frames for v in f.vehicles)
+    assert "new segment of the track: 2e+12 s" in frames[3].vehicles[0].message
+    assert "new segment" not in frames[4].vehicles[0].message
+
+
+def test_tracker_without_segments_survives_a_gap_beyond_its_internal_lag(tmp_path, track_text):
+    path = tmp_path / "gap.json"
+    path.write_text(json.dumps(gapped(track_text, 2e12)))
+    options = TrackOptions(solve=SolveOptions(covariance=False), max_gap=math.inf, covariance=False)
+    run = track_scene(load_scene(path), options)
+    assert all(v.ok and "segment" not in v.message for f in run.frames for v in f.vehicles)
+
+
+def test_gap_within_max_gap_keeps_one_segment(tmp_path, track_text):
+    path = tmp_path / "gap.json"
+    path.write_text(json.dumps(gapped(track_text, 5.0)))
+    options = TrackOptions(solve=SolveOptions(covariance=False), covariance=False)
+    scene = load_scene(path)
+    for frames in (track_scene(scene, options).frames, smooth_scene(scene, options)):
+        assert all(v.ok and "segment" not in v.message for f in frames for v in f.vehicles)
+    with pytest.raises(ValueError, match="TrackOptions.max_gap"):
+        TrackOptions(max_gap=0)
+
+
+# ------------------------------------------------------------------ 3. garbage reported as converged
+def one_camera_one_pixel(scene_text: str) -> dict:
+    """One camera, every keypoint at the same pixel: nothing fixes the depth (used to be 'converged' at 1e15 m)."""
+    data = json.loads(scene_text)
+    data["frames"] = data["frames"][:1]
+    det = data["frames"][0]["detections"][0]
+    det.pop("keypoint_covariances", None)
+    det["keypoints"] = [[500.0, 300.0, 0.9]] * 12
+    data["frames"][0]["detections"] = [det]
+    return data
+
+
+@pytest.mark.parametrize("extra", [[], ["--no-covariance"]])
+def test_unconstrained_vehicle_is_degenerate_not_converged(tmp_path, capsys, scene_text, extra):
+    path = tmp_path / "pixel.json"
+    path.write_text(json.dumps(one_camera_one_pixel(scene_text)))
+    out = tmp_path / "r.json"
+    code, err = run_cli(capsys, "solve", str(path), "--out", str(out), *extra)
+    assert code == EXIT_UNSOLVED
+    (vehicle,) = load_results(out)[0].vehicles
+    assert vehicle.status.value == "degenerate" and vehicle.world_T_vehicle is None
+    assert "farther than 1000 m" in vehicle.message and "\n" not in vehicle.message
+    assert "degenerate: the estimate lies" in one_line_error(err)
+
+
+def test_sanity_check_of_estimates(cameras, prius, world_T_vehicle):
+    cams = list(cameras.values())
+    good = VehicleResult("v", Status.CONVERGED, world_T_vehicle=world_T_vehicle, wireframe=prius,
+                         pose_covariance=np.eye(6))
+    assert check_estimate(good, cams, covariance=True) == (Status.CONVERGED, "")
+    far = dataclasses.replace(good, world_T_vehicle=gtsam.Pose3(gtsam.Rot3(), np.array([5e3, 0.0, 0.0])))
+    assert check_estimate(far, cams)[0] == Status.DEGENERATE
+    behind = dataclasses.replace(good, world_T_vehicle=gtsam.Pose3(gtsam.Rot3(), np.array([30.0, 20.0, 7.0])))
+    status, message = check_estimate(behind, cams)
+    assert status == Status.FAILED and "behind camera 'cam0'" in message
+    nan = dataclasses.replace(good, world_T_vehicle=gtsam.Pose3(gtsam.Rot3(), np.array([np.nan, 0.0, 0.0])))
+    assert check_estimate(nan, cams)[0] == Status.FAILED
+    no_cov = dataclasses.replace(good, pose_covariance=None, message="covariance unavailable: " + GTSAM_TEXT)
+    status, message = check_estimate(no_cov, cams, covariance=True)
+    assert status == Status.DEGENERATE
+    assert message == ("no pose covariance (indeterminate linear system at the light layer of the shape: the views "
+                       "do not constrain it)")
+    assert check_estimate(no_cov, cams, covariance=False)[0] == Status.CONVERGED
+    bad = checked(far, cams)
+    assert bad.world_T_vehicle is None and bad.wireframe is None and not bad.ok
+
+
+GTSAM_TEXT = """
+Indeterminate linear system detected while working near variable
+7782220156096217088 (Symbol: l0).
+
+Thrown when a linear system is ill-posed.  The most common cause for this
+error is having underconstrained variables, but the exception is also raised
+for nearly indeterminate systems that are too poorly conditioned to solve
+reliably."""
+
+
+def test_messages_are_one_line_without_escapes():
+    assert summarise_error(GTSAM_TEXT) == "indeterminate linear system at the light layer of the shape: the views do " \
+                                          "not constrain it"
+    assert summarise_error("boom\nsecond line") == "boom"
+    assert one_line("a\x1b[31mred\x1b[0m\nb\tc\x07") == "ared b c"
+    assert len(one_line("x" * 1000)) == 300
+
+
+def test_cli_prints_one_line_for_a_field_with_escapes_and_newlines(tmp_path, capsys, scene_text):
+    data = json.loads(scene_text)
+    data["cameras"][0]["\x1b[2Jname\nnext"] = 1
+    path = tmp_path / "esc.json"
+    path.write_text(json.dumps(data))
+    code, err = run_cli(capsys, "solve", str(path), "--out", str(tmp_path / "r.json"))
+    line = one_line_error(err)
+    assert code == EXIT_INPUT and "\x1b" not in line and "unknown key" in line
+
+
+# ------------------------------------------------------------------ 6. paths stay in the scene's folder
+def scene_with_image(tmp_path, scene_text, image_value: str) -> Path:
+    data = json.loads(scene_text)
+    data["frames"][0]["images"] = {"cam0": image_value}
+    path = tmp_path / "scenes" / "scene.json"
+    path.parent.mkdir(exist_ok=True)
+    path.write_text(json.dumps(data))
+    return path
+
+
+def test_paths_outside_the_scene_folder_are_refused_unless_allowed(tmp_path, capsys, scene_text):
+    (tmp_path / "outside.png").write_bytes(b"png")
+    path = scene_with_image(tmp_path, scene_text, "../outside.png")
+    with pytest.raises(SceneError, match=r"frames\[0\]\.images\.cam0: '../outside.png' is outside the scene's folder"):
+        load_scene(path)
+    assert load_scene(path, allow_outside_paths=True).frames[0].images["cam0"] == str(tmp_path / "outside.png")
+    code, err = run_cli(capsys, "solve", str(path), "--out", str(tmp_path / "r.json"))
+    assert code == EXIT_INPUT and "--allow-outside-paths" in one_line_error(err)
+    code, _ = run_cli(capsys, "solve", str(path), "--out", str(tmp_path / "r.json"), "--allow-outside-paths")
+    assert code == EXIT_OK
+    absolute = scene_with_image(tmp_path, scene_text, str(tmp_path / "outside.png"))
+    with pytest.raises(SceneError, match="is outside the scene's folder"):
+        load_scene(absolute)
+
+
+def test_symlinks_out_of_the_scene_folder_are_refused(tmp_path, scene_text):
+    (tmp_path / "outside.png").write_bytes(b"png")
+    path = scene_with_image(tmp_path, scene_text, "link.png")
+    (path.parent / "link.png").symlink_to(tmp_path / "outside.png")
+    with pytest.raises(SceneError, match=r"images\.cam0: 'link.png' is a symbolic link to .*outside.png, outside"):
+        load_scene(path)
+    (path.parent / "inside.png").write_bytes(b"png")
+    (path.parent / "link_in.png").symlink_to(path.parent / "inside.png")
+    inside = scene_with_image(tmp_path, scene_text, "link_in.png")
+    assert load_scene(inside).frames[0].images["cam0"].endswith("link_in.png")
+
+
+# ------------------------------------------------------------------ 7. atomic results, --out checked first
+def test_out_is_checked_before_the_work(tmp_path, capsys, scene_text):
+    scene = tmp_path / "scene.json"
+    scene.write_text(scene_text)
+    before = scene.read_text()
+    code, err = run_cli(capsys, "solve", str(scene), "--out", str(scene))
+    assert code == EXIT_INPUT and "--out" in one_line_error(err) and "scene file itself" in err
+    assert scene.read_text() == before
+    code, err = run_cli(capsys, "track", str(scene), "--out", str(tmp_path))
+    assert code == EXIT_INPUT and "is a folder" in one_line_error(err)
+    (tmp_path / "file").write_text("x")
+    code, err = run_cli(capsys, "solve", str(scene), "--out", str(tmp_path / "file" / "r.json"))
+    assert code == EXIT_INPUT and "is not a folder" in one_line_error(err)
+    code, err = run_cli(capsys, "simulate", "intersection_2cam", "--out", str(tmp_path / "a.json"),
+                        "--truth", str(tmp_path / "a.json"))
+    assert code == EXIT_INPUT and "--truth" in one_line_error(err)
+
+
+def test_results_are_written_atomically(tmp_path, monkeypatch):
+    target = tmp_path / "r.json"
+    target.write_text("old")
+    write_text_atomic(target, "new")
+    assert target.read_text() == "new" and [p.name for p in tmp_path.iterdir()] == ["r.json"]
+
+    def full_disk(fd):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full_disk)  # the disk fills up while writing: the old file stays whole
+    with pytest.raises(OSError):
+        write_text_atomic(target, "newer")
+    assert target.read_text() == "new" and [p.name for p in tmp_path.iterdir()] == ["r.json"]
+
+
+# ------------------------------------------------------------------ 8. exit codes
+def test_exit_codes_are_documented_in_help(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    assert "exit codes:" in out and all(f"  {code} " in out for code in EXIT_CODES)
+    assert EXIT_UNSOLVED == 3 and EXIT_UNSOLVED not in (EXIT_OK, EXIT_INPUT)
+
+
+def test_usage_errors_are_one_line(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["solve"])
+    assert info.value.code == EXIT_INPUT
+    assert "the following arguments are required" in one_line_error(capsys.readouterr().err)
+
+
+# ------------------------------------------------------------------ 9. calibration files (Camera.from_opencv_file)
+CALIBRATION = """%YAML:1.0
+---
+camera_matrix: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 900., 0., 640., 0., 900., 360., 0., 0., 1. ]
+world_T_camera: !!opencv-matrix
+   rows: 4
+   cols: 4
+   dt: d
+   data: [ 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1. ]
+image_width: 1280
+image_height: 720
+"""
+K_NODE = "camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 900., 0., 640., 0., 900., 360., 0., 0., 1. ]"
+
+
+@pytest.mark.parametrize(
+    "old, new, field, problem",
+    [
+        (K_NODE, 'camera_matrix: "hello"', "camera_matrix", "got the string 'hello'"),  # was cv2.error
+        (K_NODE, "camera_matrix: [ 1, 2, 3 ]", "camera_matrix", "got a list of 3"),  # was cv2.error
+        ("rows: 3", "rows: 4", "camera_matrix", "data: expected 4 x 3 = 12 numbers, got a list of 9"),  # cv2.error
+        ("rows: 3", "rows: 100000", "camera_matrix", "rows: expected an integer from 1 to 16"),  # 80 GB allocation
+        ("data: [ 900.", "data: [ a,", "", "not a readable OpenCV FileStorage file"),  # the parser stops: the file
+        ("image_width: 1280", "image_width: .nan", "image_width", "got nan"),  # was ValueError
+        ("image_width: 1280", "image_width: .inf", "image_width", "got inf"),  # was OverflowError
+        ("image_width: 1280", 'image_width: "wide"', "image_width", "got the string 'wide'"),  # was 1.8e308
+        ("image_height: 720", "image_height: 720.5", "image_height", "got 720.5"),
+    ],
+)
+def test_malformed_calibration_files_raise_a_calibration_error_naming_the_node(tmp_path, old, new, field, problem):
+    path = tmp_path / "calib.yaml"
+    assert old in CALIBRATION
+    path.write_text(CALIBRATION.replace(old, new, 1))
+    with pytest.raises(CalibrationError) as info:
+        Camera.from_opencv_file(path)
+    assert info.value.field == (f"{path}:{field}" if field else str(path)) and problem in info.value.problem
+    path.write_text(CALIBRATION)
+    assert Camera.from_opencv_file(path).image_size == (1280, 720)
+
+
+# ------------------------------------------------------------------ 4. boxes far outside the image
+@pytest.mark.parametrize("roi", [["0", "0", "1e7", "1e7"], ["5000", "5000", "5100", "5100"], ["-900", "0", "100", "10"]])
+def test_detect_refuses_a_box_mostly_outside_the_image(tmp_path, capsys, roi):
+    pytest.importorskip("torch")
+    import cv2
+
+    image = tmp_path / "image.png"
+    cv2.imwrite(str(image), np.zeros((72, 128, 3), np.uint8))
+    code, err = run_cli(capsys, "detect", str(image), "--roi", *roi)  # 1e7: was MemoryError / a traceback
+    assert code == EXIT_INPUT and "leaves the 128x72 image" in one_line_error(err)
+
+
+def test_box_partly_outside_the_image_is_accepted():
+    from vfactor.net.crop import check_roi_in_image
+
+    assert check_roi_in_image([-10, -10, 50, 50], 128, 72) == (-10.0, -10.0, 50.0, 50.0)
+    with pytest.raises(ValueError, match="0.00% of it is inside"):
+        check_roi_in_image([200, 0, 300, 50], 128, 72)

@@ -21,7 +21,7 @@ import numpy as np
 from vfactor.baselines import known_shape, pnp, triangulation
 from vfactor.graph import observations_from_detections
 from vfactor.metrics import pose_errors
-from vfactor.shape_model import HwcBounds, ShapeModel, default_shape_model, default_shape_prior
+from vfactor.shape_model import HwcBounds, ShapeModel, default_shape_model, default_shape_prior, pascal3d_wireframes
 from vfactor.sim import Scenario, Simulation, load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations
 from vfactor.vehicle_library import BODY_TYPES, vehicle_library
@@ -62,8 +62,9 @@ def body_type_of(model: str) -> str:
 
 
 def held_out_model(model: str) -> ShapeModel:
-    """The shape model learnt without the vehicle ``model`` (the full model when it is not in the library)."""
-    return default_shape_model(frozenset({model}) if model in vehicle_library() else frozenset())
+    """The shape model learnt without the vehicle ``model`` (a library id or ``pascal3d_<index>``; presets are never in it)."""
+    held_out = model in vehicle_library() or model in pascal3d_wireframes()
+    return default_shape_model(frozenset({model}) if held_out else frozenset())
 
 
 def car_prior_bounds() -> HwcBounds:

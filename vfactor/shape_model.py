@@ -24,7 +24,7 @@ from vfactor.keypoints import LAYERS, MIRROR_PERMUTATION
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
 
 __all__ = ["ShapePrior", "ShapeModel", "HwcBounds", "default_shape_prior", "default_shape_model", "default_hwc_bounds",
-           "DISTANCE_PAIRS", "CLASS_HINTS"]
+           "pascal3d_wireframes", "PASCAL3D_WHEELBASE", "DISTANCE_PAIRS", "CLASS_HINTS"]
 
 #: All 66 keypoint pairs (i < j) whose distance the HWC distance factor bounds.
 DISTANCE_PAIRS: np.ndarray = np.array(list(combinations(range(12), 2)))
@@ -278,19 +278,43 @@ class ShapeModel:
         return out
 
 
+#: Wheelbase (metres) at which the PASCAL3D+ car CAD models enter the body-type priors.
+PASCAL3D_WHEELBASE = 2.75
+
+
+def pascal3d_wireframes() -> dict[str, Wireframe]:
+    """The nine PASCAL3D+ car CAD models at :data:`PASCAL3D_WHEELBASE`, symmetrised, by id ``pascal3d_<index>``."""
+    out = {}
+    for i, s in enumerate(pascal3d_shapes()):
+        p = s * PASCAL3D_WHEELBASE
+        p = 0.5 * (p + p[MIRROR_PERMUTATION] * [1.0, -1.0, 1.0])
+        out[f"pascal3d_{i}"] = Wireframe(p - p[list(LAYERS["wheel"])].mean(axis=0))
+    return out
+
+
+def _mahalanobis2(prior: ShapePrior, wireframe: Wireframe) -> float:
+    r = prior.sqrt_information() @ (wireframe.vehicle_p_keypoints.ravel() - np.asarray(prior.mean).ravel())
+    return float(r @ r)
+
+
 @lru_cache(maxsize=128)
 def default_shape_model(exclude: frozenset = frozenset(), hub_sigma: float = 0.02, rule_sigma: float = 0.08,
                         inflation: float = 1.5) -> ShapeModel:
-    """The body-type shape model learnt from the vehicle library, uniform over the types.
+    """The body-type shape model learnt from the vehicle library and the PASCAL3D+ cars, uniform over the types.
 
-    The library's hubs come from published dimensions, its lamps and window
-    tops from placement rules (docs/vehicles.md) that a real vehicle departs
-    from: the priors' floor is ``hub_sigma`` on the hubs and ``rule_sigma`` on
-    the other eight keypoints.
+    Each body type's prior is learnt from the library's vehicles of that type
+    and from the PASCAL3D+ car CAD models nearest to it (Mahalanobis distance
+    to the library-only priors; at :data:`PASCAL3D_WHEELBASE`). The CAD models
+    are real car shapes annotated by hand, where the library's lamps and
+    window tops are placed by rules (docs/vehicles.md). The library's hubs come
+    from published dimensions, the rest from those rules that a real vehicle
+    departs from: the priors' floor is ``hub_sigma`` on the hubs and
+    ``rule_sigma`` on the other eight keypoints.
 
     Args:
-        exclude: library ids left out of every prior and of the bounds
-            (leave-one-model-out evaluation: the solved vehicle is never in the prior).
+        exclude: library ids and ``pascal3d_<index>`` ids left out of every
+            prior and of the bounds (leave-one-model-out evaluation: the solved
+            vehicle is never in the prior).
         hub_sigma, rule_sigma: the floor (:meth:`ShapePrior.from_wireframes`), metres.
         inflation: see :meth:`ShapePrior.from_wireframes`.
     """
@@ -298,12 +322,16 @@ def default_shape_model(exclude: frozenset = frozenset(), hub_sigma: float = 0.0
 
     exclude = frozenset(exclude)
     floor_sigma = np.array([hub_sigma] * 4 + [rule_sigma] * 8)
-    vehicles = [v for v in vehicle_library().values() if v.id not in exclude]
-    types = {}
-    for body_type in BODY_TYPES:
-        shapes = [v.wireframe for v in vehicles if v.body_type == body_type]
-        if len(shapes) >= 2:
-            types[body_type] = ShapePrior.from_wireframes(shapes, floor_sigma, inflation)
-    pooled = ShapePrior.from_wireframes([v.wireframe for v in vehicles], floor_sigma, inflation)
+    shapes = {t: [] for t in BODY_TYPES}
+    for v in vehicle_library().values():
+        if v.id not in exclude:
+            shapes[v.body_type].append(v.wireframe)
+    library_only = {t: ShapePrior.from_wireframes(w, floor_sigma, inflation) for t, w in shapes.items() if len(w) >= 2}
+    for cad_id, wireframe in pascal3d_wireframes().items():
+        if cad_id not in exclude and library_only:
+            nearest = min(library_only, key=lambda t: _mahalanobis2(library_only[t], wireframe))
+            shapes[nearest].append(wireframe)
+    types = {t: ShapePrior.from_wireframes(w, floor_sigma, inflation) for t, w in shapes.items() if len(w) >= 2}
+    pooled = ShapePrior.from_wireframes([w for ws in shapes.values() for w in ws], floor_sigma, inflation)
     return ShapeModel(types=types, pooled=pooled, bounds=default_hwc_bounds(exclude),
                       prior_probability={t: 1.0 / len(types) for t in types})

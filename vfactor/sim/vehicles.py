@@ -86,17 +86,23 @@ def random_wireframe(
     Raises:
         RuntimeError: no shape within the bounds after ``spec.max_tries`` draws.
     """
+    return _random_pascal3d(rng, spec, bounds)[0]
+
+
+def _random_pascal3d(rng: np.random.Generator, spec: RandomShape, bounds: HwcBounds | None) -> tuple[Wireframe, int]:
+    """:func:`random_wireframe` and the index of the PASCAL3D+ model drawn."""
     bounds = default_hwc_bounds() if bounds is None else bounds
     shapes = pascal3d_shapes()
     for _ in range(spec.max_tries):
-        model = shapes[rng.integers(len(shapes))]
+        index = int(rng.integers(len(shapes)))
+        model = shapes[index]
         wheelbase = rng.uniform(*spec.wheelbase)
         points = model * wheelbase + rng.normal(0.0, spec.jitter, size=model.shape)
         points = symmetrised(points)
         points -= points[list(LAYERS["wheel"])].mean(axis=0)
         wireframe = Wireframe(points)
         if within_hwc_bounds(wireframe, bounds):
-            return wireframe
+            return wireframe, index
     raise RuntimeError(f"random_wireframe: no shape within the HWC bounds after {spec.max_tries} draws")
 
 
@@ -148,14 +154,15 @@ def draw_vehicle(
 
     Returns:
         (wireframe in metres, wheel radius in metres, model: the preset name,
-        the library id, or ``"random"``).
+        the library id, or ``"pascal3d_<index>"`` for a random PASCAL3D+ car).
 
     Raises:
         ValueError: unknown name.
     """
     check_vehicle_name(name)
     if name == RANDOM:
-        return random_wireframe(rng, random_shape), random_shape.wheel_radius, RANDOM
+        wireframe, index = _random_pascal3d(rng, random_shape, None)
+        return wireframe, random_shape.wheel_radius, f"pascal3d_{index}"
     if name in PRESETS:
         p = PRESETS[name]
         return p.wireframe(), p.wheel_radius, name

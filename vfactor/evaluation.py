@@ -27,7 +27,8 @@ from vfactor.solve import SolveOptions, solve_observations
 from vfactor.vehicle_library import BODY_TYPES, vehicle_library
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
 
-__all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held_out_model", "car_prior_bounds",
+__all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held_out_model", "held_out_scene_model",
+           "car_prior_bounds",
            "compare_methods", "summarise_methods", "accuracy_table", "keypoint_table", "body_type_table",
            "noise_variant", "run_accuracy", "compare_tracking", "tracking_table", "final_shape_errors",
            "shape_over_noise_draws", "shape_draws_table"]
@@ -65,6 +66,12 @@ def held_out_model(model: str) -> ShapeModel:
     """The shape model learnt without the vehicle ``model`` (a library id or ``pascal3d_<index>``; presets are never in it)."""
     held_out = model in vehicle_library() or model in pascal3d_wireframes()
     return default_shape_model(frozenset({model}) if held_out else frozenset())
+
+
+def held_out_scene_model(sim: Simulation) -> ShapeModel:
+    """The shape model learnt without any vehicle model of the simulation (for tracks of several vehicles)."""
+    models = {v.preset for frame in sim.truth for v in frame.values()}
+    return default_shape_model(frozenset(m for m in models if m in vehicle_library() or m in pascal3d_wireframes()))
 
 
 def car_prior_bounds() -> HwcBounds:
@@ -238,19 +245,20 @@ def compare_tracking(sim: Simulation, options=None, lag: float = 0.5) -> dict:
     from vfactor.track import TrackOptions, smooth_scene, track_scene
 
     options = options or TrackOptions()
+    model = held_out_scene_model(sim)
     runs, seconds = {}, {}
     t0 = time.perf_counter()
-    runs["frame_by_frame"] = solve_scene(sim.scene, SolveOptions())  # what `vfactor solve` does
+    runs["frame_by_frame"] = solve_scene(sim.scene, SolveOptions(), prior=model)  # what `vfactor solve` does
     seconds["frame_by_frame"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    run = track_scene(sim.scene, options)
+    run = track_scene(sim.scene, options, prior=model)
     seconds["isam2"] = seconds["isam2_online"] = time.perf_counter() - t0
     runs["isam2_online"], runs["isam2"] = run.online, run.frames
     t0 = time.perf_counter()
-    runs["isam2_lag"] = track_scene(sim.scene, dataclasses.replace(options, lag=lag)).frames
+    runs["isam2_lag"] = track_scene(sim.scene, dataclasses.replace(options, lag=lag), prior=model).frames
     seconds["isam2_lag"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    runs["batch"] = smooth_scene(sim.scene, options)
+    runs["batch"] = smooth_scene(sim.scene, options, prior=model)
     seconds["batch"] = time.perf_counter() - t0
     errors, shapes = {}, {}
     for method, frames in runs.items():
@@ -321,11 +329,12 @@ def shape_over_noise_draws(sim: Simulation, draws: int, options=None) -> dict[st
     from vfactor.track import TrackOptions, smooth_scene
 
     options = options or TrackOptions(covariance=False)
+    model = held_out_scene_model(sim)
     ids = sorted({vid for f in sim.scene.frames for vid in f.vehicle_ids()})
     errors = {vid: np.full((draws, 12, 3), np.nan) for vid in ids}
     for k in range(draws):
         noisy = redraw_noise(sim, 10_000 * (sim.seed + 1) + k)
-        for vid, e in final_shape_errors(sim, smooth_scene(noisy.scene, options)).items():
+        for vid, e in final_shape_errors(sim, smooth_scene(noisy.scene, options, prior=model)).items():
             errors[vid][k] = e
     return errors
 

@@ -229,7 +229,7 @@ class ShapeModel:
         return self._variants[key]
 
     def log_prior(self, hints=()) -> dict[str, float]:
-        """Body type -> log probability given the detections' class ``hints`` (unknown classes are ignored)."""
+        """Body type -> log probability given the detections' class ``hints`` (unknown classes are ignored; normalised)."""
         logp = {t: float(np.log(self.prior_probability[t])) for t in self.types}
         for hint in hints:
             suggested = CLASS_HINTS.get(str(hint).lower())
@@ -241,7 +241,9 @@ class ShapeModel:
                 logp[t] += np.log(self.hint_weight / len(inside))
             for t in outside:
                 logp[t] += np.log((1 - self.hint_weight) / len(outside))
-        return logp
+        top = max(logp.values())
+        norm = top + np.log(sum(np.exp(v - top) for v in logp.values()))
+        return {t: float(v - norm) for t, v in logp.items()}
 
     def type_log_evidence(self, information: np.ndarray, eta: np.ndarray) -> dict[tuple[str, float], float]:
         """Log marginal likelihood of the observations under each body type's prior and spread (Laplace), up to a constant.
@@ -297,8 +299,7 @@ def _mahalanobis2(prior: ShapePrior, wireframe: Wireframe) -> float:
     return float(r @ r)
 
 
-@lru_cache(maxsize=128)
-def default_shape_model(exclude: frozenset = frozenset(), hub_sigma: float = 0.02, rule_sigma: float = 0.08,
+def default_shape_model(exclude=frozenset(), hub_sigma: float = 0.02, rule_sigma: float = 0.08,
                         inflation: float = 1.5) -> ShapeModel:
     """The body-type shape model learnt from the vehicle library and the PASCAL3D+ cars, uniform over the types.
 
@@ -318,9 +319,14 @@ def default_shape_model(exclude: frozenset = frozenset(), hub_sigma: float = 0.0
         hub_sigma, rule_sigma: the floor (:meth:`ShapePrior.from_wireframes`), metres.
         inflation: see :meth:`ShapePrior.from_wireframes`.
     """
+    return _shape_model(frozenset(exclude), float(hub_sigma), float(rule_sigma), float(inflation))
+
+
+@lru_cache(maxsize=128)
+def _shape_model(exclude: frozenset, hub_sigma: float, rule_sigma: float, inflation: float) -> ShapeModel:
+    """:func:`default_shape_model`, made once per set of arguments."""
     from vfactor.vehicle_library import BODY_TYPES, vehicle_library
 
-    exclude = frozenset(exclude)
     floor_sigma = np.array([hub_sigma] * 4 + [rule_sigma] * 8)
     shapes = {t: [] for t in BODY_TYPES}
     for v in vehicle_library().values():

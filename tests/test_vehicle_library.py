@@ -1,0 +1,97 @@
+"""The vehicle library: published dimensions, keypoints derived from them, HWC admits every vehicle."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vfactor.graph import GraphConfig, hwc_terms, hwc_violation
+from vfactor.shape_model import default_hwc_bounds, default_shape_model
+from vfactor.sim.vehicles import within_hwc_bounds
+from vfactor.vehicle_library import (
+    BODY_RULES,
+    BODY_TYPES,
+    VehicleDimensions,
+    keypoints_from_dimensions,
+    library_ids,
+    library_vehicle,
+    tyre_radius,
+    vehicle_library,
+)
+
+
+def test_library_covers_every_body_type():
+    library = vehicle_library()
+    assert len(library) >= 40
+    for body_type in BODY_TYPES:
+        assert len(library_ids(body_type)) >= 5, body_type
+    vans = [v.dimensions for v in library.values() if v.body_type == "van"]
+    assert sum(v.roof == "high" for v in vans) >= 3  # high-roof panel vans
+    assert sum(v.height < 1.95 for v in vans) >= 3  # two-box (compact) vans
+    for v in library.values():
+        assert v.dimensions.source and v.dimensions.make and v.dimensions.model, v.id
+
+
+def test_every_library_vehicle_satisfies_every_hwc_condition():
+    terms = hwc_terms(GraphConfig(), default_hwc_bounds())
+    for v in vehicle_library().values():
+        assert hwc_violation(v.wireframe, terms) == 0.0, v.id
+        assert within_hwc_bounds(v.wireframe), v.id
+
+
+def test_hwc_bounds_learnt_without_a_vehicle_still_admit_it():
+    """Leave-one-model-out: the bounds are physical, not a span of the sample."""
+    for vehicle_id in library_ids():
+        bounds = default_shape_model(frozenset({vehicle_id})).bounds
+        assert hwc_violation(library_vehicle(vehicle_id).wireframe, hwc_terms(GraphConfig(), bounds)) == 0.0, vehicle_id
+
+
+def test_tyre_radius_from_the_iso_size():
+    assert tyre_radius("205/55R16") == pytest.approx((16 * 25.4 / 2 + 205 * 0.55) / 1000)
+    assert tyre_radius("LT275/65R18") == pytest.approx((18 * 25.4 / 2 + 275 * 0.65) / 1000)
+    assert tyre_radius("215/65R16C") == pytest.approx((16 * 25.4 / 2 + 215 * 0.65) / 1000)
+    with pytest.raises(ValueError, match="tyre"):
+        tyre_radius("wide and round")
+
+
+def test_keypoints_follow_the_dimensions():
+    for v in vehicle_library().values():
+        d, p = v.dimensions, v.wireframe.vehicle_p_keypoints
+        r = d.wheel_radius
+        front, rear = d.overhangs()
+        assert front + rear + d.wheelbase == pytest.approx(d.length)
+        np.testing.assert_allclose(p[:4, 0], [d.wheelbase / 2] * 2 + [-d.wheelbase / 2] * 2)
+        np.testing.assert_allclose(np.abs(p[:4, 1]), [d.front_track / 2] * 2 + [d.rear_track / 2] * 2)
+        np.testing.assert_allclose(p[:4, 2], 0.0)
+        np.testing.assert_allclose(p[:4].mean(axis=0), 0.0, atol=1e-12)  # the body origin
+        assert np.all(p[:, 0] <= d.wheelbase / 2 + front) and np.all(p[:, 0] >= -(d.wheelbase / 2 + rear)), v.id
+        assert np.all(np.abs(p[:, 1]) <= d.width / 2), v.id
+        assert np.all(p[:, 2] + r <= d.height) and np.all(p[:, 2] + r > 0), v.id
+        assert p[4, 0] > d.wheelbase / 2 and p[6, 0] < -d.wheelbase / 2, v.id  # lamps beyond the axles
+        assert p[8, 0] > p[10, 0], v.id  # windshield ahead of the rear window
+        np.testing.assert_allclose(p[[1, 3, 5, 7, 9, 11]], p[[0, 2, 4, 6, 8, 10]] * [1, -1, 1])  # mirror images
+
+
+def test_rear_window_follows_the_body_type():
+    library = vehicle_library()
+    pickup = next(v for v in library.values() if v.body_type == "pickup")
+    d = pickup.dimensions
+    rear_end = -(d.wheelbase / 2 + d.overhangs()[1])
+    cab_back = pickup.wireframe.vehicle_p_keypoints[10, 0]
+    assert cab_back == pytest.approx(rear_end + d.bed_length + BODY_RULES["pickup"].rear_window_offset)
+    sedan = next(v for v in library.values() if v.body_type == "sedan")
+    assert sedan.wireframe.vehicle_p_keypoints[10, 0] > -sedan.dimensions.wheelbase / 2  # ahead of the rear axle
+
+
+def test_dimensions_without_overhangs_split_by_body_type():
+    d = VehicleDimensions("x", "M", "X", "", "", "suv", 4.6, 1.85, 1.7, 2.7, 1.6, 1.6, "225/65R17")
+    front, rear = d.overhangs()
+    assert front == pytest.approx(BODY_RULES["suv"].front_overhang_share * 1.9) and front + rear == pytest.approx(1.9)
+    assert keypoints_from_dimensions(d).wheelbase == pytest.approx(2.7)
+
+
+def test_unknown_ids_and_types_are_refused():
+    with pytest.raises(ValueError, match="unknown id"):
+        library_vehicle("tractor")
+    with pytest.raises(ValueError, match="body type"):
+        library_ids("tractor")

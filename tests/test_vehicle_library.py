@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import gtsam
 import numpy as np
 import pytest
 
-from vfactor.graph import GraphConfig, hwc_terms, hwc_violation
+from vfactor.factors.rectangle import rectangle_factor
+from vfactor.factors.symmetry import symmetry_factor
+from vfactor.graph import GraphConfig, hwc_terms, hwc_violation, insert_vehicle_values
+from vfactor.keys import KeyScheme
 from vfactor.shape_model import default_hwc_bounds, default_shape_model
 from vfactor.sim.vehicles import within_hwc_bounds
 from vfactor.vehicle_library import (
@@ -33,10 +37,16 @@ def test_library_covers_every_body_type():
 
 
 def test_every_library_vehicle_satisfies_every_hwc_condition():
+    """The nonlinear terms and the linear wheel-layer and symmetry factors: zero residual for every vehicle."""
     terms = hwc_terms(GraphConfig(), default_hwc_bounds())
+    keys = KeyScheme().layer_keys(0)
+    linear = [rectangle_factor(keys[0]), *(symmetry_factor(k) for k in keys)]
     for v in vehicle_library().values():
         assert hwc_violation(v.wireframe, terms) == 0.0, v.id
         assert within_hwc_bounds(v.wireframe), v.id
+        values = gtsam.Values()
+        insert_vehicle_values(values, KeyScheme(), None, v.wireframe)
+        assert max(f.error(values) for f in linear) < 1e-20, v.id
 
 
 def test_hwc_bounds_learnt_without_a_vehicle_still_admit_it():

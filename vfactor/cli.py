@@ -176,7 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="frames: noise levels, comma-separated, of clean, paper, hard (default: all three)")
     p.add_argument("--frames", type=int, help="number of scenes or frames (default: the scenario's)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
-    p.add_argument("--seeds", type=int, default=1, help="tracks: how many seeds from --seed on (default: 1)")
+    p.add_argument("--seeds", type=int, default=1,
+                   help="frames, tracks: how many seeds from --seed on (frames: pooled in one table; default: 1)")
     p.add_argument("--draws", type=int, default=0,
                    help="tracks: also batch-smooth each seed's tracks over this many new draws of the keypoint noise "
                    "and report each final shape's mean error, bias and spread (default: 0)")
@@ -533,7 +534,7 @@ def _eval(args) -> int:
     if not (np.isfinite(args.lag) and args.lag > 0):
         raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
     if args.experiment == "frames":
-        sections = _eval_frames(args.scenario or "library_2cam", frames, args.seed, _levels(args.levels))
+        sections = _eval_frames(args.scenario or "library_2cam", frames, args.seed, _levels(args.levels), args.seeds)
     elif args.experiment == "tracks":
         sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws, args.lag)
     elif args.experiment == "images":
@@ -572,16 +573,17 @@ def _levels(text: str) -> tuple[str, ...]:
     return levels
 
 
-def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper", "hard")) -> list[str]:
+def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper", "hard"), seeds: int = 1) -> list[str]:
     from vfactor.evaluation import accuracy_table, body_type_table, keypoint_table, run_accuracy, summarise_methods
 
     sections = []
-    for scenario, rows in run_accuracy(scenario_name, frames, seed, levels):
+    which = f"seed {seed}" if seeds == 1 else f"seeds {seed}-{seed + seeds - 1}"
+    for scenario, rows in run_accuracy(scenario_name, frames, seed, levels, seeds=seeds):
         n = scenario.noise
         summary = summarise_methods(rows)
         title = (f"### {scenario.name}: {n.outlier_rate:.0%} outliers, {n.swap_rate:.0%} left/right swaps, "
                  f"{n.missing_rate:.0%} missing, sigma {n.relative_sigma:.1%} of the box diagonal "
-                 f"(x{n.occluded_factor:g} when self-occluded), seed {seed}")
+                 f"(x{n.occluded_factor:g} when self-occluded), {which}")
         sections.append(f"{title}\n\n{accuracy_table(summary)}\n\nPer body type (each vehicle solved with a "
                         f"shape model learnt without it):\n\n{body_type_table(rows)}\n\nMean error per keypoint "
                         f"(cm):\n\n{keypoint_table(summary)}\n")

@@ -212,8 +212,11 @@ def body_type_table(rows: dict[str, list[dict]], reference: str = "known_shape")
 
 def run_accuracy(scenario: str = "accuracy_2cam", frames: int | None = None, seed: int = 0,
                  levels=("paper", "hard"), options: SolveOptions = SolveOptions(),
-                 methods=tuple(METHODS)) -> list[tuple[Scenario, dict[str, list[dict]]]]:
+                 methods=tuple(METHODS), seeds: int = 1) -> list[tuple[Scenario, dict[str, list[dict]]]]:
     """The accuracy experiment of docs/results.md: each noise level (:data:`NOISE_LEVELS`) simulated, every method run.
+
+    Args:
+        seeds: simulate seeds ``seed .. seed + seeds - 1`` and pool their rows (each row keeps its ``seed``).
 
     Returns:
         (scenario variant, :func:`compare_methods` rows) per level.
@@ -225,8 +228,11 @@ def run_accuracy(scenario: str = "accuracy_2cam", frames: int | None = None, see
             raise ValueError(f"noise level: expected one of {list(NOISE_LEVELS)}, got {level!r}")
         variant = noise_variant(base, **NOISE_LEVELS[level])
         variant = dataclasses.replace(variant, name=f"{base.name} ({level})")
-        sim = simulate(variant, seed=seed, num_frames=frames)
-        out.append((variant, compare_methods(sim, options, methods)))
+        pooled = {m: [] for m in methods}
+        for s in range(seed, seed + seeds):
+            for method, rows in compare_methods(simulate(variant, seed=s, num_frames=frames), options, methods).items():
+                pooled[method] += [dict(row, seed=s) for row in rows]
+        out.append((variant, pooled))
     return out
 
 

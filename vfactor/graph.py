@@ -65,7 +65,7 @@ class GraphConfig:
         body_frame_sigma: gauge tightness (hub centroid at the origin, hubs level), metres.
         shape_prior_weight: scales the information of the mean-shape prior.
         hwc: the nonlinear HWC factor (layer planes, trapezoids, distance and
-            layer-offset bounds; the wheel rectangle is linear and always in): ``"always"`` in the graph from the start;
+            layer-offset bounds; the wheel-layer factor is linear and always in): ``"always"`` in the graph from the start;
             ``"lazy"`` (default) added by the solver only when the solution
             without it breaks an HWC condition by more than ``hwc_tolerance``
             sigmas, then solved again with it (an active-set strategy: the HWC
@@ -73,7 +73,7 @@ class GraphConfig:
             active and the Python factor is rarely paid for); ``"off"`` never.
         hwc_tolerance: whitened HWC residual (sigmas) beyond which ``"lazy"`` adds the factor.
         plane_sigma_m, plane_sigma_rad: layer planarity (m) and perpendicularity (rad).
-        rectangle_sigma: wheel-layer rectangle (parallelogram residual), metres.
+        rectangle_sigma: wheel layer: parallel axles (x and z of the axle-vector difference), metres.
         trapezoid_sigma_rad, width_ratio_sigma: trapezoid parallel sides and width-ratio hinge.
         hinge_sigma: distance and layer-offset hinges beyond their bounds, metres.
         hub_height: height of the wheel hubs above the road (the ground-plane
@@ -205,7 +205,7 @@ def add_shape_factors(
     prior: ShapePrior | None = None,
     bounds: HwcBounds | None = None,
 ) -> None:
-    """Adds one vehicle's shape factors: body frame, symmetry, wheel rectangle, mean-shape prior, and HWC when ``config.hwc == "always"``.
+    """Adds one vehicle's shape factors: body frame, symmetry, wheel layer (parallel axles), shape prior, and HWC when ``config.hwc == "always"``.
 
     Add these once per vehicle (the shape is shared by all its frames). With
     ``"lazy"``, add :func:`hwc_factor` yourself when :func:`hwc_violation` says so.

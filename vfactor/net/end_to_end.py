@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from vfactor.evaluation import accuracy_table, compare_methods, compare_tracking, summarise_methods, tracking_table
+from vfactor.evaluation import (accuracy_table, body_type_table, compare_methods, compare_tracking, summarise_methods,
+                                tracking_table)
 from vfactor.net.evaluate import pck
 from vfactor.net.pipeline import detect_scene
 from vfactor.sim import load_scenario, simulate
@@ -94,7 +95,8 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
 
     Returns:
         ``{"scenario", "seed", "frames", "keypoints": keypoint_accuracy(...),
-        "summary": method -> summarise_methods row, "tracking": compare_tracking(...) or None}``;
+        "summary": method -> summarise_methods row, "rows": method -> compare_methods rows,
+        "tracking": compare_tracking(...) or None}``;
         the methods are ``factor_graph``, ``triangulation``, ``pnp``, ``known_shape`` on the
         network's keypoints and ``factor_graph_simulated_noise`` on the simulator's keypoints;
         ``tracking`` is given for a scenario with motion (each id one vehicle over
@@ -116,7 +118,7 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
     tracked = sim.scenario.motion is not None
     tracking = compare_tracking(dataclasses.replace(sim, scene=detected)) if tracked else None
     return {"scenario": sim.scenario.name, "seed": seed, "frames": len(sim.scene.frames), "keypoints": keypoints,
-            "summary": summarise_methods(rows), "tracking": tracking}
+            "summary": summarise_methods(rows), "rows": rows, "tracking": tracking}
 
 
 def images_report(evaluation: dict) -> str:
@@ -132,6 +134,8 @@ def images_report(evaluation: dict) -> str:
         f"{accuracy_table(evaluation['summary'])}\n\n"
         "factor_graph_simulated_noise: the factor graph on the simulator's keypoints (paper-like noise) of the "
         "same vehicles, for comparison with the network's keypoints.\n"
+        + (f"\nPer body type, from the network's keypoints (each vehicle solved with a shape model learnt without "
+           f"it):\n\n{body_type_table(evaluation['rows'])}\n" if evaluation.get("rows") else "")
         + (f"\nTracking from the network's keypoints:\n\n{tracking_table(evaluation['tracking'])}\n"
            if evaluation.get("tracking") else "")
     )

@@ -56,7 +56,8 @@ def build_graph(scenario: str = "intersection_2cam_track", seed: int = 2, frames
     frames = [(f, frame) for f, frame in enumerate(sim.scene.frames) if frame.detections_of(vehicle)]
     observations = {f: vfactor.observations_from_detections(frame.detections_of(vehicle), sim.scene.cameras, config)
                     for f, frame in frames}
-    firsts = {f: vfactor.solve_observations(obs, dataclasses.replace(options, covariance=False), prior=model)
+    firsts = {f: vfactor.solve_observations(obs, dataclasses.replace(options, covariance=False, shape_information=True),
+                                            prior=model)
               for f, obs in observations.items()}
     shape = vfactor.track_shape(list(firsts.values()), model)
     vfactor.add_shape_factors(graph, KEYS, vehicle=0, config=config, prior=shape.prior)

@@ -25,7 +25,7 @@ def clean():
     return simulate(noise_variant(load_scenario("library_2cam"), **NOISE_LEVELS["clean"]), seed=3, num_frames=21)
 
 
-def solve_held_out(sim, f, options=SolveOptions(covariance=False), **kwargs):
+def solve_held_out(sim, f, options=SolveOptions(covariance=False, shape_information=True), **kwargs):
     frame = sim.scene.frames[f]
     vid = frame.vehicle_ids()[0]
     truth = sim.truth[f][vid]

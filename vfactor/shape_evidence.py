@@ -215,7 +215,8 @@ def track_shape(results, model: ShapeModel | None, fallback: ShapePrior | None =
     frames) and a graph of your own (examples/infrastructure_graph.py) use it.
 
     Args:
-        results: one-frame results of the vehicle (unsolved ones are skipped).
+        results: one-frame results of the vehicle (unsolved ones are skipped), solved with
+            ``SolveOptions(shape_information=True)``.
         model: the shape model, or None to keep ``fallback``.
         fallback: the prior without a model or without a solved frame
             (default: the model's pooled prior).

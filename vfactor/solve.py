@@ -68,6 +68,9 @@ class SolveOptions:
             balance of keypoints and shape prior holds at any noise level;
             ``False`` keeps the sigmas of ``graph`` (``relative_pixel_sigma``,
             or the detections' covariances) as they are.
+        shape_information: keep the observations' information on the shape in
+            the result's ``extras["shape_information"]`` (10 kB a vehicle), for
+            :func:`vfactor.shape_evidence.track_shape` over several frames.
     """
 
     graph: GraphConfig = field(default_factory=GraphConfig)
@@ -80,6 +83,7 @@ class SolveOptions:
     min_keypoints_in_one_view: int = 4
     ground_plane: GroundPlane | None = None
     estimate_noise: bool = True
+    shape_information: bool = False
 
     def for_scene(self, scene: Scene) -> "SolveOptions":
         """These options, with the scene's road plane when they name none and the scene gives one."""
@@ -214,6 +218,8 @@ def solve_observations(
         final_error=float(error), body_type=extras.pop("body_type", None),
         body_type_probability=extras.pop("body_type_probability", None),
     )
+    if not options.shape_information:
+        extras.pop("shape_information", None)
     result.extras.update(extras)
     e = whitened_residuals(obs, world_T_vehicle, wireframe.vehicle_p_keypoints)
     weights = options.graph.loss.weight(np.linalg.norm(e, axis=1))

@@ -288,7 +288,8 @@ class Tracker:
         return T1.compose(gtsam.Pose3.Expmap(twist * (t - t1)))
 
     def _start(self, track: _TrackState, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
-        first = solve_observations(obs, self.options.solve, track.id, self.model or self.prior, self.bounds)
+        first = solve_observations(obs, dataclasses.replace(self.options.solve, shape_information=True), track.id,
+                                   self.model or self.prior, self.bounds)
         if not first.ok:
             return first
         if self.model is not None:
@@ -349,7 +350,7 @@ class Tracker:
             track.young, track.young_frames = False, []
             return
         # every young frame solved alone (once): the first time its start, every time the type and noise scale
-        options = dataclasses.replace(self.options.solve, covariance=False)
+        options = dataclasses.replace(self.options.solve, covariance=False, shape_information=True)
         for i, (frame_index, obs, motion, alone) in enumerate(track.young_frames):
             if alone is None:
                 alone = solve_observations(obs, options, track.id, self.model or self.prior, self.bounds)
@@ -600,7 +601,8 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
             per_track.setdefault(vid, []).append((i, frame.t, obs))
     results: dict[tuple[int, str], VehicleResult] = {}
     for index, (vid, items) in enumerate(per_track.items()):
-        firsts = [solve_observations(obs, options.solve, vid, model or prior, bounds) if len(obs) else None
+        alone = dataclasses.replace(options.solve, shape_information=True)
+        firsts = [solve_observations(obs, alone, vid, model or prior, bounds) if len(obs) else None
                   for _, _, obs in items]
         shape = track_shape(firsts, model, prior)
         track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability

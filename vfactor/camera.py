@@ -1,6 +1,6 @@
 """Calibrated pinhole cameras with OpenCV distortion, and their projection.
 
-Conventions (``DESIGN.md``): the camera frame is OpenCV's (x right, y down,
+Conventions (docs/conventions.md): the camera frame is OpenCV's (x right, y down,
 z forward); ``world_T_camera`` maps camera points to world points; pixels are
 ``(u, v)`` with the origin at the centre of the top-left pixel; distortion is
 OpenCV's ``[k1, k2, p1, p2(, k3)]``.
@@ -171,7 +171,7 @@ class Camera:
 
     # ------------------------------------------------------------- file I/O
     def to_dict(self) -> dict:
-        """The camera as a scene-file entry (see ``DESIGN.md``)."""
+        """The camera as a scene-file entry (see docs/scene-format.md)."""
         out = {
             "name": self.name,
             "K": self.K.tolist(),

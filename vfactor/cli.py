@@ -80,7 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
         "message; the others are still solved. Detections given as boxes in the frames' images go through the "
         "keypoint network first (needs torch).",
     )
-    p.add_argument("scene", help="scene file (JSON, see docs/conventions.md and DESIGN.md)")
+    p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md)")
     p.add_argument("--out", required=True, help="result file to write (JSON; written atomically)")
     p.add_argument("--allow-outside-paths", action="store_true",
                    help="accept heatmap and image paths outside the scene file's folder (refused by default)")

@@ -193,7 +193,7 @@ def body_type_table(rows: dict[str, list[dict]], reference: str = "known_shape")
         " | factor_graph vs reference (rot / trans / kp) | type chosen right | failed (factor graph) |"
     lines = [header, "| --- " * (len(methods) + 5) + "|"]
     present = [t for t in (*BODY_TYPES, "pascal3d") if any(r["body_type"] == t for r in rows["factor_graph"])]
-    car_types = ("sedan", "hatchback", "wagon", "suv")
+    car_types = ("sedan", "hatchback", "estate", "suv")
     for body_type in present:
         cells, summary = [], {}
         for m in methods:

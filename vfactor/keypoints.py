@@ -1,6 +1,6 @@
 """The 12 semantic vehicle keypoints: names, fixed order, layers and left/right pairs.
 
-The order is the one of the paper's Table I and of ``DESIGN.md``; every array of
+The order is the one of the paper's Table I and of docs/conventions.md; every array of
 keypoints in vfactor (scene files, results, wireframes, heatmaps) uses it.
 "Left" is the vehicle's own left as its driver sees it (``y > 0`` in the body
 frame).

@@ -1,6 +1,6 @@
 """Scene files (input) and result files (output): load, validate, save.
 
-The formats are fixed by ``DESIGN.md``. Every field of a scene or result file
+The formats are specified in docs/scene-format.md. Every field of a scene or result file
 is validated on load; any problem raises :class:`~vfactor.errors.SceneError`
 whose ``field`` is the full path of the offending field (for example
 ``frames[3].detections[0].keypoints[5]`` or ``cameras[1].K``) and whose message
@@ -15,7 +15,7 @@ otherwise)::
 
     detection = {"camera", "vehicle"?, "keypoints"?: 12 x [u, v, confidence],
                  "keypoint_covariances"?: 12 x (null | 2x2), "heatmaps"?: "x.npy",
-                 "roi"?: [x0, y0, x1, y1]}
+                 "roi"?: [x0, y0, x1, y1], "class"?: "car" | "truck" | "bus" | body type}
 
 A detection gives ``keypoints``, or ``heatmaps`` with ``roi``, or only a
 ``roi`` when its frame's ``images`` hold its camera's image (the keypoint
@@ -93,7 +93,7 @@ _KEYPOINTS_WORLD_TOL = 1e-6
 
 # ====================================================================== scenes
 def load_scene(path: str | os.PathLike, allow_outside_paths: bool = False) -> Scene:
-    """Loads and validates a scene file (JSON, see ``DESIGN.md``).
+    """Loads and validates a scene file (JSON, docs/scene-format.md).
 
     Relative paths in the file (``heatmaps``, ``images``) are resolved against
     the file's folder, which becomes ``Scene.base_dir``; they must stay inside
@@ -218,7 +218,7 @@ def save_scene(scene: Scene, path: str | os.PathLike) -> None:
 
 
 def scene_to_dict(scene: Scene, base_dir: Path | None = None) -> dict:
-    """The scene as a scene-file dictionary (see ``DESIGN.md``), JSON-serialisable.
+    """The scene as a scene-file dictionary (docs/scene-format.md), JSON-serialisable.
 
     Keypoints with confidence 0 are written ``[null, null, 0]``; every detection
     names its vehicle; ``keypoint_covariances`` is written when a detection
@@ -516,7 +516,7 @@ def _detection_to_dict(det: Detection, path: str, scene_base: Path | None, out_b
 
 # ===================================================================== results
 def save_results(path: str | os.PathLike, frames: list[FrameResult]) -> None:
-    """Writes a result file (JSON, see ``DESIGN.md`` and :func:`results_to_dict`).
+    """Writes a result file (JSON, docs/scene-format.md and :func:`results_to_dict`).
 
     Raises:
         SceneError: a result that the file cannot hold (e.g. a converged

@@ -3,7 +3,7 @@
 * :func:`default_shape_prior`: the paper's car prior, learnt from the nine
   PASCAL3D+ car CAD models scaled to metres by a wheelbase (the baselines use it).
 * :class:`ShapeModel` / :func:`default_shape_model`: one Gaussian prior per body
-  type (sedan, hatchback, wagon, SUV, pickup, van) and a pooled prior over all
+  type (sedan, hatchback, estate, SUV, pickup, van) and a pooled prior over all
   of them, learnt from the vehicle library (:mod:`vfactor.vehicle_library`),
   optionally without some vehicles (leave-one-model-out evaluation). The solver
   picks the body type by its Laplace evidence (:meth:`ShapeModel.type_log_evidence`).
@@ -179,12 +179,13 @@ def default_hwc_bounds(exclude: frozenset = frozenset()) -> HwcBounds:
 #: A 2D detector's class -> the body types it suggests (``"class"`` of a detection):
 #: COCO / YOLO names and vfactor's own body types.
 CLASS_HINTS: dict[str, tuple[str, ...]] = {
-    "car": ("sedan", "hatchback", "wagon", "suv"),
+    "car": ("sedan", "hatchback", "estate", "suv"),
     "truck": ("pickup", "van"),
     "bus": ("van",),
     "sedan": ("sedan",),
     "hatchback": ("hatchback",),
-    "wagon": ("wagon",),
+    "estate": ("estate",),
+    "wagon": ("estate",),
     "suv": ("suv",),
     "pickup": ("pickup",),
     "van": ("van",),

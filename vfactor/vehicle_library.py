@@ -41,7 +41,7 @@ __all__ = [
 ]
 
 #: The body types of the library, in table order.
-BODY_TYPES: tuple[str, ...] = ("sedan", "hatchback", "wagon", "suv", "pickup", "van")
+BODY_TYPES: tuple[str, ...] = ("sedan", "hatchback", "estate", "suv", "pickup", "van")
 
 
 @dataclass(frozen=True)
@@ -99,7 +99,7 @@ class BodyRules:
 BODY_RULES: dict[str, BodyRules] = {
     "sedan": BodyRules(0.46, 0.28, 0.68, 0.25, 0.20, 0.92, 0.24, 0.36, 0.0, 10.0, 0.06, 0.33, "axle", 0.15, 0.08),
     "hatchback": BodyRules(0.52, 0.28, 0.70, 0.25, 0.12, 0.98, 0.22, 0.36, 0.0, 10.0, 0.06, 0.31, "end", 0.40, 0.10),
-    "wagon": BodyRules(0.46, 0.28, 0.68, 0.25, 0.12, 0.96, 0.22, 0.37, 0.0, 10.0, 0.08, 0.31, "end", 0.30, 0.10),
+    "estate": BodyRules(0.46, 0.28, 0.68, 0.25, 0.12, 0.96, 0.22, 0.37, 0.0, 10.0, 0.08, 0.31, "end", 0.30, 0.10),
     "suv": BodyRules(0.47, 0.22, 0.82, 0.22, 0.08, 1.06, 0.17, 0.33, 0.0, 10.0, 0.08, 0.27, "end", 0.30, 0.12),
     "pickup": BodyRules(0.42, 0.16, 1.00, 0.22, 0.05, 0.98, 0.09, 0.10, 0.75, 10.0, 0.08, 0.27, "cab", 0.15, 0.10),
     "van": BodyRules(0.46, 0.14, 0.92, 0.20, 0.04, 1.00, 0.08, 0.0, 0.58, 2.05, 0.10, 0.20, "end", 0.08, 0.15, 2.20),

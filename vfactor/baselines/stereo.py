@@ -108,7 +108,7 @@ def stereo(
     R, t, s = umeyama(mean.vehicle_p_keypoints[idx], world, with_scale=True)
     wheels = [k for k in LAYERS["wheel"] if k in set(idx.tolist())]
     if len(wheels) == 4:
-        origin = world[np.isin(idx, wheels)].mean(0)  # the body origin is the hub centroid (DESIGN.md)
+        origin = world[np.isin(idx, wheels)].mean(0)  # the body origin is the hub centroid (docs/conventions.md)
     else:
         origin = t  # the aligned mean's hub centroid
     world_T_vehicle = gtsam.Pose3(gtsam.Rot3(R), origin)

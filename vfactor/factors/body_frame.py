@@ -1,7 +1,7 @@
 """Body-frame factor: fixes the gauge of pose and shape.
 
 Pose and shape together have six degrees of freedom too many (move every body
-point by a rigid motion and the pose by its inverse). ``DESIGN.md`` fixes the
+point by a rigid motion and the pose by its inverse). docs/conventions.md fixes the
 body frame at the centroid of the four wheel hubs, x forward, z up; with the
 symmetry factor (which fixes yaw and roll about x), the wheel layer residual
 

@@ -1,7 +1,7 @@
 """Textured low-poly vehicle meshes built around a 12-keypoint wireframe (NumPy only).
 
 A vehicle mesh is built in the body frame (x forward, y left, z up, origin at
-the centroid of the four wheel hubs; ``DESIGN.md``) so that every keypoint lies
+the centroid of the four wheel hubs; docs/conventions.md) so that every keypoint lies
 exactly on the feature it names:
 
 * wheel hubs (0-3): the centre of the hub cap, in the plane of the rim disc,

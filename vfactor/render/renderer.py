@@ -1,6 +1,6 @@
 """Rasterising vehicles, occluders and the road with OpenGL (moderngl, headless EGL).
 
-Conventions (``DESIGN.md``): world z up, the road is ``z = 0``; cameras are
+Conventions (docs/conventions.md): world z up, the road is ``z = 0``; cameras are
 :class:`vfactor.camera.Camera` (OpenCV frame, pixel origin at the centre of the
 top-left pixel). The OpenGL projection is built from ``K`` exactly, so a world
 point projected with ``Camera.project`` lands on the pixel where it is drawn:

@@ -1,6 +1,6 @@
 """Camera rigs for simulation: pole-mounted cameras looking down at the road.
 
-Conventions (``DESIGN.md``): world z up, the road is ``z = 0``; cameras use the
+Conventions (docs/conventions.md): world z up, the road is ``z = 0``; cameras use the
 OpenCV frame (x right, y down, z forward) and are placed by ``world_T_camera``
 (camera -> world, 4x4); pixels have their origin at the centre of the top-left
 pixel, so the principal point of an ideal ``w x h`` camera is

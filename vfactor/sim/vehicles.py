@@ -6,7 +6,7 @@ A scenario names each vehicle by a preset name, a library id
 PASCAL3D+ car); :func:`draw_vehicle` turns the name into a shape.
 
 A vehicle stands on the road ``z = 0`` with roll = pitch = 0. Its body origin is
-the centroid of the four wheel hubs (``DESIGN.md``), so the origin lies
+the centroid of the four wheel hubs (docs/conventions.md), so the origin lies
 ``wheel_radius`` above the road and the road is the body plane
 ``z = -wheel_radius``.
 """

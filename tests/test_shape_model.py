@@ -150,3 +150,19 @@ def test_track_shape_adds_the_frames_evidence(clean):
     assert shape.body_type == "suv" and shape.probability > 0.9
     assert shape.noise_scale == pytest.approx(np.median([r.extras["noise_scale"] for r in results]))
     assert track_shape([], default_shape_model()).prior is default_shape_model().pooled
+
+
+def test_an_open_choice_widens_the_prior_a_clear_one_keeps_the_type(clean):
+    """The second solve's prior: the moment-matched mixture of the components under their posterior."""
+    model = default_shape_model()
+    result, _ = solve_held_out(clean, 5)  # a van, well seen
+    information, eta = result.extras["shape_information"]
+    clear = choose_body_type(model, information, eta)
+    assert clear.body_type == "van" and clear.untyped < 1e-3
+    np.testing.assert_allclose(clear.prior.mean, model.prior("van", clear.spread).mean, atol=1e-3)
+    vague = choose_body_type(model, 1e-6 * information, 1e-6 * eta)  # next to no evidence: the priors' own weights
+    assert vague.untyped == pytest.approx(model.pooled_probability, rel=0.05)
+    spread_of_types = np.trace(model.types["van"].covariance)
+    assert np.trace(vague.prior.covariance) > spread_of_types  # wider than one type's prior
+    no_pooled = dataclasses.replace(model, pooled_probability=0.0, _variants={})
+    assert all(t != "any" for t, _ in no_pooled.components())

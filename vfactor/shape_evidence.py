@@ -22,7 +22,7 @@ import gtsam
 import numpy as np
 
 from vfactor.keys import KeyScheme
-from vfactor.shape_model import ShapeModel, ShapePrior
+from vfactor.shape_model import ANY, ShapeModel, ShapePrior
 
 __all__ = ["Linearisation", "linearise", "noise_scale", "shape_information", "BodyTypeChoice", "choose_body_type",
            "TrackShape", "track_shape", "NOISE_SCALE_RANGE"]
@@ -156,7 +156,10 @@ class BodyTypeChoice:
         spread: the covariance multiplier of highest evidence for that type.
         probability: the type's posterior probability (over its spreads).
         posterior: body type -> posterior probability.
-        prior: the chosen :class:`ShapePrior` (``model.prior(body_type, spread)``).
+        prior: the prior to solve with: the moment-matched mixture of the
+            components under their posterior probabilities (those above 0.1 %),
+            which is ``model.prior(body_type, spread)`` itself for a clear choice.
+        untyped: posterior probability of the pooled prior (the vehicle of none of the types).
     """
 
     body_type: str
@@ -164,27 +167,63 @@ class BodyTypeChoice:
     probability: float
     posterior: dict
     prior: ShapePrior
+    untyped: float = 0.0
 
 
 def choose_body_type(model: ShapeModel, information: np.ndarray, eta: np.ndarray, hints=()) -> BodyTypeChoice:
-    """The body type of highest posterior probability, its prior spread, and every type's probability.
+    """The body type of highest posterior probability, its prior spread, every type's probability, and the prior to use.
 
-    ``p(type, spread | z) ~ p(z | type, spread) p(type | hints) / len(spreads)``:
-    the Laplace evidence of :meth:`ShapeModel.type_log_evidence` times the
-    prior of :meth:`ShapeModel.log_prior`; a type's probability sums over its spreads.
+    ``p(c | z) ~ p(z | c) p(c | hints)`` over the model's components ``c``
+    (:meth:`ShapeModel.components`: each type at each spread, and the pooled
+    prior): the Laplace evidence of :meth:`ShapeModel.type_log_evidence`
+    times the prior of :meth:`ShapeModel.log_prior`, split evenly over a type's
+    spreads, with :attr:`ShapeModel.pooled_probability` on the pooled prior. A
+    type's probability sums over its spreads and is reported among the types
+    (conditional on the vehicle being of one); the prior to solve with is the
+    moment-matched mixture of all components.
     """
     log_evidence = model.type_log_evidence(information, eta)
     log_prior = model.log_prior(hints)
-    log_post = {key: value + log_prior[key[0]] for key, value in log_evidence.items()}
+    share = np.log(1.0 - model.pooled_probability) - np.log(len(model.spreads))
+    log_post = {key: value + (np.log(model.pooled_probability) if key[0] == ANY else log_prior[key[0]] + share)
+                for key, value in log_evidence.items()}
     top = max(log_post.values())
     weights = {key: float(np.exp(v - top)) for key, v in log_post.items()}
     total = sum(weights.values())
+    typed = sum(w for (t, _), w in weights.items() if t != ANY)
     posterior = {t: 0.0 for t in model.types}
     for (t, _), w in weights.items():
-        posterior[t] += w / total
+        if t != ANY:
+            posterior[t] += w / typed
     body_type = max(posterior, key=posterior.get)
     spread = max((k for t, k in weights if t == body_type), key=lambda k: weights[(body_type, k)])
-    return BodyTypeChoice(body_type, float(spread), posterior[body_type], posterior, model.prior(body_type, spread))
+    return BodyTypeChoice(body_type, float(spread), posterior[body_type], posterior,
+                          _moment_matched(model, {key: w / total for key, w in weights.items()}),
+                          weights.get((ANY, 1.0), 0.0) / total)
+
+
+def _moment_matched(model: ShapeModel, weights: dict, negligible: float = 1e-3) -> ShapePrior:
+    """The Gaussian with the mean and covariance of the mixture of the (type, spread) priors under ``weights``.
+
+    ``mu = sum w_k mu_k``, ``Sigma = sum w_k (Sigma_k + (mu_k - mu)(mu_k - mu)^T)``: when the
+    observations leave the type uncertain the prior widens over the types they allow instead
+    of committing to one; a clear choice gives that type's prior itself.
+    """
+    kept = {key: w for key, w in weights.items() if w >= negligible}
+    if len(kept) == 1:
+        return model.prior(*next(iter(kept)))
+    total = sum(kept.values())
+    priors = {key: model.prior(*key) for key in kept}
+    mean = sum(w * np.asarray(priors[key].mean).ravel() for key, w in kept.items()) / total
+    cov = np.zeros((36, 36))
+    for key, w in kept.items():
+        d = np.asarray(priors[key].mean).ravel() - mean
+        cov += w / total * (priors[key].covariance + np.outer(d, d))
+    cov = 0.5 * (cov + cov.T)
+    mean = mean.reshape(12, 3)
+    mean.setflags(write=False)
+    cov.setflags(write=False)
+    return ShapePrior(mean=mean, covariance=cov)
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from vfactor.keypoints import LAYERS, MIRROR_PERMUTATION
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
 
 __all__ = ["ShapePrior", "ShapeModel", "HwcBounds", "default_shape_prior", "default_shape_model", "default_hwc_bounds",
-           "pascal3d_wireframes", "PASCAL3D_WHEELBASE", "DISTANCE_PAIRS", "CLASS_HINTS"]
+           "pascal3d_wireframes", "PASCAL3D_WHEELBASE", "DISTANCE_PAIRS", "CLASS_HINTS", "ANY"]
 
 #: All 66 keypoint pairs (i < j) whose distance the HWC distance factor bounds.
 DISTANCE_PAIRS: np.ndarray = np.array(list(combinations(range(12), 2)))
@@ -176,6 +176,9 @@ def default_hwc_bounds(exclude: frozenset = frozenset()) -> HwcBounds:
     return HwcBounds.from_wireframes(wireframes, margin=0.5)
 
 
+#: The component of a :class:`ShapeModel` that is no body type: the pooled prior.
+ANY = "any"
+
 #: A 2D detector's class -> the body types it suggests (``"class"`` of a detection):
 #: COCO / YOLO names and vfactor's own body types.
 CLASS_HINTS: dict[str, tuple[str, ...]] = {
@@ -209,6 +212,11 @@ class ShapeModel:
             evidence chooses too (empirical Bayes on the prior's width): a
             vehicle unlike the library's of its type gets a wider prior rather
             than being pulled to their mean.
+        pooled_probability: probability, before any observation, that the vehicle
+            is of none of the types (its prior then is :attr:`pooled`, key
+            :data:`ANY`): a vehicle unlike every type's vehicles (another
+            keypoint convention, a body the library lacks) is held by the broad
+            pooled prior instead of a wrong type's.
     """
 
     types: dict
@@ -217,13 +225,19 @@ class ShapeModel:
     prior_probability: dict
     hint_weight: float = 0.8
     spreads: tuple = (1.0, 4.0, 16.0)
+    pooled_probability: float = 1.0 / 7.0
     _variants: dict = field(default_factory=dict, repr=False, compare=False)
 
+    def components(self) -> list[tuple[str, float]]:
+        """The (body type, spread) priors the evidence weighs, and ``(ANY, 1.0)``: the pooled prior."""
+        typed = [(t, float(k)) for t in self.types for k in self.spreads]
+        return typed + [(ANY, 1.0)] if self.pooled_probability > 0 else typed
+
     def prior(self, body_type: str, spread: float = 1.0) -> ShapePrior:
-        """The prior of ``body_type`` with its covariance times ``spread`` (made once, then cached)."""
+        """The prior of ``body_type`` (or :data:`ANY`: the pooled prior) with its covariance times ``spread`` (cached)."""
         key = (body_type, float(spread))
         if key not in self._variants:
-            base = self.types[body_type]
+            base = self.pooled if body_type == ANY else self.types[body_type]
             cov = base.covariance * spread
             cov.setflags(write=False)
             self._variants[key] = base if spread == 1.0 else ShapePrior(mean=base.mean, covariance=cov)
@@ -264,10 +278,10 @@ class ShapeModel:
             eta: (36,) information vector, 1/m.
 
         Returns:
-            (body type, spread) -> log evidence.
+            (body type or :data:`ANY`, spread) -> log evidence.
         """
         out = {}
-        for name, spread in ((t, k) for t in self.types for k in self.spreads):
+        for name, spread in self.components():
             prior = self.prior(name, spread)
             P = prior.sqrt_information().T @ prior.sqrt_information()
             mu = np.asarray(prior.mean).ravel()

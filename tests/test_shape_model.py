@@ -158,8 +158,8 @@ def test_an_open_choice_widens_the_prior_a_clear_one_keeps_the_type(clean):
     result, _ = solve_held_out(clean, 5)  # a van, well seen
     information, eta = result.extras["shape_information"]
     clear = choose_body_type(model, information, eta)
-    assert clear.body_type == "van" and clear.untyped < 1e-3
-    np.testing.assert_allclose(clear.prior.mean, model.prior("van", clear.spread).mean, atol=1e-3)
+    assert clear.body_type == "van" and clear.untyped < 0.05
+    assert np.abs(clear.prior.mean - model.prior("van", clear.spread).mean).max() < 0.05
     vague = choose_body_type(model, 1e-6 * information, 1e-6 * eta)  # next to no evidence: the priors' own weights
     assert vague.untyped == pytest.approx(model.pooled_probability, rel=0.05)
     spread_of_types = np.trace(model.types["van"].covariance)

@@ -38,6 +38,7 @@ __all__ = [
     "vehicle_library",
     "library_vehicle",
     "library_ids",
+    "library_table",
 ]
 
 #: The body types of the library, in table order.
@@ -300,3 +301,21 @@ def library_ids(body_type: str | None = None) -> tuple[str, ...]:
     if body_type is not None and body_type not in BODY_TYPES:
         raise ValueError(f"body type: expected one of {BODY_TYPES}, got {body_type!r}")
     return tuple(v.id for v in vehicle_library().values() if body_type is None or v.body_type == body_type)
+
+
+def library_table() -> str:
+    """A Markdown table of every library vehicle: type, make and model, the dimensions used, and the source."""
+    lines = [
+        "| id | body type | vehicle | length | width | height | wheelbase | tracks f / r | tyre (r, m) | overhangs f / r | bed | source |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for v in vehicle_library().values():
+        d = v.dimensions
+        front, rear = d.overhangs()
+        published = "" if d.front_overhang is not None or d.rear_overhang is not None else " (split)"
+        bed = f"{d.bed_length:.3f}" if d.bed_length is not None else "-"
+        lines.append(
+            f"| {d.id} | {d.body_type} | {d.make} {d.model} {d.generation}, {d.variant} | {d.length:.3f} | {d.width:.3f} | "
+            f"{d.height:.3f} | {d.wheelbase:.3f} | {d.front_track:.3f} / {d.rear_track:.3f} | {d.tyre} ({d.wheel_radius:.3f}) | "
+            f"{front:.3f} / {rear:.3f}{published} | {bed} | {d.source} |")
+    return "\n".join(lines)

@@ -105,3 +105,12 @@ def test_unknown_ids_and_types_are_refused():
         library_vehicle("tractor")
     with pytest.raises(ValueError, match="body type"):
         library_ids("tractor")
+
+
+def test_docs_list_every_vehicle_as_the_library_has_it():
+    from pathlib import Path
+
+    from vfactor.vehicle_library import library_table
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "vehicles.md").read_text(encoding="utf-8")
+    assert library_table() in page

@@ -90,8 +90,8 @@ class GraphConfig:
             truncate).
         shape_prior_loss: robust loss on the shape prior's Mahalanobis norm:
             ``"none"`` (default) is the native Gaussian; a heavy tail (tracking
-            uses ``RobustLoss("cauchy", 3.0)``) lets the data overrule the car
-            prior for a vehicle far from a car (docs/factors.md).
+            uses ``RobustLoss("cauchy", 6.0)``) lets many frames overrule the
+            prior for a vehicle far from it (docs/factors.md).
     """
 
     relative_pixel_sigma: float = 0.03

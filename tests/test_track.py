@@ -84,8 +84,9 @@ def test_isam2_and_batch_choose_their_shape_from_different_frames(sim, tracked):
 
 
 def test_covariance_shrinks_as_frames_accumulate(tracked):
+    """The last frame's position covariance is well under the first's (whose noise scale is that frame's alone)."""
     online = [f.vehicles[0].pose_covariance for f in tracked.online]
-    assert np.trace(online[-1][3:, 3:]) < 0.5 * np.trace(online[0][3:, 3:])
+    assert np.trace(online[-1][3:, 3:]) < 0.6 * np.trace(online[0][3:, 3:])
 
 
 def test_fixed_lag_keeps_a_bounded_window(sim):

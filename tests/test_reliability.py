@@ -379,3 +379,54 @@ def test_box_partly_outside_the_image_is_accepted():
     assert check_roi_in_image([-10, -10, 50, 50], 128, 72) == (-10.0, -10.0, 50.0, 50.0)
     with pytest.raises(ValueError, match="0.00% of it is inside"):
         check_roi_in_image([200, 0, 300, 50], 128, 72)
+
+
+# ------------------------------------------------------------------ 8. cameras at odds with the others
+def turned(world_T_camera: np.ndarray, degrees: float, axis=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """``world_T_camera`` rotated about its own centre by ``degrees`` about a world ``axis``."""
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    out = np.array(world_T_camera, float)
+    out[:3, :3] = gtsam.Rot3.AxisAngle(gtsam.Point3(*axis), math.radians(degrees)).matrix() @ out[:3, :3]
+    return out
+
+
+@pytest.mark.parametrize("scenario, seed, frame", [("intersection_multi", 1100, 23), ("library_2cam", 1300, 24)])
+def test_correct_vehicle_at_hard_noise_is_not_blamed_on_a_camera(scenario, seed, frame):
+    """Vehicles of benchmarks/disagreement_check.py that the old check failed (a camera's keypoints mostly outliers)."""
+    from vfactor.evaluation import NOISE_LEVELS, noise_variant
+    from vfactor.sim import simulate
+    from vfactor.solve import solve_frame
+
+    sim = simulate(noise_variant(load_scenario(scenario), **NOISE_LEVELS["hard"]), seed=seed, num_frames=frame + 1)
+    options = SolveOptions(covariance=False).for_scene(sim.scene)
+    (vehicle,) = [v for v in solve_frame(sim.scene.frames[frame], sim.scene.cameras, options).vehicles if v.id == "v1"]
+    assert vehicle.ok and "disagree" not in vehicle.message
+
+
+@pytest.mark.parametrize("degrees, axis", [(10.0, (1.0, 2.0, 0.5)), (180.0, (0.0, 0.0, 1.0))])
+def test_a_camera_with_a_wrong_extrinsic_is_named(degrees, axis):
+    from vfactor.sim import simulate
+    from vfactor.solve import solve_frame
+
+    sim = simulate("intersection_multi", seed=7, num_frames=2)
+    cameras = dict(sim.scene.cameras)
+    cameras["cam1"] = dataclasses.replace(cameras["cam1"],
+                                          world_T_camera=turned(cameras["cam1"].world_T_camera, degrees, axis))
+    options = SolveOptions(covariance=False).for_scene(sim.scene)
+    vehicles = [v for frame in sim.scene.frames for v in solve_frame(frame, cameras, options).vehicles]
+    blamed = [v for v in vehicles if v.status == Status.FAILED and "camera(s) 'cam1' disagree" in v.message]
+    assert len(blamed) >= len(vehicles) - 1, [v.message for v in vehicles]
+
+
+def test_a_vehicle_failed_by_the_disagreement_check_gives_exit_3(tmp_path, capsys):
+    """A camera turned around in the scene file: its vehicles are reported failed (exit 3), not bad input (2)."""
+    path = tmp_path / "scene.json"
+    assert main(["simulate", "intersection_multi", "--out", str(path), "--frames", "1", "--seed", "7"]) == 0
+    doc = json.loads(path.read_text())
+    doc["cameras"][1]["world_T_camera"] = turned(doc["cameras"][1]["world_T_camera"], 180.0).tolist()
+    path.write_text(json.dumps(doc))
+    capsys.readouterr()
+    code, err = run_cli(capsys, "solve", str(path), "--out", str(tmp_path / "r.json"), "--quiet")
+    assert code == EXIT_UNSOLVED and "disagree with the other cameras" in err
+    assert all(line.startswith("frames[0] vehicle ") for line in err.splitlines() if line.strip())
+    assert any(not v.ok for v in load_results(tmp_path / "r.json")[0].vehicles)

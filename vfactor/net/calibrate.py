@@ -390,7 +390,7 @@ def write_calibration(path, calibration: CovarianceCalibration, extra: dict | No
     """Stores a calibration in a weights file's metadata; the weights and the rest of the header are kept.
 
     The file (:func:`vfactor.net.model.save_weights`) is read with
-    ``torch.load(..., weights_only=True)``, its ``config`` gets
+    :func:`vfactor.net.model.read_torch_file` (``weights_only=True``), its ``config`` gets
     ``{METADATA_KEY: calibration.to_dict()}`` (and ``extra``, JSON-like), and it
     is written back atomically.
 
@@ -404,12 +404,12 @@ def write_calibration(path, calibration: CovarianceCalibration, extra: dict | No
     """
     import torch  # noqa: PLC0415
 
-    from vfactor.net.model import WEIGHTS_FORMAT, _check_plain  # noqa: PLC0415
+    from vfactor.net.model import WEIGHTS_FORMAT, WeightsError, _check_plain, read_torch_file  # noqa: PLC0415
 
     path = Path(path)
-    payload = torch.load(path, map_location="cpu", weights_only=True)
+    payload = read_torch_file(path)
     if not isinstance(payload, dict) or payload.get("format") != WEIGHTS_FORMAT:
-        raise ValueError(f"{path}: not a vfactor keypoint-network weights file (format {WEIGHTS_FORMAT!r} expected)")
+        raise WeightsError(str(path), f"not a vfactor keypoint-network weights file (format {WEIGHTS_FORMAT!r} expected)")
     if not isinstance(calibration, CovarianceCalibration):
         raise TypeError(f"calibration: expected a CovarianceCalibration, got {type(calibration).__name__}")
     config = dict(payload.get("config", {}))

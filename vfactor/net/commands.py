@@ -14,6 +14,7 @@ import argparse
 import json
 import math
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ import numpy as np
 from vfactor.errors import InputError
 from vfactor.jsonio import read_json, write_text_atomic
 from vfactor.keypoints import KEYPOINT_NAMES
+from vfactor.sanity import one_line
 
 __all__ = ["main", "build_parser", "run_train", "run_detect", "run_calibrate", "run_score"]
 
@@ -127,8 +129,19 @@ def main(argv=None, prog: str = "python -m vfactor.net") -> int:
     try:
         return run(args)
     except (InputError, ValueError, FileNotFoundError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(one_line(f"error: {exc}", limit=2000), file=sys.stderr)
         return EXIT_INPUT
+
+
+@contextmanager
+def _file_of(option: str):
+    """Reports a bad weights or checkpoint file (:class:`vfactor.net.model.WeightsError`) under ``option``."""
+    from vfactor.net.model import WeightsError  # noqa: PLC0415
+
+    try:
+        yield
+    except WeightsError as exc:
+        raise InputError(option, str(exc)) from None
 
 
 # ------------------------------------------------------------------- train
@@ -156,8 +169,9 @@ def run_train(args: argparse.Namespace) -> int:
         raise InputError("--data", "no training data: give --data, --render or --pascal3d")
     data = KeypointDataset.concatenate([p.resized(S) for p in parts])
     val = KeypointDataset.concatenate([_load(p, "--val", S).resized(S) for p in val_paths]) if val_paths else None
-    result = train(config, as_dataset(data), val, out_dir=out, resume=args.resume, progress=not args.quiet,
-                   device=args.device)
+    with _file_of("--resume"):  # a damaged checkpoint
+        result = train(config, as_dataset(data), val, out_dir=out, resume=args.resume, progress=not args.quiet,
+                       device=args.device)
     exported = result.best_weights_path or result.weights_path
     if args.export:
         dest = Path(args.export)
@@ -223,7 +237,8 @@ def run_detect(args: argparse.Namespace) -> int:
         if bgr is None:
             raise InputError("IMAGE", f"cannot read {name}")
         images.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
-    detector = KeypointDetector(args.weights, device=args.device)
+    with _file_of("--weights"):
+        detector = KeypointDetector(args.weights, device=args.device)
     results = detector.detect_batch(images, [boxes[name] for name in args.images])
     doc = {"keypoint_names": list(KEYPOINT_NAMES), "images": []}
     heatmaps, rois, crop_rois, owner = [], [], [], []
@@ -302,9 +317,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if not args.val:
         raise InputError("--val", "give the held-out crops: --val SHARD_OR_FOLDER ...")
     weights = Path(args.weights) if args.weights else default_weights_path()
-    if not weights.exists():
-        raise InputError("--weights", f"no such file {weights}")
-    detector = KeypointDetector(weights, device=args.device, calibration=CovarianceCalibration())
+    with _file_of("--weights"):
+        detector = KeypointDetector(weights, device=args.device, calibration=CovarianceCalibration())
     try:
         errors = measure_errors(detector, [Path(v) for v in args.val])
     except (ValueError, OSError, KeyError) as exc:
@@ -369,9 +383,10 @@ def run_calibrate(args: argparse.Namespace) -> int:
         check = {g: {"n": after[g]["found"], "d2_median_before": before[g]["d2_median"],
                      "d2_median": after[g]["d2_median"], "within_95": after[g]["within_95"]}
                  for g in ("visible", "self_occluded", "all")}
-        write_calibration(weights, chosen, {f"{METADATA_KEY}_check": {
-            "data": [str(v) for v in args.val], "fit": "even-numbered crops", "checked": "odd-numbered crops",
-            **check}})
+        with _file_of("--weights"):
+            write_calibration(weights, chosen, {f"{METADATA_KEY}_check": {
+                "data": [str(v) for v in args.val], "fit": "even-numbered crops", "checked": "odd-numbered crops",
+                **check}})
         print(f"\ncalibration written to {weights} (metadata '{METADATA_KEY}'; weights unchanged)", file=sys.stderr)
     return EXIT_OK
 
@@ -404,9 +419,8 @@ def run_score(args: argparse.Namespace) -> int:
     from vfactor.net.train import evaluate_model  # noqa: PLC0415
 
     weights = Path(args.weights) if args.weights else default_weights_path()
-    if not weights.exists():
-        raise InputError("--weights", f"no such file {weights}")
-    model = load_weights(weights)
+    with _file_of("--weights"):
+        model = load_weights(weights)
     size = model.config.input_size
     paths = [Path(p) for p in args.data]
     if args.render_test:

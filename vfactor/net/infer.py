@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -26,17 +25,12 @@ from vfactor.heatmaps import DecodedKeypoints, decode_heatmaps
 from vfactor.keypoints import MIRROR_PERMUTATION
 from vfactor.net.calibrate import CovarianceCalibration
 from vfactor.net.crop import check_roi_in_image, crop_roi, expand_roi
-from vfactor.net.model import StackedHourglass, load_weights
+from vfactor.net.model import StackedHourglass, default_weights_path, load_weights
 
 #: Left/right swap of the heatmap channels, as a tensor index.
 _MIRROR = torch.tensor(MIRROR_PERMUTATION.tolist())
 
 __all__ = ["KeypointDetector", "Detection", "default_weights_path", "benchmark_inference"]
-
-
-def default_weights_path() -> Path:
-    """Where the shipped weights live in the package (``vfactor/net/weights/keypoints.pt``); may be absent."""
-    return Path(__file__).resolve().parent / "weights" / "keypoints.pt"
 
 
 @dataclass(frozen=True)
@@ -61,7 +55,9 @@ class KeypointDetector:
 
     Args:
         weights: a weights file (:func:`vfactor.net.model.save_weights`), a
-            :class:`StackedHourglass`, or None for the shipped weights.
+            :class:`StackedHourglass`, or None for the shipped weights; a file is
+            read by :func:`vfactor.net.model.load_weights` (a bad file raises
+            :class:`vfactor.net.model.WeightsError`).
         device: "cpu", "cuda", ...; None: CUDA when available, else the CPU.
         roi_margin, roi_square: how a given box is grown (fraction per side) and
             squared before cropping; None: from the weights' metadata (the
@@ -99,10 +95,7 @@ class KeypointDetector:
         if isinstance(weights, StackedHourglass):
             model = weights
         else:
-            path = Path(weights) if weights is not None else default_weights_path()
-            if not path.exists():
-                raise FileNotFoundError(f"weights: no such file {path}")
-            model, meta = load_weights(path, with_config=True)
+            model, meta = load_weights(weights if weights is not None else default_weights_path(), with_config=True)
         self.model = model.to(device).eval()
         self.device = device
         crop = meta.get("crop", {}) if isinstance(meta.get("crop"), dict) else {}

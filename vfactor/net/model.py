@@ -28,6 +28,10 @@ S/4)``; the last one is the prediction.
 
 from __future__ import annotations
 
+import hashlib
+import json
+import re
+import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -35,6 +39,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
+from vfactor.errors import InputError
 from vfactor.keypoints import NUM_KEYPOINTS
 
 __all__ = [
@@ -44,13 +49,22 @@ __all__ = [
     "StackedHourglass",
     "save_weights",
     "load_weights",
+    "read_torch_file",
+    "check_state_dict",
+    "weights_digest",
+    "default_weights_path",
     "count_parameters",
+    "WeightsError",
     "WEIGHTS_FORMAT",
+    "SHIPPED_WEIGHTS_SHA256",
 ]
 
 #: Tag in the header of weight files written by :func:`save_weights`.
 WEIGHTS_FORMAT = "vfactor-stacked-hourglass"
 _WEIGHTS_VERSION = 1
+#: :func:`weights_digest` of the shipped weights (:func:`default_weights_path`), checked on every load of
+#: that file: update it (``weights_digest`` of the new file) when the shipped network is replaced.
+SHIPPED_WEIGHTS_SHA256 = "ec30efc20f58f4e7304158c74939fd6e2aceace201d88371e6e41c801153ae9c"
 #: The stem downsamples by this factor: heatmaps are ``input_size / STRIDE`` pixels.
 STRIDE = 4
 
@@ -207,6 +221,110 @@ def count_parameters(model: nn.Module) -> int:
     return sum(p.numel() for p in model.parameters() if p.requires_grad)
 
 
+class WeightsError(InputError):
+    """A weights or checkpoint file that cannot be used; ``field`` is the file's path.
+
+    Raised for a missing, empty, truncated or non-torch file, one that holds
+    pickled code (refused by ``torch.load(..., weights_only=True)``), one that is
+    not a vfactor weights file, non-finite tensors, and tensors that do not
+    match the file's (or the shipped weights') SHA-256 checksum. The message is
+    one line; the commands report it under the option that gave the file
+    (``--weights``, ``--resume``).
+    """
+
+
+def default_weights_path() -> Path:
+    """Where the shipped weights live in the package (``vfactor/net/weights/keypoints.pt``); may be absent."""
+    return Path(__file__).resolve().parent / "weights" / "keypoints.pt"
+
+
+def weights_digest(state_dict: dict, model: dict | None = None) -> str:
+    """SHA-256 (hex) of a network: its :class:`ModelConfig` dict and every tensor's name, dtype, shape and bytes.
+
+    The free-form metadata (``config`` of :func:`save_weights`, e.g. the
+    covariance calibration) is not covered, so that storing a calibration
+    leaves the digest as it was.
+
+    Args:
+        state_dict: ``{name: tensor}``.
+        model: the architecture (``ModelConfig.to_dict()``); None for none.
+    """
+    digest = hashlib.sha256(json.dumps(model, sort_keys=True).encode())
+    for name in sorted(state_dict):
+        tensor = state_dict[name].detach().to("cpu").contiguous().reshape(-1)
+        digest.update(f"\0{name}\0{tensor.dtype}\0{tuple(state_dict[name].shape)}\0".encode())
+        digest.update(tensor.view(torch.uint8).numpy().tobytes())
+    return digest.hexdigest()
+
+
+def read_torch_file(path) -> object:
+    """``torch.load(path, map_location="cpu", weights_only=True)`` with every failure a one-line :class:`WeightsError`.
+
+    Only the zip archives that ``torch.save`` writes are read; no code is
+    unpickled (a file that asks for any is refused, naming the object).
+
+    Raises:
+        WeightsError: missing, a folder, empty, unreadable, not a zip archive
+            (a truncated file has no zip directory), or refused / failed by ``torch.load``.
+    """
+    path = Path(path)
+    where = str(path)
+    if not path.exists():
+        raise WeightsError(where, "no such file")
+    if path.is_dir():
+        raise WeightsError(where, "is a folder, not a weights file")
+    try:
+        size = path.stat().st_size
+        is_zip = zipfile.is_zipfile(path)
+    except OSError as exc:
+        raise WeightsError(where, f"cannot read it: {exc.strerror or exc}") from None
+    if size == 0:
+        raise WeightsError(where, "empty file")
+    if not is_zip:
+        raise WeightsError(where, f"not a torch.save archive ({size} bytes without a zip directory): truncated, "
+                           "or not a weights file")
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - torch raises many types for a damaged archive; all are bad input
+        text = str(exc)
+        found = re.search(r"(?:Unsupported global|GLOBAL):?\s*(?:GLOBAL\s+)?([\w.]+)", text)
+        if "weights only" in text.lower() or found:
+            name = f" ({found.group(1)})" if found else ""
+            raise WeightsError(where, f"refused: it holds pickled code or objects{name}, not only tensors and "
+                               "plain values (read with torch.load(weights_only=True))") from None
+        first = next((line.strip() for line in text.splitlines() if line.strip()), "")
+        raise WeightsError(where, f"damaged torch.save archive ({type(exc).__name__}: {first[:200]})") from None
+
+
+def check_state_dict(state_dict, where: str, sha256: str | None = None, model: dict | None = None) -> None:
+    """Checks a loaded ``state_dict``: tensors only, all finite, and the checksum when one is given.
+
+    Args:
+        state_dict: what the file holds under ``state_dict``.
+        where: the file, for the messages.
+        sha256: the expected :func:`weights_digest` (the file's own, or the
+            shipped weights'); None: not checked.
+        model: the architecture dict the digest covers.
+
+    Raises:
+        WeightsError: not a dict of tensors, a non-finite value (naming the
+            tensor and how many), or a checksum mismatch.
+    """
+    if not isinstance(state_dict, dict) or not all(
+            isinstance(k, str) and isinstance(v, torch.Tensor) for k, v in state_dict.items()):
+        raise WeightsError(where, "state_dict: expected a dict of named tensors")
+    for name, tensor in state_dict.items():
+        if tensor.is_floating_point() or tensor.is_complex():
+            bad = int((~torch.isfinite(tensor)).sum())
+            if bad:
+                raise WeightsError(where, f"tensor {name!r} holds {bad} NaN or infinite value(s) of {tensor.numel()}")
+    if sha256 is not None:
+        actual = weights_digest(state_dict, model)
+        if actual != sha256:
+            raise WeightsError(where, f"the tensors do not match the SHA-256 checksum (expected {sha256[:16]}..., "
+                               f"got {actual[:16]}...): the file is corrupted")
+
+
 def save_weights(model: StackedHourglass, path, config: dict | None = None) -> Path:
     """Writes the model's weights with a small header (no pickled code).
 
@@ -214,9 +332,10 @@ def save_weights(model: StackedHourglass, path, config: dict | None = None) -> P
 
         {"format": "vfactor-stacked-hourglass", "version": 1,
          "model": ModelConfig as a dict, "config": extra metadata (JSON-like),
-         "state_dict": {name: tensor}}
+         "sha256": weights_digest(state_dict, model), "state_dict": {name: tensor}}
 
-    so :func:`load_weights` reads it with ``torch.load(..., weights_only=True)``.
+    so :func:`load_weights` reads it with ``torch.load(..., weights_only=True)``
+    and checks the tensors against the stored checksum.
 
     Args:
         model: the network (its :class:`ModelConfig` is stored).
@@ -235,11 +354,13 @@ def save_weights(model: StackedHourglass, path, config: dict | None = None) -> P
     state = {k: v.detach().to("cpu").clone() for k, v in model.state_dict().items()}
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    architecture = model.config.to_dict()
     payload = {
         "format": WEIGHTS_FORMAT,
         "version": _WEIGHTS_VERSION,
-        "model": model.config.to_dict(),
+        "model": architecture,
         "config": extra,
+        "sha256": weights_digest(state, architecture),
         "state_dict": state,
     }
     tmp = path.with_name(path.name + ".tmp")
@@ -251,8 +372,11 @@ def save_weights(model: StackedHourglass, path, config: dict | None = None) -> P
 def load_weights(path, map_location="cpu", with_config: bool = False):
     """Rebuilds a :class:`StackedHourglass` from a file written by :func:`save_weights`.
 
-    Loaded with ``torch.load(..., weights_only=True)``: no code is unpickled.
-    The model is returned in ``eval()`` mode on ``map_location``.
+    Loaded with ``torch.load(..., weights_only=True)`` (:func:`read_torch_file`):
+    no code is unpickled. Every tensor must be finite and match the file's
+    SHA-256 checksum (``sha256``; files written before it was stored have none)
+    and, for the shipped weights, :data:`SHIPPED_WEIGHTS_SHA256`. The model is
+    returned in ``eval()`` mode on ``map_location``.
 
     Args:
         path: weights file.
@@ -263,22 +387,39 @@ def load_weights(path, map_location="cpu", with_config: bool = False):
         The model, or ``(model, config)`` when ``with_config``.
 
     Raises:
-        ValueError: not a vfactor weights file, an unknown version, or weights
+        WeightsError: (a ``ValueError``) an unreadable, damaged or refused file
+            (:func:`read_torch_file`), not a vfactor weights file, an unknown
+            version, a bad header, non-finite or corrupted tensors, or weights
             that do not fit the stored architecture.
     """
-    payload = torch.load(Path(path), map_location=map_location, weights_only=True)
+    where = str(path)
+    payload = read_torch_file(path)
     if not isinstance(payload, dict) or payload.get("format") != WEIGHTS_FORMAT:
-        raise ValueError(f"{path}: not a vfactor keypoint-network weights file (format {WEIGHTS_FORMAT!r} expected)")
+        raise WeightsError(where, f"not a vfactor keypoint-network weights file (format {WEIGHTS_FORMAT!r} expected)")
     if payload.get("version") != _WEIGHTS_VERSION:
-        raise ValueError(f"{path}: weights version {payload.get('version')!r}, expected {_WEIGHTS_VERSION}")
-    model = StackedHourglass(**ModelConfig.from_dict(payload["model"]).to_dict())
+        raise WeightsError(where, f"weights version {payload.get('version')!r}, expected {_WEIGHTS_VERSION}")
+    architecture, extra, own = payload.get("model"), payload.get("config", {}), payload.get("sha256")
+    if not isinstance(architecture, dict):
+        raise WeightsError(where, "model: expected the architecture as a dict")
+    if not isinstance(extra, dict) or not (own is None or isinstance(own, str)):
+        raise WeightsError(where, "config: expected a dict, sha256: a hex string")
     try:
-        model.load_state_dict(payload["state_dict"])
+        config = ModelConfig.from_dict(architecture)
+    except (TypeError, ValueError) as exc:
+        raise WeightsError(where, f"model: {exc}") from None
+    state = payload.get("state_dict")
+    check_state_dict(state, where, own, architecture)
+    if Path(path).resolve() == default_weights_path():
+        check_state_dict(state, f"{where} (the shipped weights)", SHIPPED_WEIGHTS_SHA256, architecture)
+    model = StackedHourglass(**config.to_dict())
+    try:
+        model.load_state_dict(state)
     except RuntimeError as exc:
-        raise ValueError(f"{path}: weights do not fit the stored architecture: {exc}") from None
+        first = str(exc).splitlines()[0] if str(exc) else ""
+        raise WeightsError(where, f"weights do not fit the stored architecture: {first}") from None
     model.to(map_location).eval()
     if with_config:
-        return model, dict(payload.get("config", {}))
+        return model, dict(extra)
     return model
 
 

@@ -39,7 +39,8 @@ from torch.utils.data import DataLoader, Dataset
 from vfactor.errors import check_numbers
 from vfactor.net.data import AugmentConfig, KeypointDataset, as_dataset, augment, sample_rng
 from vfactor.net.evaluate import decode_batch, score_predictions
-from vfactor.net.model import StackedHourglass, count_parameters, save_weights
+from vfactor.net.model import (
+    StackedHourglass, WeightsError, check_state_dict, count_parameters, read_torch_file, save_weights, weights_digest)
 from vfactor.net.targets import heatmap_targets, keypoint_weights
 from vfactor.progress import Progress
 
@@ -429,15 +430,17 @@ def _save_checkpoint(path: Path, config, model, optimizer, epoch: int, history, 
         "history": [_plain(h) for h in history],
         "rng": _rng_states(np_rng),
     }
+    payload["sha256"] = weights_digest(_checkpoint_tensors(payload, path))
     tmp = path.with_name(path.name + ".tmp")
     torch.save(payload, tmp)
     tmp.replace(path)
 
 
 def _restore(path: Path, config: TrainConfig, model, optimizer, np_rng, device) -> tuple[int, list[dict]]:
-    payload = torch.load(path, map_location="cpu", weights_only=True)
+    payload = read_torch_file(path)  # a damaged checkpoint raises WeightsError
     if not isinstance(payload, dict) or payload.get("format") != _CHECKPOINT_FORMAT:
-        raise ValueError(f"{path}: not a vfactor training checkpoint")
+        raise WeightsError(str(path), "not a vfactor training checkpoint")
+    check_state_dict(_checkpoint_tensors(payload, path), str(path), payload.get("sha256"))
     stored = payload["config"]
     current = config.to_dict()
     changed = sorted(k for k in set(stored) | set(current)
@@ -454,6 +457,30 @@ def _restore(path: Path, config: TrainConfig, model, optimizer, np_rng, device) 
     if "cuda" in rng and torch.cuda.is_available():
         torch.cuda.set_rng_state_all(rng["cuda"])
     return int(payload["epoch"]), [dict(h) for h in payload["history"]]
+
+
+def _checkpoint_tensors(payload: dict, path: Path) -> dict:
+    """Every tensor of a checkpoint (model, optimiser state, random states), by its path in the payload.
+
+    What the checkpoint's checksum covers.
+    """
+    if not isinstance(payload.get("state_dict"), dict) or not isinstance(payload.get("optimizer"), dict):
+        raise WeightsError(str(path), "not a vfactor training checkpoint (no state_dict and optimizer)")
+    tensors: dict = {}
+
+    def walk(value, where: str) -> None:
+        if isinstance(value, torch.Tensor):
+            tensors[where] = value
+        elif isinstance(value, dict):
+            for key, item in value.items():
+                walk(item, f"{where}.{key}")
+        elif isinstance(value, (list, tuple)):
+            for i, item in enumerate(value):
+                walk(item, f"{where}[{i}]")
+
+    for key in ("state_dict", "optimizer", "rng"):
+        walk(payload.get(key), key)
+    return tensors
 
 
 def _as_tuple(x):

@@ -205,3 +205,13 @@ def test_eval_images_tracks_a_multi_frame_scenario(rendered):
     isam2 = [r for r in evaluation["tracking"]["errors"]["isam2"] if "rotation_deg" in r]
     assert len(isam2) == 3 and np.mean([r["rotation_deg"] for r in isam2]) < 5.0
     assert "Tracking from the network's keypoints" in images_report(evaluation)
+
+
+def test_rendered_scenes_report_only_boxes_the_network_takes():
+    """The simulated 2D detector's rule (render_simulation's min_inside) is the network's MIN_ROI_INSIDE."""
+    import inspect
+
+    from vfactor.net.crop import MIN_ROI_INSIDE
+    from vfactor.render.scenes import render_simulation
+
+    assert inspect.signature(render_simulation).parameters["min_inside"].default == MIN_ROI_INSIDE

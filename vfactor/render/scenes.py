@@ -60,6 +60,15 @@ class RenderedScene:
     visible: list[dict]
 
 
+def _share_inside(box, size) -> float:
+    """Share of a box's area ``(x0, y0, x1, y1)`` inside an image of ``size = (width, height)``."""
+    w = min(box[2], size[0]) - max(box[0], 0.0)
+    h = min(box[3], size[1]) - max(box[1], 0.0)
+    if w < 1 or h < 1:
+        return 0.0
+    return float(w * h / ((box[2] - box[0]) * (box[3] - box[1])))
+
+
 def render_simulation(
     sim: Simulation,
     out_dir: str | Path,
@@ -69,6 +78,7 @@ def render_simulation(
     pixel_noise: float = 2.0,
     supersample: float = 2.0,
     progress: Callable[[int, int], None] | None = None,
+    min_inside: float = 0.25,
 ) -> RenderedScene:
     """Renders every camera image of a simulation and writes a scene file of images and boxes.
 
@@ -82,6 +92,10 @@ def render_simulation(
         pixel_noise: standard deviation of the Gaussian sensor noise, grey levels.
         supersample: the renderer's anti-aliasing factor.
         progress: called with ``(images done, images total)``.
+        min_inside: a box is reported only when at least this share of its area
+            lies in the image (a 2D detector does not report a vehicle almost
+            wholly out of view, and the keypoint network refuses such a box:
+            ``vfactor.net.crop.MIN_ROI_INSIDE``, the same 25 %).
 
     Returns:
         :class:`RenderedScene`.
@@ -133,6 +147,8 @@ def render_simulation(
                     noisy = box + rng.normal(0.0, box_noise * side, 4)
                     if not (noisy[2] > noisy[0] + 1 and noisy[3] > noisy[1] + 1):
                         noisy = box
+                    if _share_inside(noisy, size) < min_inside:
+                        continue
                     detections.append(Detection(camera=name, vehicle=vid, keypoints=np.full((12, 2), np.nan),
                                                 confidence=np.zeros(12), roi=tuple(float(b) for b in noisy),
                                                 from_image=True))

@@ -347,24 +347,31 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
     vehicle lies behind another camera.
     """
     own_poses, rejected = {}, []
+
+    def own_pose(c):  # the camera's own PnP pose of the mean shape (computed once, only where needed)
+        if c not in own_poses:
+            own = best_candidates(obs.subset(obs.camera_index == c), mean, options.graph.loss, 1)
+            own_poses[c] = own[0].world_T_vehicle if own else None
+        return own_poses[c]
+
     for c, camera in enumerate(obs.cameras):
         rows = obs.camera_index == c
         if rows.sum() < options.min_keypoints_in_one_view:
             continue
-        own = best_candidates(obs.subset(rows), mean, options.graph.loss, 1)
-        if not own:
-            continue
-        own_poses[c] = own[0].world_T_vehicle
         joint = float(np.mean(weights[rows] > 0.5))
+        if joint >= DISAGREEMENT_JOINT_INLIERS or own_pose(c) is None:  # the joint solve keeps the camera: no PnP
+            continue
         alone = options.graph.loss.weight(np.linalg.norm(
-            whitened_residuals(obs.subset(rows), own[0].world_T_vehicle, mean.vehicle_p_keypoints), axis=1))
-        if joint < DISAGREEMENT_JOINT_INLIERS and float(np.mean(alone > 0.5)) - joint >= DISAGREEMENT_MARGIN - 1e-9:
+            whitened_residuals(obs.subset(rows), own_pose(c), mean.vehicle_p_keypoints), axis=1))
+        if float(np.mean(alone > 0.5)) - joint >= DISAGREEMENT_MARGIN - 1e-9:
             rejected.append(camera.name)
     if not rejected:
         return ""
     details = []
-    for c, world_T_vehicle in own_poses.items():
-        world = mean.in_world(world_T_vehicle)
+    for c in range(len(obs.cameras)):
+        if (obs.camera_index == c).sum() < options.min_keypoints_in_one_view or own_pose(c) is None:
+            continue
+        world = mean.in_world(own_pose(c))
         for d, other in enumerate(obs.cameras):
             if d != c and (obs.camera_index == d).any() and np.median(other.to_camera(world)[:, 2]) <= 0:
                 details.append(f"as camera '{obs.cameras[c].name}' sees it, the vehicle lies behind camera "

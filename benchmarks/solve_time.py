@@ -14,7 +14,7 @@ and the estimated noise scale (the default), and as it was before them (one
 PASCAL3D+ car prior, fixed sigmas, the car HWC bounds), with the ratio between
 the two.
 
-Run: ``python benchmarks/solve_time.py [--repeats 200]``. Prints median times and
+Run: ``python benchmarks/solve_time.py [--repeats 200] [--level paper|clean|hard]``. Prints median times and
 their ratios (machines here are shared and noisy; compare ratios, not times).
 """
 
@@ -26,7 +26,7 @@ import time
 import gtsam
 import numpy as np
 
-from vfactor.evaluation import car_prior_bounds
+from vfactor.evaluation import NOISE_LEVELS, car_prior_bounds, noise_variant
 from vfactor.graph import (
     GraphConfig,
     build_vehicle_graph,
@@ -74,9 +74,12 @@ def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=200)
     parser.add_argument("--scenes", type=int, default=10, help="distinct simulated vehicles cycled through")
+    parser.add_argument("--level", default="paper", choices=list(NOISE_LEVELS),
+                        help="keypoint noise of the scenes (vfactor.evaluation.NOISE_LEVELS; default: paper)")
     args = parser.parse_args(argv)
 
-    sim = simulate(load_scenario("intersection_2cam"), seed=7, num_frames=args.scenes)
+    scenario = noise_variant(load_scenario("intersection_2cam"), **NOISE_LEVELS[args.level])
+    sim = simulate(scenario, seed=7, num_frames=args.scenes)
     options = SolveOptions()
     prior = default_shape_prior()
     keys = KeyScheme()
@@ -130,7 +133,8 @@ def main(argv=None) -> dict:
 
     med = {k: float(np.median(v)) for k, v in times.items()}
     it_native, it_ours = np.mean(iterations["native"]), np.mean(iterations["vfactor_lm"])
-    print(f"one vehicle, 2 cameras x 12 keypoints; {args.repeats} solves over {len(cases)} simulated vehicles")
+    print(f"one vehicle, 2 cameras x 12 keypoints, {args.level} noise; {args.repeats} solves over {len(cases)} "
+          f"simulated vehicles")
     print(f"{'what':<58}{'median ms':>10}{'ratio':>8}")
     rows = [
         ("native GTSAM graph, LM (reference)", "native"),

@@ -19,6 +19,7 @@ from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
+import scipy.linalg
 
 from vfactor.keypoints import LAYERS, MIRROR_PERMUTATION
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
@@ -74,6 +75,18 @@ class ShapePrior:
     @property
     def wireframe(self) -> Wireframe:
         return Wireframe(self.mean)
+
+    def evidence_terms(self) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """``(P, P mu, mu^T P mu, log|Sigma|)`` with ``P = Sigma^-1`` (computed once; for the Laplace evidence)."""
+        cached = self.__dict__.get("_evidence_terms")
+        if cached is None:
+            R = self.sqrt_information()
+            P = R.T @ R
+            mu = np.asarray(self.mean).ravel()
+            Pmu = P @ mu
+            cached = (P, Pmu, float(mu @ Pmu), float(-2 * np.log(np.abs(np.diag(R))).sum()))
+            self.__dict__["_evidence_terms"] = cached
+        return cached
 
     def sqrt_information(self) -> np.ndarray:
         """(36, 36) upper-triangular R with ``R^T R = covariance^-1`` (computed once, read-only)."""
@@ -282,16 +295,11 @@ class ShapeModel:
         """
         out = {}
         for name, spread in self.components():
-            prior = self.prior(name, spread)
-            P = prior.sqrt_information().T @ prior.sqrt_information()
-            mu = np.asarray(prior.mean).ravel()
-            A = information + P
-            b = eta + P @ mu
-            L = np.linalg.cholesky(A)
-            y = np.linalg.solve(L, b)
+            P, Pmu, muPmu, logdet_sigma = self.prior(name, spread).evidence_terms()
+            L = np.linalg.cholesky(information + P)
+            y = scipy.linalg.solve_triangular(L, eta + Pmu, lower=True, check_finite=False)
             logdet_A = 2 * np.log(np.diag(L)).sum()
-            logdet_sigma = -2 * np.log(np.abs(np.diag(prior.sqrt_information()))).sum()
-            out[(name, spread)] = -0.5 * (mu @ P @ mu - y @ y + logdet_sigma + logdet_A)
+            out[(name, spread)] = -0.5 * (muPmu - y @ y + logdet_sigma + logdet_A)
         return out
 
 

@@ -21,11 +21,11 @@ import numpy as np
 from vfactor.baselines import known_shape, pnp, triangulation
 from vfactor.graph import observations_from_detections
 from vfactor.metrics import pose_errors
-from vfactor.shape_model import HwcBounds, ShapeModel, default_shape_model, default_shape_prior, pascal3d_wireframes
+from vfactor.shape_model import (HwcBounds, ShapeModel, car_hwc_bounds, default_shape_model, default_shape_prior,
+                                 pascal3d_wireframes)
 from vfactor.sim import Scenario, Simulation, load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations
 from vfactor.vehicle_library import BODY_TYPES, vehicle_library
-from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
 
 __all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held_out_model", "held_out_scene_model",
            "car_prior_bounds",
@@ -75,10 +75,8 @@ def held_out_scene_model(sim: Simulation) -> ShapeModel:
 
 
 def car_prior_bounds() -> HwcBounds:
-    """The HWC bounds as they were before the body-type model: PASCAL3D+ cars at 2.4-3.1 m and the presets, 15 %."""
-    wireframes = [Wireframe(s * wb) for s in pascal3d_shapes() for wb in (2.4, 3.1)]
-    wireframes += [p.wireframe() for p in PRESETS.values()]
-    return HwcBounds.from_wireframes(wireframes, margin=0.15)
+    """The HWC bounds as they were before the body-type model (:func:`vfactor.shape_model.car_hwc_bounds`)."""
+    return car_hwc_bounds()
 
 
 def noise_variant(scenario: Scenario, outlier_rate: float | None = None, swap_rate: float | None = None,

@@ -25,7 +25,7 @@ from vfactor.keypoints import LAYERS, MIRROR_PERMUTATION
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
 
 __all__ = ["ShapePrior", "ShapeModel", "HwcBounds", "default_shape_prior", "default_shape_model", "default_hwc_bounds",
-           "pascal3d_wireframes", "PASCAL3D_WHEELBASE", "DISTANCE_PAIRS", "CLASS_HINTS", "ANY"]
+           "car_hwc_bounds", "pascal3d_wireframes", "PASCAL3D_WHEELBASE", "DISTANCE_PAIRS", "CLASS_HINTS", "ANY"]
 
 #: All 66 keypoint pairs (i < j) whose distance the HWC distance factor bounds.
 DISTANCE_PAIRS: np.ndarray = np.array(list(combinations(range(12), 2)))
@@ -187,6 +187,18 @@ def default_hwc_bounds(exclude: frozenset = frozenset()) -> HwcBounds:
     wireframes += [p.wireframe() for p in PRESETS.values()]
     wireframes += [v.wireframe for v in vehicle_library().values() if v.id not in exclude]
     return HwcBounds.from_wireframes(wireframes, margin=0.5)
+
+
+@lru_cache(maxsize=1)
+def car_hwc_bounds() -> HwcBounds:
+    """The HWC bounds of the paper's car prior: the PASCAL3D+ cars at wheelbases 2.4-3.1 m and the presets, 15 %.
+
+    vfactor's own bounds until issue 10; the paper's CPO + HWC reproduction
+    (:mod:`vfactor.baselines.cpo`) and the ``car_prior`` evaluation method keep them.
+    """
+    wireframes = [Wireframe(s * wb) for s in pascal3d_shapes() for wb in (2.4, 3.1)]
+    wireframes += [p.wireframe() for p in PRESETS.values()]
+    return HwcBounds.from_wireframes(wireframes, margin=0.15)
 
 
 #: The component of a :class:`ShapeModel` that is no body type: the pooled prior.

@@ -67,7 +67,7 @@ from vfactor.graph import GraphConfig
 from vfactor.init import umeyama
 from vfactor.keypoints import LAYER_NAMES, LAYERS, NUM_KEYPOINTS
 from vfactor.result import Status, VehicleResult
-from vfactor.shape_model import DISTANCE_PAIRS, HwcBounds, default_hwc_bounds, default_shape_prior
+from vfactor.shape_model import DISTANCE_PAIRS, HwcBounds, car_hwc_bounds, default_shape_prior
 from vfactor.wireframe import Wireframe
 
 __all__ = ["CpoOptions", "cpo", "observation_confidence", "hwc_projection"]
@@ -116,7 +116,7 @@ class CpoOptions:
             its own (its keypoints still enter the energy and the shape).
         min_observations: fewer observations in all make the result ``degenerate``.
         mean: starting wireframe (default: the prior's mean).
-        bounds: HWC ranges (default :func:`vfactor.shape_model.default_hwc_bounds`).
+        bounds: HWC ranges (default :func:`vfactor.shape_model.car_hwc_bounds`: the paper's car-learnt bounds).
         graph: the noise settings the observations were made with; used only to
             recover the confidences from the square-root information.
     """
@@ -427,7 +427,7 @@ def _hwc_layer(name: str, target: np.ndarray, weight: np.ndarray, fallback: np.n
 
 def hwc_projection(shape: np.ndarray, bounds: HwcBounds | None = None) -> np.ndarray:
     """(12, 3) ``shape`` made to obey the HWC rules layer by layer (equal left/right weights), hub-centred and level."""
-    bounds = bounds or default_hwc_bounds()
+    bounds = bounds or car_hwc_bounds()
     out = np.array(shape, dtype=float)
     for name in LAYER_NAMES:
         idx = list(LAYERS[name])
@@ -528,7 +528,7 @@ def cpo(
         on bad observations (bad ``confidence`` gives ``failed``).
     """
     mean = options.mean if options.mean is not None else Wireframe(default_shape_prior().mean)
-    bounds = options.bounds or default_hwc_bounds()
+    bounds = options.bounds or car_hwc_bounds()
     if confidence is not None:
         try:
             confidence = np.asarray(confidence, dtype=float).ravel()

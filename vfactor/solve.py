@@ -262,7 +262,7 @@ def _refine(first, obs: KeypointObservations, options: SolveOptions, model: Shap
         :func:`vfactor.shape_evidence.shape_information`).
     """
     extras = {}
-    outcome, scale, prior = first, 1.0, first_prior
+    outcome, scale, prior, scaled = first, 1.0, first_prior, obs
     for k in range(passes):
         estimate, graph = outcome[0], outcome[4]
         prior_factor = shape_prior_factor(keys.layer_keys(0), prior, options.graph.shape_prior_weight,
@@ -272,7 +272,7 @@ def _refine(first, obs: KeypointObservations, options: SolveOptions, model: Shap
         if options.estimate_noise:
             world_T_vehicle = estimate.atPose3(keys.pose_key())
             points = wireframe_from_values(estimate, keys).vehicle_p_keypoints
-            relative, p_eff = noise_scale(whitened_residuals(obs.scaled(scale), world_T_vehicle, points), lin)
+            relative, p_eff = noise_scale(whitened_residuals(scaled, world_T_vehicle, points), lin)
             new_scale = float(np.clip(scale * relative, *NOISE_SCALE_RANGE))
             extras.update(effective_parameters=p_eff)
         if model is not None:
@@ -282,16 +282,27 @@ def _refine(first, obs: KeypointObservations, options: SolveOptions, model: Shap
             extras.update(body_type=choice.body_type, body_type_probability=choice.probability,
                           body_type_posterior=choice.posterior, prior_spread=choice.spread,
                           shape_information=(information, eta))
-        if k > 0 and new_prior is prior and abs(np.log(new_scale / scale)) < np.log(1.1):
+        if k > 0 and _same_prior(new_prior, prior) and abs(np.log(new_scale / scale)) < np.log(1.1):
             break
         scale, prior = new_scale, new_prior
-        graph = build_vehicle_graph(obs.scaled(scale), keys, config=options.graph, prior=prior, bounds=bounds,
+        scaled = obs.scaled(scale)
+        graph = build_vehicle_graph(scaled, keys, config=options.graph, prior=prior, bounds=bounds,
                                     ground_plane=options.ground_plane)
         estimate, error, iterations, hit_limit, graph = _optimise(graph, estimate, keys, options, terms, hwc)
         outcome = (estimate, error, outcome[2] + iterations, hit_limit or outcome[3], graph)
         extras["passes"] = k + 1
     extras["noise_scale"] = scale
-    return outcome, obs.scaled(scale), extras
+    return outcome, scaled, extras
+
+
+def _same_prior(a: ShapePrior, b: ShapePrior, mean_tol: float = 2e-3, sigma_tol: float = 0.05) -> bool:
+    """Whether two priors are the same for the solve: means within ``mean_tol`` m, sigmas within ``sigma_tol`` (relative)."""
+    if a is b:
+        return True
+    if np.abs(np.asarray(a.mean) - np.asarray(b.mean)).max() > mean_tol:
+        return False
+    da, db = np.sqrt(np.diag(a.covariance)), np.sqrt(np.diag(b.covariance))
+    return bool(np.abs(da / db - 1.0).max() <= sigma_tol)
 
 
 def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc):

@@ -215,3 +215,20 @@ def test_window_shape_is_checked():
     with pytest.raises(ValueError, match="v_lo < v_hi"):
         KeypointObservations(obs.cameras, obs.camera_index, obs.keypoint_index, obs.uv, obs.sqrt_information,
                              upside_down)
+
+
+def test_scaled_observations_equal_freshly_built_ones():
+    """KeypointObservations.scaled keeps the camera tables and rescales the noise as a new object would have it."""
+    from vfactor.graph import observations_from_detections
+    from vfactor.sim import simulate
+
+    sim = simulate("tracks_3cam", seed=2, num_frames=6)  # vehicles cut by the image border: truncation windows
+    for frame in sim.scene.frames:
+        for vid in frame.vehicle_ids():
+            obs = observations_from_detections(frame.detections_of(vid), sim.scene.cameras)
+            scaled = obs.scaled(0.37)
+            fresh = KeypointObservations(obs.cameras, obs.camera_index, obs.keypoint_index, obs.uv,
+                                         scaled.sqrt_information, obs.window, obs.min_sigma)
+            np.testing.assert_allclose(scaled._sigma_table, fresh._sigma_table)
+            np.testing.assert_allclose(scaled.sqrt_information, obs.sqrt_information / np.maximum(
+                0.37, obs.min_sigma * np.linalg.norm(obs.sqrt_information, ord=2, axis=(1, 2)))[:, None, None])

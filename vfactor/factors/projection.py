@@ -122,8 +122,13 @@ class KeypointObservations:
         if self.min_sigma > 0 and len(L):
             smallest_sigma = 1.0 / np.linalg.norm(L, ord=2, axis=(1, 2))
             factor = np.maximum(factor, self.min_sigma / smallest_sigma)
-        return KeypointObservations(self.cameras, self.camera_index, self.keypoint_index, self.uv,
-                                    L / factor[:, None, None], self.window, self.min_sigma)
+        # the camera tables stay; only the noise (and the truncation's marginal sigmas) change
+        out = object.__new__(KeypointObservations)
+        out.__dict__.update(self.__dict__)
+        object.__setattr__(out, "sqrt_information", L / factor[:, None, None])
+        truncated = np.isfinite(self._window_table[:, 0])
+        object.__setattr__(out, "_sigma_table", np.where(truncated[:, None], self._sigma_table * factor[:, None], 1.0))
+        return out
 
     def expected_pixels(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """What the detector is expected to measure for predicted pixels ``uv`` (n, 2), and the slope.

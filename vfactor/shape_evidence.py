@@ -219,11 +219,7 @@ def _moment_matched(model: ShapeModel, weights: dict, negligible: float = 1e-3) 
     for key, w in kept.items():
         d = np.asarray(priors[key].mean).ravel() - mean
         cov += w / total * (priors[key].covariance + np.outer(d, d))
-    cov = 0.5 * (cov + cov.T)
-    mean = mean.reshape(12, 3)
-    mean.setflags(write=False)
-    cov.setflags(write=False)
-    return ShapePrior(mean=mean, covariance=cov)
+    return ShapePrior(mean=mean, covariance=0.5 * (cov + cov.T))
 
 
 @dataclass(frozen=True)

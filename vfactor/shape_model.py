@@ -45,6 +45,12 @@ class ShapePrior:
     mean: np.ndarray
     covariance: np.ndarray
 
+    def __post_init__(self):  # read-only float copies: a prior is shared by every solve that uses it
+        for name, shape in (("mean", (12, 3)), ("covariance", (36, 36))):
+            value = np.array(getattr(self, name), dtype=float).reshape(shape)
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
     @classmethod
     def from_wireframes(cls, wireframes, floor_sigma=0.04, inflation: float = 1.5) -> "ShapePrior":
         """Mean and covariance of metric shapes, symmetrised.
@@ -67,10 +73,7 @@ class ShapePrior:
         flat = pts.reshape(len(pts), 36)
         mean = flat.mean(0).reshape(12, 3)
         floor = np.repeat(np.broadcast_to(np.asarray(floor_sigma, dtype=float), (12,)), 3)
-        cov = inflation * np.cov(flat, rowvar=False) + np.diag(floor**2)
-        mean.setflags(write=False)
-        cov.setflags(write=False)
-        return cls(mean=mean, covariance=cov)
+        return cls(mean=mean, covariance=inflation * np.cov(flat, rowvar=False) + np.diag(floor**2))
 
     @property
     def wireframe(self) -> Wireframe:
@@ -122,10 +125,7 @@ def default_shape_prior(
     cov_n = np.cov(flat, rowvar=False)
     second = wheelbase**2 + wheelbase_sigma**2
     cov = second * cov_n + wheelbase_sigma**2 * np.outer(mean_n, mean_n) + floor_sigma**2 * np.eye(36)
-    mean = (wheelbase * mean_n).reshape(12, 3)
-    mean.setflags(write=False)
-    cov.setflags(write=False)
-    return ShapePrior(mean=mean, covariance=cov)
+    return ShapePrior(mean=wheelbase * mean_n, covariance=cov)
 
 
 @dataclass(frozen=True)
@@ -263,9 +263,7 @@ class ShapeModel:
         key = (body_type, float(spread))
         if key not in self._variants:
             base = self.pooled if body_type == ANY else self.types[body_type]
-            cov = base.covariance * spread
-            cov.setflags(write=False)
-            self._variants[key] = base if spread == 1.0 else ShapePrior(mean=base.mean, covariance=cov)
+            self._variants[key] = base if spread == 1.0 else ShapePrior(mean=base.mean, covariance=base.covariance * spread)
         return self._variants[key]
 
     def log_prior(self, hints=()) -> dict[str, float]:

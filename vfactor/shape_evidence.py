@@ -46,6 +46,8 @@ class Linearisation:
         projection, projection_eta: the keypoint projection factor alone.
         prior, prior_eta: the shape prior factor alone.
         shape: (36,) the shape at the linearisation point (keypoint-major, metres).
+        jacobian, rhs: the projection factor's whitened system ``A dx ~ b`` (2n rows;
+            ``b`` is minus its residuals), for predicting the residuals of a step.
     """
 
     total: np.ndarray
@@ -55,6 +57,8 @@ class Linearisation:
     prior: np.ndarray
     prior_eta: np.ndarray
     shape: np.ndarray
+    jacobian: np.ndarray | None = None
+    rhs: np.ndarray | None = None
 
 
 def linearise(graph: gtsam.NonlinearFactorGraph, projection: gtsam.NonlinearFactor, prior: gtsam.NonlinearFactor,
@@ -82,10 +86,11 @@ def linearise(graph: gtsam.NonlinearFactorGraph, projection: gtsam.NonlinearFact
     variables = [keys.pose_key(vehicle, frame), *layer_keys]
     H, eta = hessian([graph.at(i) for i in range(graph.size())], variables)
     Hp, eta_p = hessian([projection], variables)
+    A, b = projection.linearize(values).jacobian()  # keys [pose, wheel, light, roof], as ``variables``
     Hs, eta_s = np.zeros((42, 42)), np.zeros(42)
     Hs[6:, 6:], eta_s[6:] = hessian([prior], layer_keys)
     shape = np.concatenate([values.atVector(k) for k in layer_keys])
-    return Linearisation(H, eta, Hp, eta_p, Hs, eta_s, shape)
+    return Linearisation(H, eta, Hp, eta_p, Hs, eta_s, shape, np.asarray(A), np.ravel(b))
 
 
 def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -> tuple[float, float]:
@@ -96,14 +101,19 @@ def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -
     ``p(s) = tr(H_proj(s) H(s)^-1)`` is the number of parameters the keypoints
     determine at that scale (the trace of the hat matrix: 6 for the pose plus
     the part of the shape that the prior does not hold; ``H_proj(s) = H_proj / s^2``).
-    ``p`` grows as ``s`` shrinks, so the two are iterated to their fixed point.
+    The residuals are those of the solution the graph would reach with the
+    sigmas times ``s``, predicted by one Gauss-Newton step from the
+    linearisation (``e(s) = A dx(s) - b``, ``dx(s) = H(s)^-1 eta(s)``): a fit
+    under the nominal sigmas, where the prior weighs more, overstates a small
+    noise. ``s``, ``p`` and the residuals are iterated to their fixed point.
     The median ignores outliers (up to half of the keypoints). Clipped to
     :data:`NOISE_SCALE_RANGE`.
 
     Args:
         whitened: (n, 2) whitened residuals of the keypoints at the solution, nominal sigmas.
         lin: the linearisation at the solution (nominal sigmas).
-        iterations: fixed-point iterations of ``s`` and ``p``.
+        iterations: at most this many fixed-point iterations of ``s``, ``p`` and the
+            residuals (they stop when ``s`` moves by less than 0.1 %).
 
     Returns:
         (scale, p): the noise scale (multiplies the sigmas) and the effective
@@ -112,14 +122,24 @@ def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -
     n = len(whitened)
     if n == 0:
         return 1.0, 0.0
-    base = float(np.median(np.sum(whitened**2, axis=1))) / _CHI2_2_MEDIAN
     other = lin.total - lin.projection
+    other_eta = lin.total_eta - lin.projection_eta
+    predict = lin.jacobian is not None and lin.jacobian.shape[0] == 2 * n
+    squared = np.sum(whitened**2, axis=1)
     scale, p = 1.0, 0.0
     for _ in range(iterations):
-        info = lin.projection / scale**2
-        p = float(np.trace(np.linalg.solve(other + info, info)))
+        previous = scale
+        w = 1.0 / scale**2
+        H = other + w * lin.projection
+        p = float(np.trace(np.linalg.solve(H, w * lin.projection)))
+        if predict:
+            step = np.linalg.solve(H, other_eta + w * lin.projection_eta)
+            squared = np.sum((lin.jacobian @ step - lin.rhs).reshape(n, 2) ** 2, axis=1)
+        base = float(np.median(squared)) / _CHI2_2_MEDIAN
         dof = max(2.0 * n - p, 2.0)
         scale = float(np.clip(np.sqrt(max(base * 2.0 * n / dof, 0.0)), *NOISE_SCALE_RANGE))
+        if abs(scale - previous) <= 1e-3 * previous:
+            break
     return scale, p
 
 

@@ -19,7 +19,6 @@ from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
-import scipy.linalg
 
 from vfactor.keypoints import LAYERS, MIRROR_PERMUTATION
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
@@ -303,13 +302,15 @@ class ShapeModel:
         Returns:
             (body type or :data:`ANY`, spread) -> log evidence.
         """
-        out = {}
-        for name, spread in self.components():
-            P, Pmu, muPmu, logdet_sigma = self.prior(name, spread).evidence_terms()
-            L = np.linalg.cholesky(information + P)
-            y = scipy.linalg.solve_triangular(L, eta + Pmu, lower=True, check_finite=False)
-            logdet_A = 2 * np.log(np.diag(L)).sum()
-            out[(name, spread)] = -0.5 * (muPmu - y @ y + logdet_sigma + logdet_A)
+        keys = self.components()
+        terms = [self.prior(name, spread).evidence_terms() for name, spread in keys]
+        L = np.linalg.cholesky(information[None] + np.stack([t[0] for t in terms]))  # one batched factorisation
+        b = eta[None] + np.stack([t[1] for t in terms])
+        y = np.linalg.solve(L, b[..., None])[..., 0]
+        logdet_A = 2 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
+        value = -0.5 * (np.array([t[2] for t in terms]) - np.einsum("ki,ki->k", y, y)
+                        + np.array([t[3] for t in terms]) + logdet_A)
+        out = {key: float(v) for key, v in zip(keys, value)}
         return out
 
 

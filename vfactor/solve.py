@@ -295,7 +295,7 @@ def _refine(first, obs: KeypointObservations, options: SolveOptions, model: Shap
     return outcome, scaled, extras
 
 
-def _same_prior(a: ShapePrior, b: ShapePrior, mean_tol: float = 2e-3, sigma_tol: float = 0.05) -> bool:
+def _same_prior(a: ShapePrior, b: ShapePrior, mean_tol: float = 0.02, sigma_tol: float = 0.2) -> bool:
     """Whether two priors are the same for the solve: means within ``mean_tol`` m, sigmas within ``sigma_tol`` (relative)."""
     if a is b:
         return True

@@ -166,3 +166,13 @@ def test_an_open_choice_widens_the_prior_a_clear_one_keeps_the_type(clean):
     assert np.trace(vague.prior.covariance) > spread_of_types  # wider than one type's prior
     no_pooled = dataclasses.replace(model, pooled_probability=0.0, _variants={})
     assert all(t != "any" for t, _ in no_pooled.components())
+
+
+def test_an_overflowing_linearisation_keeps_the_first_solve():
+    """Found by the long fuzzing profile: a focal length of 1e300 made the evidence NaN (ZeroDivisionError)."""
+    from vfactor.solve import solve_scene
+
+    data = scene_to_dict(simulate("intersection_2cam", seed=3, num_frames=1).scene)
+    data["cameras"][0]["K"][0][0] *= 1.0001e300
+    result = solve_scene(scene_from_dict(data))[0].vehicles[0]
+    assert "kept the first solve" in result.extras.get("refinement", "")

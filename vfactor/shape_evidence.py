@@ -118,10 +118,15 @@ def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -
     Returns:
         (scale, p): the noise scale (multiplies the sigmas) and the effective
         number of parameters at that scale.
+
+    Raises:
+        numpy.linalg.LinAlgError: the residuals or the linearisation are not finite.
     """
     n = len(whitened)
     if n == 0:
         return 1.0, 0.0
+    if not (np.all(np.isfinite(whitened)) and np.all(np.isfinite(lin.total)) and np.all(np.isfinite(lin.projection))):
+        raise np.linalg.LinAlgError("the residuals or the linearisation are not finite")
     other = lin.total - lin.projection
     other_eta = lin.total_eta - lin.projection_eta
     predict = lin.jacobian is not None and lin.jacobian.shape[0] == 2 * n
@@ -201,8 +206,13 @@ def choose_body_type(model: ShapeModel, information: np.ndarray, eta: np.ndarray
     type's probability sums over its spreads and is reported among the types
     (conditional on the vehicle being of one); the prior to solve with is the
     moment-matched mixture of all components.
+
+    Raises:
+        numpy.linalg.LinAlgError: the evidence is not finite (the solver then keeps its first solve).
     """
     log_evidence = model.type_log_evidence(information, eta)
+    if not all(np.isfinite(v) for v in log_evidence.values()):
+        raise np.linalg.LinAlgError("the body types' evidence is not finite (the linearisation overflowed)")
     log_prior = model.log_prior(hints)
     share = np.log(1.0 - model.pooled_probability) - np.log(len(model.spreads))
     log_post = {key: value + (np.log(model.pooled_probability) if key[0] == ANY else log_prior[key[0]] + share)

@@ -355,7 +355,7 @@ class Tracker:
         options = dataclasses.replace(self.options.solve, covariance=False, shape_information=True)
         for i, (frame_index, obs, motion, alone) in enumerate(track.young_frames):
             if alone is None:
-                alone = solve_observations(obs, options, track.id, self.model or self.prior, self.bounds)
+                alone = _solve_alone(obs, options, track.id, self.model or self.prior, self.bounds)
                 track.young_frames[i] = (frame_index, obs, motion, alone)
             if not track.reanchored and alone.ok:
                 estimate.update(self.keys.pose_key(track.index, frame_index), alone.world_T_vehicle)
@@ -573,6 +573,14 @@ def _refresh(final: dict, estimates: dict) -> None:
         final[key] = v
 
 
+def _solve_alone(obs: KeypointObservations, options: SolveOptions, vid: str, prior, bounds) -> VehicleResult:
+    """One frame of a track solved on its own; a numerical failure is a ``failed`` result, not an exception."""
+    try:
+        return solve_observations(obs, options, vid, prior, bounds)
+    except (RuntimeError, np.linalg.LinAlgError) as exc:
+        return VehicleResult(vid, Status.FAILED, message=summarise_error(exc))
+
+
 def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: ShapePrior | ShapeModel | None = None,
                  bounds: HwcBounds | None = None) -> list[FrameResult]:
     """Batch smoothing: every track's whole graph solved at once by Levenberg-Marquardt.
@@ -604,8 +612,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
     results: dict[tuple[int, str], VehicleResult] = {}
     for index, (vid, items) in enumerate(per_track.items()):
         alone = dataclasses.replace(options.solve, shape_information=True)
-        firsts = [solve_observations(obs, alone, vid, model or prior, bounds) if len(obs) else None
-                  for _, _, obs in items]
+        firsts = [_solve_alone(obs, alone, vid, model or prior, bounds) if len(obs) else None for _, _, obs in items]
         shape = track_shape(firsts, model, prior)
         track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()

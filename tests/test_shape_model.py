@@ -168,6 +168,7 @@ def test_an_open_choice_widens_the_prior_a_clear_one_keeps_the_type(clean):
     assert all(t != "any" for t, _ in no_pooled.components())
 
 
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 def test_an_overflowing_linearisation_keeps_the_first_solve():
     """Found by the long fuzzing profile: a focal length of 1e300 made the evidence NaN (ZeroDivisionError)."""
     from vfactor.solve import solve_scene

@@ -143,8 +143,12 @@ def solve_observations(
     is first solved with the model's pooled prior; the noise scale (with
     ``options.estimate_noise``) and the body type (Laplace evidence and the
     ``hints``) are then read off that solution, and it is solved again, from
-    there, with the chosen type's prior and the estimated sigmas. With a single
-    :class:`~vfactor.shape_model.ShapePrior` that prior is used throughout.
+    there, with the estimated sigmas and the moment-matched mixture of the
+    types' priors (and the pooled one) under their posterior probabilities: the
+    chosen type's own prior when the choice is clear (docs/factors.md). With a
+    single :class:`~vfactor.shape_model.ShapePrior` that prior is used
+    throughout. A refinement that fails numerically keeps the first solve
+    (``extras["refinement"]`` says why).
 
     Args:
         obs: the vehicle's observations in all cameras

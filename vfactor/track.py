@@ -176,10 +176,12 @@ class Tracker:
         cameras: camera name -> camera.
         options: tracking settings.
         prior: the body-type shape model (default:
-            :func:`~vfactor.shape_model.default_shape_model`): each track takes the
-            body type, and the noise scale, of its first one-frame solve
-            (:func:`~vfactor.solve.solve_observations`) for all its frames; or one
-            :class:`~vfactor.shape_model.ShapePrior` for every track.
+            :func:`~vfactor.shape_model.default_shape_model`): a track starts with
+            the prior (the body types' mixture) and noise scale of its first
+            frame's own solve (:func:`~vfactor.solve.solve_observations`) and
+            chooses them again from all its frames while it is young (its first
+            five frames seen by two cameras, :func:`~vfactor.shape_evidence.track_shape`);
+            or one :class:`~vfactor.shape_model.ShapePrior` for every track.
         bounds: HWC bounds (default: the model's).
         keys: key scheme of the variables (each track's smoother uses vehicle index
             0..n-1 in order of first appearance).
@@ -294,13 +296,10 @@ class Tracker:
                                    self.model or self.prior, self.bounds)
         if not first.ok:
             return first
-        if self.model is not None:
-            track.prior = (self.model.prior(first.body_type, first.extras.get("prior_spread", 1.0)) if first.body_type
-                           else self.model.pooled)
-        else:
+        track.prior = None
+        self._rechoose(track, [first])  # the prior and noise scale the frame's own solve used
+        if track.prior is None:  # no model and no prior given
             track.prior = self.prior
-        track.body_type, track.body_type_probability = first.body_type, first.body_type_probability
-        track.noise_scale = float(first.extras.get("noise_scale", 1.0))
         track.smoother = self._new_smoother()
         track.poses, track.hwc_added = [], False
         key = self.keys.pose_key(track.index, frame_index)
@@ -327,7 +326,7 @@ class Tracker:
         return graph
 
     def _rechoose(self, track: _TrackState, alone: list[VehicleResult]) -> None:
-        """The body type and noise scale of a young track from its frames solved alone (as :func:`smooth_scene` does)."""
+        """The prior, body type and noise scale of a young track from its frames solved alone (as :func:`smooth_scene` does)."""
         if not any(r.ok for r in alone):
             return
         shape = track_shape(alone, self.model, self.prior)

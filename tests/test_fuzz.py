@@ -230,32 +230,29 @@ def test_scene_reader_returns_or_raises_a_scene_error(data):
     STATS["scene_reader (by first mutation)"][f"{kind}: {outcome}"] += 1
 
 
-@fuzzing.examples("cli_solve")
-@given(st.data())
-def test_cli_solve_on_mutated_scenes(data):
-    text, kind = mutate(data.draw, BASE_SCENE)
+def _fuzz_cli(data, base: dict, command: str, options: list[list[str]], fixed: tuple[str, ...] = ()) -> None:
+    """One mutated ``base`` scene through ``vfactor COMMAND`` with one of ``options``; the outcome counted."""
+    text, kind = mutate(data.draw, base)
     with tempfile.TemporaryDirectory() as folder:
         path, out = Path(folder) / "scene.json", Path(folder) / "result.json"
         path.write_text(text)
-        covariance = data.draw(st.sampled_from([[], ["--no-covariance"]]))
-        code, err = run_cli(["solve", str(path), "--out", str(out), "--quiet", *covariance])
+        extra = data.draw(st.sampled_from(options))
+        code, err = run_cli([command, str(path), "--out", str(out), "--quiet", *fixed, *extra])
         outcome = check_outcome(code, err, text, out)
-    STATS["cli_solve"][outcome] += 1
-    STATS["cli_solve (by first mutation)"][f"{kind}: {outcome}"] += 1
+    STATS[f"cli_{command}"][outcome] += 1
+    STATS[f"cli_{command} (by first mutation)"][f"{kind}: {outcome}"] += 1
+
+
+@fuzzing.examples("cli_solve")
+@given(st.data())
+def test_cli_solve_on_mutated_scenes(data):
+    _fuzz_cli(data, BASE_SCENE, "solve", [[], ["--no-covariance"]])
 
 
 @fuzzing.examples("cli_track")
 @given(st.data())
 def test_cli_track_on_mutated_scenes(data):
-    text, kind = mutate(data.draw, BASE_TRACK)
-    with tempfile.TemporaryDirectory() as folder:
-        path, out = Path(folder) / "scene.json", Path(folder) / "result.json"
-        path.write_text(text)
-        mode = data.draw(st.sampled_from([[], ["--lag", "0.15"], ["--batch"]]))
-        code, err = run_cli(["track", str(path), "--out", str(out), "--quiet", "--no-covariance", *mode])
-        outcome = check_outcome(code, err, text, out)
-    STATS["cli_track"][outcome] += 1
-    STATS["cli_track (by first mutation)"][f"{kind}: {outcome}"] += 1
+    _fuzz_cli(data, BASE_TRACK, "track", [[], ["--lag", "0.15"], ["--batch"]], fixed=("--no-covariance",))
 
 
 @fuzzing.examples("result_reader")

@@ -20,8 +20,8 @@ from itertools import combinations
 
 import numpy as np
 
-from vfactor.keypoints import LAYERS, MIRROR_PERMUTATION
-from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
+from vfactor.keypoints import LAYERS
+from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes, symmetrised
 
 __all__ = ["ShapePrior", "ShapeModel", "HwcBounds", "default_shape_prior", "default_shape_model", "default_hwc_bounds",
            "car_hwc_bounds", "pascal3d_wireframes", "PASCAL3D_WHEELBASE", "DISTANCE_PAIRS", "CLASS_HINTS", "ANY"]
@@ -68,8 +68,7 @@ class ShapePrior:
         pts = np.array([w.vehicle_p_keypoints for w in wireframes], dtype=float)
         if len(pts) < 2:
             raise ValueError(f"ShapePrior.from_wireframes: expected at least 2 shapes, got {len(pts)}")
-        pts = 0.5 * (pts + pts[:, MIRROR_PERMUTATION] * [1.0, -1.0, 1.0])
-        flat = pts.reshape(len(pts), 36)
+        flat = symmetrised(pts).reshape(len(pts), 36)
         mean = flat.mean(0).reshape(12, 3)
         floor = np.repeat(np.broadcast_to(np.asarray(floor_sigma, dtype=float), (12,)), 3)
         return cls(mean=mean, covariance=inflation * np.cov(flat, rowvar=False) + np.diag(floor**2))
@@ -117,9 +116,7 @@ def default_shape_prior(
         wheelbase_sigma: standard deviation of the wheelbase, metres.
         floor_sigma: isotropic standard deviation added to every coordinate, metres.
     """
-    shapes = pascal3d_shapes()
-    shapes = 0.5 * (shapes + shapes[:, MIRROR_PERMUTATION] * [1.0, -1.0, 1.0])
-    flat = shapes.reshape(len(shapes), 36)
+    flat = symmetrised(pascal3d_shapes()).reshape(-1, 36)
     mean_n = flat.mean(0)
     cov_n = np.cov(flat, rowvar=False)
     second = wheelbase**2 + wheelbase_sigma**2
@@ -310,21 +307,19 @@ class ShapeModel:
         logdet_A = 2 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
         value = -0.5 * (np.array([t[2] for t in terms]) - np.einsum("ki,ki->k", y, y)
                         + np.array([t[3] for t in terms]) + logdet_A)
-        out = {key: float(v) for key, v in zip(keys, value)}
-        return out
+        return {key: float(v) for key, v in zip(keys, value)}
 
 
 #: Wheelbase (metres) at which the PASCAL3D+ car CAD models enter the body-type priors.
 PASCAL3D_WHEELBASE = 2.75
 
 
+@lru_cache(maxsize=1)
 def pascal3d_wireframes() -> dict[str, Wireframe]:
-    """The nine PASCAL3D+ car CAD models at :data:`PASCAL3D_WHEELBASE`, symmetrised, by id ``pascal3d_<index>``."""
+    """The nine PASCAL3D+ car CAD models at :data:`PASCAL3D_WHEELBASE`, symmetrised, by id ``pascal3d_<index>`` (made once)."""
     out = {}
-    for i, s in enumerate(pascal3d_shapes()):
-        p = s * PASCAL3D_WHEELBASE
-        p = 0.5 * (p + p[MIRROR_PERMUTATION] * [1.0, -1.0, 1.0])
-        out[f"pascal3d_{i}"] = Wireframe(p - p[list(LAYERS["wheel"])].mean(axis=0))
+    for i, shape in enumerate(symmetrised(pascal3d_shapes() * PASCAL3D_WHEELBASE)):
+        out[f"pascal3d_{i}"] = Wireframe(shape - shape[list(LAYERS["wheel"])].mean(axis=0))
     return out
 
 

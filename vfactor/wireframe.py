@@ -24,7 +24,18 @@ __all__ = [
     "pascal3d_shapes",
     "template_shape",
     "preset",
+    "symmetrised",
 ]
+
+
+def symmetrised(points: np.ndarray) -> np.ndarray:
+    """Averages each keypoint with the mirror image of its left/right partner (exact symmetry about y = 0).
+
+    Args:
+        points: (..., 12, 3) keypoints in the body frame (one shape or a stack).
+    """
+    points = np.asarray(points, dtype=float)
+    return 0.5 * (points + points[..., MIRROR_PERMUTATION, :] * [1.0, -1.0, 1.0])
 
 
 class Wireframe:

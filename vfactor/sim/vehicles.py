@@ -18,10 +18,10 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
-from vfactor.keypoints import LAYERS, MIRROR_PERMUTATION
+from vfactor.keypoints import LAYERS
 from vfactor.shape_model import DISTANCE_PAIRS, HwcBounds, default_hwc_bounds
 from vfactor.vehicle_library import BODY_TYPES, library_ids, vehicle_library
-from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
+from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes, symmetrised
 
 __all__ = [
     "RANDOM",
@@ -63,11 +63,6 @@ class RandomShape:
     jitter: float = 0.03
     wheel_radius: float = 0.33
     max_tries: int = 100
-
-
-def symmetrised(points: np.ndarray) -> np.ndarray:
-    """Averages each keypoint with the mirror image of its left/right partner (exact symmetry about y = 0)."""
-    return 0.5 * (points + points[MIRROR_PERMUTATION] * [1.0, -1.0, 1.0])
 
 
 def random_wireframe(

@@ -24,7 +24,7 @@ from vfactor.keypoints import LAYERS
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes, symmetrised
 
 __all__ = ["ShapePrior", "ShapeModel", "HwcBounds", "default_shape_prior", "default_shape_model", "default_hwc_bounds",
-           "car_hwc_bounds", "pascal3d_wireframes", "PASCAL3D_WHEELBASE", "DISTANCE_PAIRS", "CLASS_HINTS", "ANY"]
+           "car_hwc_bounds", "resolve_shape_prior", "pascal3d_wireframes", "PASCAL3D_WHEELBASE", "DISTANCE_PAIRS", "CLASS_HINTS", "ANY"]
 
 #: All 66 keypoint pairs (i < j) whose distance the HWC distance factor bounds.
 DISTANCE_PAIRS: np.ndarray = np.array(list(combinations(range(12), 2)))
@@ -166,6 +166,13 @@ def _widen(lo, hi, margin, minimum):
     return np.stack([lo - pad, hi + pad], axis=-1)
 
 
+def _car_wireframes(exclude: frozenset = frozenset()) -> list[Wireframe]:
+    """The PASCAL3D+ cars (those not excluded) at wheelbases 2.4 and 3.1 m, and the presets."""
+    wireframes = [Wireframe(s * wb) for i, s in enumerate(pascal3d_shapes()) if f"pascal3d_{i}" not in exclude
+                  for wb in (2.4, 3.1)]
+    return wireframes + [p.wireframe() for p in PRESETS.values()]
+
+
 @lru_cache(maxsize=64)
 def default_hwc_bounds(exclude: frozenset = frozenset()) -> HwcBounds:
     """HWC bounds spanning every vehicle of the library, the PASCAL3D+ cars at wheelbases 2.4-3.1 m and the presets.
@@ -175,13 +182,11 @@ def default_hwc_bounds(exclude: frozenset = frozenset()) -> HwcBounds:
     still a vehicle to HWC.
 
     Args:
-        exclude: library ids left out (leave-one-model-out evaluation).
+        exclude: library ids and ``pascal3d_<index>`` ids left out (leave-one-model-out evaluation).
     """
     from vfactor.vehicle_library import vehicle_library
 
-    wireframes = [Wireframe(s * wb) for s in pascal3d_shapes() for wb in (2.4, 3.1)]
-    wireframes += [p.wireframe() for p in PRESETS.values()]
-    wireframes += [v.wireframe for v in vehicle_library().values() if v.id not in exclude]
+    wireframes = _car_wireframes(exclude) + [v.wireframe for v in vehicle_library().values() if v.id not in exclude]
     return HwcBounds.from_wireframes(wireframes, margin=0.5)
 
 
@@ -192,9 +197,7 @@ def car_hwc_bounds() -> HwcBounds:
     vfactor's own bounds until issue 10; the paper's CPO + HWC reproduction
     (:mod:`vfactor.baselines.cpo`) and the ``car_prior`` evaluation method keep them.
     """
-    wireframes = [Wireframe(s * wb) for s in pascal3d_shapes() for wb in (2.4, 3.1)]
-    wireframes += [p.wireframe() for p in PRESETS.values()]
-    return HwcBounds.from_wireframes(wireframes, margin=0.15)
+    return HwcBounds.from_wireframes(_car_wireframes(), margin=0.15)
 
 
 #: The component of a :class:`ShapeModel` that is no body type: the pooled prior.
@@ -308,6 +311,19 @@ class ShapeModel:
         value = -0.5 * (np.array([t[2] for t in terms]) - np.einsum("ki,ki->k", y, y)
                         + np.array([t[3] for t in terms]) + logdet_A)
         return {key: float(v) for key, v in zip(keys, value)}
+
+
+def resolve_shape_prior(prior: "ShapePrior | ShapeModel | None",
+                        bounds: HwcBounds | None = None) -> tuple["ShapeModel | None", "ShapePrior | None", HwcBounds]:
+    """What a solver's ``prior`` argument means: (the shape model or None, the single prior or None, the bounds).
+
+    ``None`` is :func:`default_shape_model`; a :class:`ShapeModel` is used as it
+    is; a :class:`ShapePrior` is that one prior for every vehicle. The bounds
+    default to the model's (the default model's with a single prior).
+    """
+    model = default_shape_model() if prior is None else (prior if isinstance(prior, ShapeModel) else None)
+    single = None if model is not None else prior
+    return model, single, bounds or (model or default_shape_model()).bounds
 
 
 #: Wheelbase (metres) at which the PASCAL3D+ car CAD models enter the body-type priors.

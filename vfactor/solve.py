@@ -37,7 +37,7 @@ from vfactor.observations import Detection, Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
 from vfactor.shape_evidence import NOISE_SCALE_RANGE, choose_body_type, linearise, noise_scale, shape_information
-from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, default_shape_model
+from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
 from vfactor.wireframe import Wireframe
 
 __all__ = ["SolveOptions", "solve_vehicle", "solve_observations", "solve_frame", "solve_scene", "keypoint_covariances"]
@@ -161,9 +161,8 @@ def solve_observations(
             ``"bus"`` or a body type), weighing the body types
             (:data:`vfactor.shape_model.CLASS_HINTS`); never a hard rule.
     """
-    model = default_shape_model() if prior is None else (prior if isinstance(prior, ShapeModel) else None)
-    first_prior = model.pooled if model is not None else prior
-    bounds = bounds or (model.bounds if model is not None else default_shape_model().bounds)
+    model, single, bounds = resolve_shape_prior(prior, bounds)
+    first_prior = model.pooled if model is not None else single
     keys = KeyScheme()
     n_seen = len(obs)
     if n_seen < options.min_observations:

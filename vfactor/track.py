@@ -47,7 +47,7 @@ from vfactor.observations import Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
 from vfactor.shape_evidence import track_shape
-from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, default_shape_model
+from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
 from vfactor.solve import SolveOptions, solve_observations
 from vfactor.wireframe import Wireframe
 
@@ -192,9 +192,7 @@ class Tracker:
                  keys: KeyScheme = KeyScheme()):
         self.cameras = cameras
         self.options = options
-        self.model = default_shape_model() if prior is None else (prior if isinstance(prior, ShapeModel) else None)
-        self.prior = None if self.model is not None else prior
-        self.bounds = bounds or (self.model or default_shape_model()).bounds
+        self.model, self.prior, self.bounds = resolve_shape_prior(prior, bounds)
         self.keys = keys
         self._terms = hwc_terms(options.solve.graph, self.bounds)
         self._tracks: dict[str, _TrackState] = {}
@@ -596,8 +594,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
         InputError: a detection still waits for the keypoint network.
     """
     scene.require_keypoints()
-    model = default_shape_model() if prior is None else (prior if isinstance(prior, ShapeModel) else None)
-    bounds = bounds or (model or default_shape_model()).bounds
+    model, prior, bounds = resolve_shape_prior(prior, bounds)
     order = frame_order(scene)
     options = dataclasses.replace(options, solve=options.solve.for_scene(scene), lag=None)
     keys = KeyScheme()

@@ -73,22 +73,25 @@ def linearise(graph: gtsam.NonlinearFactorGraph, projection: gtsam.NonlinearFact
     """
     layer_keys = keys.layer_keys(vehicle)
 
-    def hessian(factors, variables):
+    def hessian(linear: gtsam.GaussianFactorGraph, variables):
         ordering = gtsam.Ordering()
         for key in variables:
             ordering.push_back(key)
-        linear = gtsam.GaussianFactorGraph()
-        for factor in factors:
-            linear.push_back(factor.linearize(values))
         H, eta = linear.hessian(ordering)
         return H, np.ravel(eta)
 
+    def alone(factor: gtsam.GaussianFactor) -> gtsam.GaussianFactorGraph:
+        linear = gtsam.GaussianFactorGraph()
+        linear.push_back(factor)
+        return linear
+
     variables = [keys.pose_key(vehicle, frame), *layer_keys]
-    H, eta = hessian([graph.at(i) for i in range(graph.size())], variables)
-    Hp, eta_p = hessian([projection], variables)
-    A, b = projection.linearize(values).jacobian()  # keys [pose, wheel, light, roof], as ``variables``
+    H, eta = hessian(graph.linearize(values), variables)
+    projection_linear = projection.linearize(values)  # once: its Hessian and its whitened system
+    Hp, eta_p = hessian(alone(projection_linear), variables)
+    A, b = projection_linear.jacobian()  # keys [pose, wheel, light, roof], as ``variables``
     Hs, eta_s = np.zeros((42, 42)), np.zeros(42)
-    Hs[6:, 6:], eta_s[6:] = hessian([prior], layer_keys)
+    Hs[6:, 6:], eta_s[6:] = hessian(alone(prior.linearize(values)), layer_keys)
     shape = np.concatenate([values.atVector(k) for k in layer_keys])
     return Linearisation(H, eta, Hp, eta_p, Hs, eta_s, shape, np.asarray(A), np.ravel(b))
 

@@ -23,10 +23,10 @@ import dataclasses
 
 import numpy as np
 
-from vfactor.evaluation import NOISE_LEVELS, body_type_of, car_prior_bounds, held_out_model, noise_variant
+from vfactor.evaluation import NOISE_LEVELS, body_type_of, held_out_model, noise_variant
 from vfactor.graph import observations_from_detections
 from vfactor.metrics import pose_errors
-from vfactor.shape_model import default_shape_prior
+from vfactor.shape_model import car_hwc_bounds, default_shape_prior
 from vfactor.sim import load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations
 
@@ -37,7 +37,7 @@ def variants(model):
         "default": (estimated, model, model.bounds),
         "types_only": (estimated, dataclasses.replace(model, pooled_probability=0.0, _variants={}), model.bounds),
         "pooled": (estimated, model.pooled, model.bounds),
-        "car_prior": (fixed, default_shape_prior(), car_prior_bounds()),
+        "car_prior": (fixed, default_shape_prior(), car_hwc_bounds()),
     }
 
 

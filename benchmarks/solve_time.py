@@ -26,7 +26,7 @@ import time
 import gtsam
 import numpy as np
 
-from vfactor.evaluation import NOISE_LEVELS, car_prior_bounds, noise_variant
+from vfactor.evaluation import NOISE_LEVELS, noise_variant
 from vfactor.graph import (
     GraphConfig,
     build_vehicle_graph,
@@ -37,7 +37,7 @@ from vfactor.graph import (
 )
 from vfactor.init import best_candidates
 from vfactor.keys import KeyScheme
-from vfactor.shape_model import default_shape_prior
+from vfactor.shape_model import car_hwc_bounds, default_shape_prior
 from vfactor.sim import load_scenario, simulate
 from vfactor.solve import SolveOptions, _optimise, solve_vehicle
 from vfactor.wireframe import Wireframe
@@ -93,7 +93,7 @@ def main(argv=None) -> dict:
             cases.append((dets, obs, start))
     times = {name: [] for name in ("native", "native_build_lm", "vfactor_lm", "vfactor_lm_no_hwc", "vfactor_lm_lazy", "vfactor_build_lm",
                                    "vfactor_solve_vehicle", "car_prior_solve_vehicle")}
-    car_options, car_bounds = SolveOptions(estimate_noise=False), car_prior_bounds()
+    car_options, car_bounds = SolveOptions(estimate_noise=False), car_hwc_bounds()
     iterations = {"native": [], "vfactor_lm": []}
     no_hwc = GraphConfig(hwc="off")
     always = GraphConfig(hwc="always")

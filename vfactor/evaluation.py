@@ -5,10 +5,10 @@
 metrics side by side and :func:`body_type_table` the same per body type.
 ``vfactor eval`` is the command.
 
-Leave-one-model-out: a simulated library vehicle is solved with the shape
-model learnt without it (:func:`held_out_model`), so that no figure here comes
-from a vehicle the prior has seen. Presets and PASCAL3D+ cars are never in
-the library's priors.
+Leave-one-model-out: a simulated library vehicle or PASCAL3D+ car is solved
+with the shape model (priors and HWC bounds) learnt without it
+(:func:`held_out_model`), so that no figure here comes from a vehicle the
+prior has seen. The presets are never in the shape model.
 """
 
 from __future__ import annotations
@@ -21,14 +21,12 @@ import numpy as np
 from vfactor.baselines import known_shape, pnp, triangulation
 from vfactor.graph import observations_from_detections
 from vfactor.metrics import pose_errors
-from vfactor.shape_model import (HwcBounds, ShapeModel, car_hwc_bounds, default_shape_model, default_shape_prior,
-                                 pascal3d_wireframes)
+from vfactor.shape_model import ShapeModel, car_hwc_bounds, default_shape_model, default_shape_prior, pascal3d_wireframes
 from vfactor.sim import Scenario, Simulation, load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations
 from vfactor.vehicle_library import BODY_TYPES, vehicle_library
 
 __all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held_out_model", "held_out_scene_model",
-           "car_prior_bounds",
            "compare_methods", "summarise_methods", "accuracy_table", "keypoint_table", "body_type_table",
            "noise_variant", "run_accuracy", "compare_tracking", "tracking_table", "final_shape_errors",
            "shape_over_noise_draws", "shape_draws_table"]
@@ -62,21 +60,14 @@ def body_type_of(model: str) -> str:
     return PRESET_BODY_TYPES.get(model, "pascal3d")
 
 
-def held_out_model(model: str) -> ShapeModel:
-    """The shape model learnt without the vehicle ``model`` (a library id or ``pascal3d_<index>``; presets are never in it)."""
-    held_out = model in vehicle_library() or model in pascal3d_wireframes()
-    return default_shape_model(frozenset({model}) if held_out else frozenset())
+def held_out_model(*models: str) -> ShapeModel:
+    """The shape model learnt without the vehicle ``models`` (library ids or ``pascal3d_<index>``; presets are never in it)."""
+    return default_shape_model(frozenset(m for m in models if m in vehicle_library() or m in pascal3d_wireframes()))
 
 
 def held_out_scene_model(sim: Simulation) -> ShapeModel:
     """The shape model learnt without any vehicle model of the simulation (for tracks of several vehicles)."""
-    models = {v.preset for frame in sim.truth for v in frame.values()}
-    return default_shape_model(frozenset(m for m in models if m in vehicle_library() or m in pascal3d_wireframes()))
-
-
-def car_prior_bounds() -> HwcBounds:
-    """The HWC bounds as they were before the body-type model (:func:`vfactor.shape_model.car_hwc_bounds`)."""
-    return car_hwc_bounds()
+    return held_out_model(*{v.preset for frame in sim.truth for v in frame.values()})
 
 
 def noise_variant(scenario: Scenario, outlier_rate: float | None = None, swap_rate: float | None = None,
@@ -114,7 +105,7 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
                 if method == "factor_graph":
                     result = solve_observations(obs, options, vid, held_out_model(truth.preset), hints=hints)
                 elif method == "car_prior":
-                    result = solve_observations(obs, car_options, vid, default_shape_prior(), car_prior_bounds())
+                    result = solve_observations(obs, car_options, vid, default_shape_prior(), car_hwc_bounds())
                 elif method == "triangulation":
                     result = triangulation(obs, vid)
                 elif method == "pnp":

@@ -148,11 +148,15 @@ class _TrackState:
     young_frames: list = field(default_factory=list)
     multiview_frames: int = 0  # frames two cameras saw
     reanchored: bool = False
-    prior: ShapePrior | None = None  # the track's shape prior (its body type's)
+    prior: ShapePrior | None = None  # the track's shape prior (the mixture its frames chose, Tracker._rechoose)
     body_type: str | None = None
     body_type_probability: float | None = None
     noise_scale: float = 1.0  # multiplies the detections' pixel sigmas
     notes: dict = field(default_factory=dict)  # pose key -> message of every result of it (a new segment)
+
+    def restart(self) -> None:
+        """Drops the smoother and the young-track state: the track starts again from its next solvable frame."""
+        self.smoother, self.poses, self.hwc_added, self.young, self.young_frames = None, [], False, False, []
 
 
 def frame_order(scene: Scene) -> list[int]:
@@ -231,7 +235,7 @@ class Tracker:
                 failed = True
             track = self._tracks.get(vid)
             if failed and track is not None:  # restart this track from its next solvable frame
-                track.smoother, track.poses, track.hwc_added, track.young, track.young_frames = None, [], False, False, []
+                track.restart()
         return FrameResult(frame.t, vehicles)
 
     def estimates(self, covariance: bool = False) -> dict[tuple[int, str], VehicleResult]:
@@ -294,10 +298,7 @@ class Tracker:
                                    self.model or self.prior, self.bounds)
         if not first.ok:
             return first
-        track.prior = None
         self._rechoose(track, [first])  # the prior and noise scale the frame's own solve used
-        if track.prior is None:  # no model and no prior given
-            track.prior = self.prior
         track.smoother = self._new_smoother()
         track.poses, track.hwc_added = [], False
         key = self.keys.pose_key(track.index, frame_index)
@@ -374,10 +375,9 @@ class Tracker:
         track.frames_seen += 1
         gap = t - track.poses[-1][1] if track.smoother is not None and track.poses else 0.0
         if gap > self.options.max_gap:  # beyond the motion model: a new segment, from a new smoother
-            track.smoother, track.poses, track.hwc_added, track.young, track.young_frames = None, [], False, False, []
+            track.restart()
+            track.notes[self.keys.pose_key(track.index, frame_index)] = _segment_message(gap, self.options.max_gap)
         if track.smoother is None:
-            if gap > self.options.max_gap:
-                track.notes[self.keys.pose_key(track.index, frame_index)] = _segment_message(gap, self.options.max_gap)
             return self._start(track, frame_index, t, obs)
         raw, obs = obs, obs.scaled(track.noise_scale)
         options = self.options.solve

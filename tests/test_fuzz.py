@@ -213,19 +213,23 @@ def check_outcome(code: int, err: str, scene_text: str, out: Path) -> str:
 
 
 # ----------------------------------------------------------------------------- properties
+def _read_mutated(data, base: dict, name: str, read):
+    """``read`` of a mutated ``base`` file: (the first mutation's kind, "loaded" or "SceneError", what was read or None)."""
+    text, kind = mutate(data.draw, base)
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / name
+        path.write_text(text)
+        try:
+            return kind, "loaded", read(path)
+        except InputError as exc:
+            assert "\n" not in exc.field
+            return kind, "SceneError", None
+
+
 @fuzzing.examples("scene_reader")
 @given(st.data())
 def test_scene_reader_returns_or_raises_a_scene_error(data):
-    text, kind = mutate(data.draw, BASE_SCENE)
-    with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "scene.json"
-        path.write_text(text)
-        try:
-            load_scene(path)
-            outcome = "loaded"
-        except InputError as exc:
-            assert "\n" not in exc.field
-            outcome = "SceneError"
+    kind, outcome, _ = _read_mutated(data, BASE_SCENE, "scene.json", load_scene)
     STATS["scene_reader"][outcome] += 1
     STATS["scene_reader (by first mutation)"][f"{kind}: {outcome}"] += 1
 
@@ -258,16 +262,9 @@ def test_cli_track_on_mutated_scenes(data):
 @fuzzing.examples("result_reader")
 @given(st.data())
 def test_result_reader_returns_or_raises_a_scene_error(data):
-    text, kind = mutate(data.draw, BASE_RESULT)
-    with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "result.json"
-        path.write_text(text)
-        try:
-            frames = load_results(path)
-            assert all(np.all(np.isfinite(v.world_T_vehicle.matrix())) for f in frames for v in f.vehicles if v.ok)
-            outcome = "loaded"
-        except InputError:
-            outcome = "SceneError"
+    _, outcome, frames = _read_mutated(data, BASE_RESULT, "result.json", load_results)
+    if frames is not None:
+        assert all(np.all(np.isfinite(v.world_T_vehicle.matrix())) for f in frames for v in f.vehicles if v.ok)
     STATS["result_reader"][outcome] += 1
 
 

@@ -20,14 +20,15 @@ import numpy as np
 
 from vfactor.baselines import known_shape, pnp, triangulation
 from vfactor.graph import observations_from_detections
-from vfactor.metrics import pose_errors
+from vfactor.metrics import keypoint_nees, nees_summary, pose_errors, pose_nees
 from vfactor.shape_model import ShapeModel, car_hwc_bounds, default_shape_model, default_shape_prior, pascal3d_wireframes
 from vfactor.sim import Scenario, Simulation, load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations
 from vfactor.vehicle_library import BODY_TYPES, vehicle_library
 
 __all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held_out_model", "held_out_scene_model",
-           "compare_methods", "summarise_methods", "accuracy_table", "keypoint_table", "body_type_table",
+           "compare_methods", "covariance_errors", "summarise_methods", "accuracy_table", "keypoint_table",
+           "body_type_table", "consistency_table",
            "noise_variant", "run_accuracy", "compare_tracking", "tracking_table", "final_shape_errors",
            "shape_over_noise_draws", "shape_draws_table"]
 
@@ -118,8 +119,41 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
                 if result.ok:
                     row.update(pose_errors(result.world_T_vehicle, result.keypoints_world, truth.world_T_vehicle,
                                            truth.keypoints_world))
+                    row.update(covariance_errors(result, truth))
                 rows[method].append(row)
     return rows
+
+
+def covariance_errors(result, truth) -> dict:
+    """``pose_nees`` and ``keypoint_nees`` (12,) of an estimate with covariances against its truth; {} without them."""
+    out = {}
+    if result.pose_covariance is not None:
+        out["pose_nees"] = pose_nees(result.world_T_vehicle, result.pose_covariance, truth.world_T_vehicle)
+    if result.keypoint_covariances_world is not None:
+        out["keypoint_nees"] = keypoint_nees(result.keypoints_world, result.keypoint_covariances_world,
+                                             truth.keypoints_world)
+    return out
+
+
+def consistency_table(rows: dict[str, list[dict]], method: str = "factor_graph", by: str = "body_type") -> str:
+    """Per body type (or another row field ``by``): how consistent ``method``'s covariances are.
+
+    The mean NEES of the pose (6 dof) and of each world keypoint (3 dof), as a
+    ratio to its dimension (1 is consistent), and the share of cases under
+    the chi2 95 % bound (95 % is consistent); docs/results.md says how to read it.
+    """
+    lines = [f"| {by.replace('_', ' ')} | vehicles | pose NEES (mean, x 6) | pose under chi2 95 % | "
+             "keypoint NEES (mean, x 3) | keypoints under chi2 95 % |", "| --- | --- | --- | --- | --- | --- |"]
+    mine = [r for r in rows[method] if "pose_nees" in r]
+    groups = [g for g in (*BODY_TYPES, "pascal3d") if any(r.get(by) == g for r in mine)] if by == "body_type" else \
+        sorted({r.get(by) for r in mine}, key=str)
+    for group in [*groups, "all"]:
+        rs = [r for r in mine if group == "all" or r.get(by) == group]
+        pose = nees_summary([r["pose_nees"] for r in rs], 6)
+        kp = nees_summary([r["keypoint_nees"] for r in rs if "keypoint_nees" in r], 3)
+        lines.append(f"| {group} | {pose['count']} | {pose['mean']:.2f} ({pose['ratio']:.2f}x) | "
+                     f"{100 * pose['under_95']:.1f} % | {kp['mean']:.2f} ({kp['ratio']:.2f}x) | {100 * kp['under_95']:.1f} % |")
+    return "\n".join(lines)
 
 
 def summarise_methods(rows: dict[str, list[dict]]) -> dict[str, dict]:
@@ -265,6 +299,7 @@ def compare_tracking(sim: Simulation, options=None, lag: float = 0.5) -> dict:
                     truth = sim.truth[f][v.id]
                     row.update(pose_errors(v.world_T_vehicle, v.keypoints_world, truth.world_T_vehicle,
                                            truth.keypoints_world))
+                    row.update(covariance_errors(v, truth))
                 rows.append(row)
         errors[method] = rows
         shapes[method] = {vid: 100 * float(np.linalg.norm(e, axis=1).mean())
@@ -280,8 +315,8 @@ def tracking_table(comparison: dict) -> str:
     """Markdown tables of :func:`compare_tracking`: errors per method, with ratios to frame-by-frame."""
     base = summarise_methods({"frame_by_frame": comparison["errors"]["frame_by_frame"]})["frame_by_frame"]
     lines = [
-        "| method | poses | failed | rotation (deg) | translation (cm) | keypoint (cm) | vs frame-by-frame (rot / trans) | final shape error (cm) | time (s) |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| method | poses | failed | rotation (deg) | translation (cm) | keypoint (cm) | vs frame-by-frame (rot / trans) | final shape error (cm) | pose NEES (x 6) / under chi2 95 % | time (s) |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for method, rows in comparison["errors"].items():
         s = summarise_methods({method: rows})[method]
@@ -289,8 +324,10 @@ def tracking_table(comparison: dict) -> str:
         shape_text = ", ".join(f"{vid} {e:.1f}" for vid, e in sorted(shape.items()))
         ratio = "-" if method == "frame_by_frame" else (
             f"{s['rotation_deg'] / base['rotation_deg']:.2f}x / {s['translation_cm'] / base['translation_cm']:.2f}x")
+        nees = nees_summary([r["pose_nees"] for r in rows if "pose_nees" in r], 6)
+        nees_text = "-" if not nees["count"] else f"{nees['ratio']:.2f}x / {100 * nees['under_95']:.0f} %"
         lines.append(f"| {method} | {s['count']} | {s['failures']} | {s['rotation_deg']:.2f} | {s['translation_cm']:.2f} | "
-                     f"{s['keypoint_cm']:.2f} | {ratio} | {shape_text} | {comparison['seconds'][method]:.2f} |")
+                     f"{s['keypoint_cm']:.2f} | {ratio} | {shape_text} | {nees_text} | {comparison['seconds'][method]:.2f} |")
     cm, deg = comparison["isam2_vs_batch"]
     lines.append("")
     lines.append(f"iSAM2 (final) against batch: largest difference {cm:.2f} cm, {deg:.3f} deg.")

@@ -95,7 +95,7 @@ class GraphConfig:
     """
 
     relative_pixel_sigma: float = 0.03
-    min_pixel_sigma: float = 1.0
+    min_pixel_sigma: float = 0.25
     loss: RobustLoss = field(default_factory=RobustLoss)
     symmetry_sigma: float = 0.01
     body_frame_sigma: float = 1e-3

@@ -7,6 +7,12 @@
   sets, cm.
 - Keypoint error: per-keypoint 3D Euclidean distance, cm, and its mean.
 
+And the consistency of the covariances (:func:`pose_nees`, :func:`keypoint_nees`):
+the NEES, the error's squared Mahalanobis norm under the estimate's
+covariance, which a consistent estimator averages at the dimension (6 for a
+pose, 3 for a keypoint), with :data:`CHI2_95` of the cases under the chi2 95 %
+bound.
+
 Inputs are in metres and radians (vfactor's internal units); outputs in cm and
 degrees.
 """
@@ -27,7 +33,14 @@ __all__ = [
     "pose_errors",
     "summarise",
     "evaluate",
+    "CHI2_95",
+    "pose_nees",
+    "keypoint_nees",
+    "nees_summary",
 ]
+
+#: The 95 % points of chi2 with 3 and 6 degrees of freedom: a keypoint's and a pose's NEES bound.
+CHI2_95 = {3: 7.814727903251178, 6: 12.591587243743977}
 
 
 def _rotation_matrix(R, name: str) -> np.ndarray:
@@ -161,3 +174,36 @@ def evaluate(frame_results, truth) -> list[dict]:
                 row.update(pose_errors(v.world_T_vehicle, v.keypoints_world, t.world_T_vehicle, t.keypoints_world))
             rows.append(row)
     return rows
+
+
+def pose_nees(world_T_vehicle_est: gtsam.Pose3, pose_covariance, world_T_vehicle_true: gtsam.Pose3) -> float:
+    """Squared Mahalanobis norm of a pose error under the estimate's (6, 6) covariance.
+
+    The error is ``xi = Logmap(est^-1 true)``, rotation (rad) then translation
+    (m) in the estimate's body frame: the tangent convention of
+    :attr:`vfactor.result.VehicleResult.pose_covariance` (``true = est exp(xi)``).
+    """
+    P = np.asarray(pose_covariance, dtype=float)
+    if P.shape != (6, 6):
+        raise ValueError(f"pose_covariance: expected shape (6, 6), got {P.shape}")
+    xi = gtsam.Pose3.Logmap(world_T_vehicle_est.between(world_T_vehicle_true))
+    return float(xi @ np.linalg.solve(P, xi))
+
+
+def keypoint_nees(kp_world_est, keypoint_covariances_world, kp_world_true) -> np.ndarray:
+    """(N,) squared Mahalanobis norms of the world keypoint errors (N, 3) under their (N, 3, 3) covariances (m, m^2)."""
+    a, b = _points(kp_world_est, "kp_world_est"), _points(kp_world_true, "kp_world_true")
+    C = np.asarray(keypoint_covariances_world, dtype=float)
+    if a.shape != b.shape or C.shape != (len(a), 3, 3):
+        raise ValueError(f"keypoints and covariances: shapes {a.shape}, {b.shape}, {C.shape} do not match")
+    e = a - b
+    return np.einsum("ni,ni->n", e, np.linalg.solve(C, e[..., None])[..., 0])
+
+
+def nees_summary(values, dim: int) -> dict:
+    """Mean NEES, its ratio to ``dim`` and the share under the chi2 95 % bound of ``dim`` (3 or 6); NaN when empty."""
+    v = np.asarray([x for x in np.ravel(values) if np.isfinite(x)], dtype=float)
+    if not len(v):
+        return {"count": 0, "mean": math.nan, "ratio": math.nan, "under_95": math.nan}
+    return {"count": int(len(v)), "mean": float(v.mean()), "ratio": float(v.mean() / dim),
+            "under_95": float(np.mean(v < CHI2_95[dim]))}

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
+from vfactor.box import Box
 from vfactor.wireframe import Wireframe
 
 __all__ = ["Status", "VehicleResult", "FrameResult"]
@@ -43,6 +44,8 @@ class VehicleResult:
             :data:`vfactor.vehicle_library.BODY_TYPES`), None when a single
             prior was given.
         body_type_probability: its posterior probability, in [0, 1].
+        box: the vehicle's 3D box (:mod:`vfactor.box`), with the standard
+            deviations of its size, heading and centre where covariances were computed.
         extras: solver diagnostics; ``"body_type_posterior"``: body type ->
             probability; ``"noise_scale"``: the estimated pixel-noise scale
             (multiplies the detector's sigmas); ``"inlier_weights"``: (n,) robust-loss weight in
@@ -61,6 +64,7 @@ class VehicleResult:
     message: str = ""
     body_type: str | None = None
     body_type_probability: float | None = None
+    box: Box | None = None
     extras: dict = field(default_factory=dict)
 
     @property

@@ -17,6 +17,7 @@ docs/factors.md gives the maths.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import gtsam
 import numpy as np
@@ -24,7 +25,7 @@ import numpy as np
 from vfactor.keys import KeyScheme
 from vfactor.shape_model import ANY, ShapeModel, ShapePrior
 
-__all__ = ["Linearisation", "linearise", "noise_scale", "shape_information", "BodyTypeChoice", "choose_body_type",
+__all__ = ["Linearisation", "linearise", "noise_scale", "inlier_noise_scale", "covariance_inflation", "shape_information", "BodyTypeChoice", "choose_body_type",
            "TrackShape", "track_shape", "NOISE_SCALE_RANGE"]
 
 #: The noise scale is kept within this range: down to a thirtieth of the detector's nominal sigma, up to four times it
@@ -61,15 +62,19 @@ class Linearisation:
     rhs: np.ndarray | None = None
 
 
-def linearise(graph: gtsam.NonlinearFactorGraph, projection: gtsam.NonlinearFactor, prior: gtsam.NonlinearFactor,
-              values: gtsam.Values, keys: KeyScheme = KeyScheme(), vehicle: int = 0, frame: int = 0) -> Linearisation:
+def linearise(graph: gtsam.NonlinearFactorGraph, projection: gtsam.NonlinearFactor, prior: gtsam.NonlinearFactor | None,
+              values: gtsam.Values, keys: KeyScheme = KeyScheme(), vehicle: int = 0, frame: int = 0,
+              raw_projection: gtsam.NonlinearFactor | None = None) -> Linearisation:
     """The graph's, the projection factor's and the shape prior's dense Hessians at ``values``.
 
     Args:
         graph: the one-frame graph of one vehicle.
         projection: its keypoint projection factor.
-        prior: its shape prior factor (or an identical one).
+        prior: its shape prior factor (or an identical one); None: ``prior`` and ``prior_eta`` are zero.
         values: the solution.
+        raw_projection: the projection factor without its robust loss (``RobustLoss("none")``),
+            whose whitened system becomes ``jacobian`` and ``rhs`` (:func:`noise_scale` needs
+            it); None: that of ``projection``.
     """
     layer_keys = keys.layer_keys(vehicle)
 
@@ -89,9 +94,11 @@ def linearise(graph: gtsam.NonlinearFactorGraph, projection: gtsam.NonlinearFact
     H, eta = hessian(graph.linearize(values), variables)
     projection_linear = projection.linearize(values)  # once: its Hessian and its whitened system
     Hp, eta_p = hessian(alone(projection_linear), variables)
-    A, b = projection_linear.jacobian()  # keys [pose, wheel, light, roof], as ``variables``
+    system = projection_linear if raw_projection is None else raw_projection.linearize(values)
+    A, b = system.jacobian()  # keys [pose, wheel, light, roof], as ``variables``
     Hs, eta_s = np.zeros((42, 42)), np.zeros(42)
-    Hs[6:, 6:], eta_s[6:] = hessian(alone(prior.linearize(values)), layer_keys)
+    if prior is not None:
+        Hs[6:, 6:], eta_s[6:] = hessian(alone(prior.linearize(values)), layer_keys)
     shape = np.concatenate([values.atVector(k) for k in layer_keys])
     return Linearisation(H, eta, Hp, eta_p, Hs, eta_s, shape, np.asarray(A), np.ravel(b))
 
@@ -142,13 +149,151 @@ def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -
         p = float(np.trace(np.linalg.solve(H, w * lin.projection)))
         if predict:
             step = np.linalg.solve(H, other_eta + w * lin.projection_eta)
-            squared = np.sum((lin.jacobian @ step - lin.rhs).reshape(n, 2) ** 2, axis=1)
+            e = (lin.jacobian @ step - lin.rhs).reshape(n, 2)
+            X = np.linalg.solve(H, lin.jacobian.T).T.reshape(n, 2, -1)
+            M = w * np.einsum("nik,njk->nij", X, lin.jacobian.reshape(n, 2, -1))
+            M = 0.5 * (M + np.swapaxes(M, 1, 2))
+            usable = np.linalg.eigvalsh(M)[:, -1] < _MAX_LEVERAGE
+            if np.any(usable):
+                R = np.eye(2) - M[usable]
+                squared = np.einsum("ni,ni->n", e[usable], np.linalg.solve(R, e[usable][..., None])[..., 0])
+                base = float(np.median(squared)) / _CHI2_2_MEDIAN
+                scale = float(np.clip(np.sqrt(max(base, 0.0)), *NOISE_SCALE_RANGE))
+                if abs(scale - previous) <= 1e-3 * previous:
+                    break
+                continue
         base = float(np.median(squared)) / _CHI2_2_MEDIAN
         dof = max(2.0 * n - p, 2.0)
         scale = float(np.clip(np.sqrt(max(base * 2.0 * n / dof, 0.0)), *NOISE_SCALE_RANGE))
         if abs(scale - previous) <= 1e-3 * previous:
             break
     return scale, p
+
+
+def inlier_noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -> tuple[float, float, float]:
+    """The inliers' noise scale, studentised by the fit's leverages, and its degrees of freedom: the covariances' scale.
+
+    :func:`noise_scale` sets the balance of keypoints and prior for the
+    solve: a median over every keypoint, which gross errors widen, and so a
+    robust loss that does not lock onto one camera's keypoints. The
+    covariances need the inliers' own noise, unbiased and with the number of
+    degrees of freedom it rests on (:func:`covariance_inflation`): this. With ``e_i`` the 2-vector whitened residuals at the current sigmas and
+    ``M_i = A_i H(s)^-1 A_i^T / s^2`` the observation's 2x2 block of the hat
+    matrix (its leverage: how much of its own residual the fit absorbs;
+    ``A`` the projection factor's whitened Jacobian without the robust loss,
+    ``H(s) = H - H_proj + H_proj / s^2``), the studentised residuals
+    ``q_i = e_i^T (I - M_i)^-1 e_i`` are ``s^2 chi2(2)`` for inliers whatever
+    their leverage. The scale is then
+
+    1. ``s0^2 = median(q) / median chi2(2)`` (ignores up to half of the keypoints as outliers),
+    2. ``s^2 = mean(q_i : q_i < c s0^2) / E[chi2(2) | chi2(2) < c]``, ``c`` the 99 % point
+       of chi2(2): the inliers' mean square, twice as efficient as the median,
+
+    and its degrees of freedom ``nu = sum over those inliers of tr(I - M_i)``.
+    The residuals are those of the solution the graph would reach with the
+    sigmas times ``s``, predicted by one Gauss-Newton step from the
+    linearisation (``e(s) = e + A dx(s)``, ``dx(s) = H(s)^-1 eta(s)``): a fit
+    under the current sigmas, where the prior weighs more, overstates a small
+    noise. ``s``, the leverages and the residuals are iterated to their fixed
+    point. Observations the fit absorbs whole (leverage above 0.95) say
+    nothing about the noise and are left out. Clipped to :data:`NOISE_SCALE_RANGE`.
+
+    Args:
+        whitened: (n, 2) whitened residuals of the keypoints at the solution, current sigmas,
+            before the robust loss.
+        lin: the linearisation at the solution (current sigmas); its ``jacobian`` and ``rhs``
+            must be those of the projection factor without the robust loss.
+        iterations: at most this many fixed-point iterations (they stop when ``s`` moves by
+            less than 0.1 %).
+
+    Returns:
+        (scale, p, nu): the noise scale (multiplies the sigmas), the effective number of
+        parameters at that scale (the hat matrix's trace, ``tr(H_proj(s) H(s)^-1)``) and
+        the degrees of freedom of the scale's estimate (0 when nothing was left to estimate
+        it from: the scale is then 1).
+
+    Raises:
+        numpy.linalg.LinAlgError: the residuals or the linearisation are not finite.
+    """
+    n = len(whitened)
+    if n == 0:
+        return 1.0, 0.0, 0.0
+    if not (np.all(np.isfinite(whitened)) and np.all(np.isfinite(lin.total)) and np.all(np.isfinite(lin.projection))):
+        raise np.linalg.LinAlgError("the residuals or the linearisation are not finite")
+    other = lin.total - lin.projection
+    other_eta = lin.total_eta - lin.projection_eta
+    have_jacobian = lin.jacobian is not None and lin.jacobian.shape[0] == 2 * n
+    A = lin.jacobian.reshape(n, 2, -1) if have_jacobian else None
+    e = np.asarray(whitened, dtype=float)
+    scale, p, nu = 1.0, 0.0, 0.0
+    for _ in range(iterations):
+        previous = scale
+        w = 1.0 / scale**2
+        H = other + w * lin.projection
+        p = float(np.trace(np.linalg.solve(H, w * lin.projection)))
+        if have_jacobian:
+            step = np.linalg.solve(H, other_eta + w * lin.projection_eta)
+            e = whitened + np.einsum("nij,j->ni", A, step)
+            X = np.linalg.solve(H, lin.jacobian.T).T.reshape(n, 2, -1)  # (A H^-1) per observation
+            M = w * np.einsum("nik,njk->nij", X, A)  # leverage blocks
+        else:  # no Jacobian: every observation takes an equal share of the parameters
+            M = np.broadcast_to(np.eye(2) * min(p / (2.0 * n), 0.95), (n, 2, 2))
+        estimate = _studentised_scale(e, M)
+        if estimate is None:
+            return 1.0, p, 0.0
+        squared, nu = estimate
+        scale = float(np.clip(np.sqrt(squared), *NOISE_SCALE_RANGE))
+        if abs(scale - previous) <= 1e-3 * previous:
+            break
+    return scale, p, nu
+
+
+#: Leverage (the larger eigenvalue of an observation's hat block) above which it says nothing about the noise.
+_MAX_LEVERAGE = 0.95
+_CHI2_2_99 = 2.0 * np.log(100.0)  # 99 % point of chi2(2)
+_CHI2_2_TRUNCATED_MEAN = 2.0 - _CHI2_2_99 * 0.01 / 0.99  # E[chi2(2) | chi2(2) < its 99 % point]
+
+
+def covariance_inflation(dof: float, dim: int = 6, level: float = 0.95) -> float:
+    """What a covariance computed at an estimated noise scale is multiplied by, so that its confidence regions hold.
+
+    With the scale estimated from ``nu`` degrees of freedom, a ``dim``-vector
+    error's squared Mahalanobis norm at the estimated scale is ``dim F(dim, nu)``,
+    not ``chi2(dim)``: heavier-tailed, most of all for few keypoints. The
+    factor ``dim F_level(dim, nu) / chi2_level(dim)`` makes the covariance's
+    ``chi2_level`` region the error's ``level`` region (by default the 95 %
+    region of a pose); its mean squared norm is then ``nu / (nu - 2)`` times
+    ``dim`` over that factor, about 0.9 ``dim`` (docs/factors.md). ``nu`` is
+    taken as at least 3; 0 (no estimate) gives 1.
+    """
+    if not dof > 0:
+        return 1.0
+    return _f_over_chi2(dim, round(max(float(dof), 3.0), 1), level)
+
+
+@lru_cache(maxsize=1024)
+def _f_over_chi2(dim: int, nu: float, level: float) -> float:
+    from scipy.special import chdtri, fdtri  # scipy.special only here: it is not needed to import vfactor
+
+    return float(dim * fdtri(dim, nu, level) / chdtri(dim, 1.0 - level))
+
+
+def _studentised_scale(e: np.ndarray, M: np.ndarray) -> tuple[float, float] | None:
+    """(s^2, nu) from (n, 2) residuals and their (n, 2, 2) hat blocks (:func:`noise_scale`); None when none is usable."""
+    M = 0.5 * (M + np.swapaxes(M, 1, 2))
+    leverage = np.linalg.eigvalsh(M)[:, -1]
+    usable = leverage < _MAX_LEVERAGE
+    if not np.any(usable):
+        return None
+    R = np.eye(2) - M[usable]
+    q = np.einsum("ni,ni->n", e[usable], np.linalg.solve(R, e[usable][..., None])[..., 0])
+    s0 = float(np.median(q)) / _CHI2_2_MEDIAN
+    if not s0 > 0:
+        return None
+    inlier = q < _CHI2_2_99 * s0
+    squared = float(np.mean(q[inlier])) / _CHI2_2_TRUNCATED_MEAN
+    nu = float(np.trace(R[inlier], axis1=1, axis2=2).sum())
+    return squared, nu
 
 
 def shape_information(lin: Linearisation, projection_factor: float = 1.0) -> tuple[np.ndarray, np.ndarray]:

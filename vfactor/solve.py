@@ -15,10 +15,12 @@ from typing import Callable
 import gtsam
 import numpy as np
 
+from vfactor.box import vehicle_box
 from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.ground_plane import GroundPlane
-from vfactor.factors.projection import KeypointObservations, whitened_residuals
+from vfactor.factors.projection import KeypointObservations, projection_factor, whitened_residuals
+from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_prior import shape_prior_factor
 from vfactor.graph import (
     GraphConfig,
@@ -36,11 +38,13 @@ from vfactor.keys import KeyScheme
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
-from vfactor.shape_evidence import NOISE_SCALE_RANGE, choose_body_type, linearise, noise_scale, shape_information
+from vfactor.shape_evidence import (NOISE_SCALE_RANGE, choose_body_type, covariance_inflation, inlier_noise_scale, linearise,
+                                    noise_scale, shape_information)
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
 from vfactor.wireframe import Wireframe
 
-__all__ = ["SolveOptions", "solve_vehicle", "solve_observations", "solve_frame", "solve_scene", "keypoint_covariances"]
+__all__ = ["SolveOptions", "solve_vehicle", "solve_observations", "solve_frame", "solve_scene", "pose_shape_covariance",
+           "keypoint_covariances"]
 
 
 @dataclass(frozen=True)
@@ -99,20 +103,26 @@ class SolveOptions:
         return params
 
 
+def pose_shape_covariance(marginals: gtsam.Marginals, keys: KeyScheme, vehicle: int = 0, frame: int = 0) -> np.ndarray:
+    """(42, 42) joint marginal covariance of a vehicle's pose (6, GTSAM tangent) and shape (wheel, light, roof: 36)."""
+    key_vector = gtsam.KeyVector([keys.pose_key(vehicle, frame), *keys.layer_keys(vehicle)])
+    joint = marginals.jointMarginalCovariance(key_vector)
+    return np.block([[joint.at(a, b) for b in key_vector] for a in key_vector])
+
+
 def keypoint_covariances(
-    marginals: gtsam.Marginals, keys: KeyScheme, world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, vehicle: int = 0, frame: int = 0
+    marginals: gtsam.Marginals | np.ndarray, keys: KeyScheme, world_T_vehicle: gtsam.Pose3, wireframe: Wireframe,
+    vehicle: int = 0, frame: int = 0,
 ) -> np.ndarray:
     """(12, 3, 3) covariances of the world keypoints from the joint marginal of pose and shape.
 
     ``world_p_k = R vehicle_p_k + t``; with GTSAM's right perturbation,
     ``d world_p_k / d xi = [-R [p_k]x, R]`` and ``d world_p_k / d vehicle_p_k = R``.
+
+    Args:
+        marginals: the graph's marginals, or the (42, 42) :func:`pose_shape_covariance` itself.
     """
-    pose_key = keys.pose_key(vehicle, frame)
-    layer_keys = keys.layer_keys(vehicle)
-    key_vector = gtsam.KeyVector([pose_key, *layer_keys])
-    joint = marginals.jointMarginalCovariance(key_vector)
-    blocks = [[joint.at(a, b) for b in key_vector] for a in key_vector]
-    full = np.block(blocks)  # (42, 42): pose (6), wheel (12), light (12), roof (12)
+    full = marginals if isinstance(marginals, np.ndarray) else pose_shape_covariance(marginals, keys, vehicle, frame)
     R = world_T_vehicle.rotation().matrix()
     out = np.empty((12, 3, 3))
     for k, p in enumerate(wireframe.vehicle_p_keypoints):
@@ -234,14 +244,59 @@ def solve_observations(
     problem = _camera_disagreement(strict, strict_weights, mean, options)
     if problem:
         return VehicleResult(vehicle_id, Status.FAILED, message=problem)
+    joint = None
     if options.covariance:
         try:
-            marginals = gtsam.Marginals(graph, estimate)
-            result.pose_covariance = marginals.marginalCovariance(pose_key)
-            result.keypoint_covariances_world = keypoint_covariances(marginals, keys, world_T_vehicle, wireframe)
-        except RuntimeError as exc:
+            covariance_graph, inflation = _covariance_graph(graph, obs, estimate, keys, options)
+            joint = inflation * pose_shape_covariance(gtsam.Marginals(covariance_graph, estimate), keys)
+            result.extras["covariance_inflation"] = inflation
+            result.pose_covariance = joint[:6, :6].copy()
+            result.keypoint_covariances_world = keypoint_covariances(joint, keys, world_T_vehicle, wireframe)
+        except (RuntimeError, np.linalg.LinAlgError) as exc:
             result.message = f"covariance unavailable: {exc}"
+    result.box = vehicle_box(world_T_vehicle, wireframe, joint, result.extras.get("body_type_posterior"))
     return checked(result, [obs.cameras[c] for c in np.unique(obs.camera_index)], options.covariance)  # vfactor.sanity
+
+
+#: An observation whose whitened residual's square is beyond this (the 99 % point of chi2(2)) is an outlier to the
+#: covariance.
+INLIER_BOUND = 2.0 * np.log(100.0)
+
+
+def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservations, estimate: gtsam.Values,
+                      keys: KeyScheme, options: SolveOptions) -> tuple[gtsam.NonlinearFactorGraph, float]:
+    """The graph whose marginals, times the returned factor, are the result's covariances.
+
+    * **Inliers at full weight.** The Gauss-Newton information of a robust
+      loss down-weights every observation by its residual, good ones too (the
+      Cauchy loss gives a keypoint 1.5 sigmas off 63 % of its information), so
+      its covariances come out too wide where the keypoints are clean.
+      The projection factor is replaced by least squares on the inliers: the
+      observations whose whitened residual's square is within
+      :data:`INLIER_BOUND`, the others left out.
+    * **The inliers' noise.** With ``options.estimate_noise``, their sigmas
+      are the solve's times :func:`~vfactor.shape_evidence.inlier_noise_scale`,
+      and the factor is :func:`~vfactor.shape_evidence.covariance_inflation` of
+      its degrees of freedom (the Student t of an estimated scale); else the
+      solve's sigmas and 1.
+
+    ``graph`` is the solved graph: factor 0 its projection factor, with the
+    observations ``obs`` (the solve's sigmas). docs/factors.md gives the maths.
+    """
+    pose_key, layer_keys = keys.pose_key(), keys.layer_keys(0)
+    world_T_vehicle = estimate.atPose3(pose_key)
+    points = wireframe_from_values(estimate, keys).vehicle_p_keypoints
+    inflation = 1.0
+    if options.estimate_noise:
+        raw = projection_factor(pose_key, layer_keys, obs, RobustLoss("none"))
+        lin = linearise(graph, graph.at(0), None, estimate, keys, raw_projection=raw)
+        relative, _, dof = inlier_noise_scale(whitened_residuals(obs, world_T_vehicle, points), lin)
+        obs = obs.scaled(relative)
+        inflation = covariance_inflation(dof)
+    inlier = np.sum(whitened_residuals(obs, world_T_vehicle, points) ** 2, axis=1) < INLIER_BOUND
+    out = copy_graph(graph)
+    out.replace(0, projection_factor(pose_key, layer_keys, obs.subset(inlier), RobustLoss("none")))
+    return out, inflation
 
 
 def _refine(first, obs: KeypointObservations, options: SolveOptions, model: ShapeModel | None, first_prior: ShapePrior,

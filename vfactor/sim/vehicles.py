@@ -68,7 +68,7 @@ class RandomShape:
 def random_wireframe(
     rng: np.random.Generator, spec: RandomShape = RandomShape(), bounds: HwcBounds | None = None
 ) -> Wireframe:
-    """A random car: one PASCAL3D+ model times a random wheelbase, jittered, symmetrised.
+    """A random car: one PASCAL3D+ model times a random wheelbase, jittered (the hubs kept level), symmetrised.
 
     The shape is re-centred on its wheel-hub centroid and redrawn until it lies
     within the HWC ``bounds`` (default :func:`default_hwc_bounds`).
@@ -94,6 +94,8 @@ def _random_pascal3d(rng: np.random.Generator, spec: RandomShape, bounds: HwcBou
         wheelbase = rng.uniform(*spec.wheelbase)
         points = model * wheelbase + rng.normal(0.0, spec.jitter, size=model.shape)
         points = symmetrised(points)
+        if spec.jitter > 0:
+            points[:4, 2] = 0.0  # the jitter must not tilt the body frame: the hubs stay level (docs/conventions.md)
         points -= points[list(LAYERS["wheel"])].mean(axis=0)
         wireframe = Wireframe(points)
         if within_hwc_bounds(wireframe, bounds):

@@ -16,9 +16,11 @@ from __future__ import annotations
 import dataclasses
 import time
 
+import gtsam
 import numpy as np
 
 from vfactor.baselines import known_shape, pnp, triangulation
+from vfactor.box import BoxModel, default_box_model
 from vfactor.graph import observations_from_detections
 from vfactor.metrics import keypoint_nees, nees_summary, pose_errors, pose_nees
 from vfactor.shape_model import ShapeModel, car_hwc_bounds, default_shape_model, default_shape_prior, pascal3d_wireframes
@@ -27,7 +29,7 @@ from vfactor.solve import SolveOptions, solve_observations
 from vfactor.vehicle_library import BODY_TYPES, vehicle_library
 
 __all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held_out_model", "held_out_scene_model",
-           "compare_methods", "covariance_errors", "summarise_methods", "accuracy_table", "keypoint_table",
+           "compare_methods", "covariance_errors", "held_out_box_model", "true_box", "summarise_methods", "accuracy_table", "keypoint_table",
            "body_type_table", "consistency_table",
            "noise_variant", "run_accuracy", "compare_tracking", "tracking_table", "final_shape_errors",
            "shape_over_noise_draws", "shape_draws_table"]
@@ -104,7 +106,8 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
             for method in methods:
                 t0 = time.perf_counter()
                 if method == "factor_graph":
-                    result = solve_observations(obs, options, vid, held_out_model(truth.preset), hints=hints)
+                    result = solve_observations(obs, dataclasses.replace(options, box_model=held_out_box_model(
+                        truth.preset)), vid, held_out_model(truth.preset), hints=hints)
                 elif method == "car_prior":
                     result = solve_observations(obs, car_options, vid, default_shape_prior(), car_hwc_bounds())
                 elif method == "triangulation":
@@ -124,9 +127,40 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
     return rows
 
 
+def held_out_box_model(model: str) -> BoxModel:
+    """The box offsets learnt without the vehicle ``model`` (a library id; anything else is not in them)."""
+    return default_box_model(frozenset({model}) & frozenset(vehicle_library()))
+
+
+def true_box(truth) -> tuple[np.ndarray, gtsam.Pose3] | None:
+    """(size (3,), world_T_box) of a simulated library vehicle from its published dimensions; None for others."""
+    vehicle = vehicle_library().get(truth.preset)
+    if vehicle is None:
+        return None
+    d = vehicle.dimensions
+    front, rear = d.overhangs()
+    centre = np.array([0.5 * (front - rear), 0.0, 0.5 * d.height - d.wheel_radius])
+    return np.array([d.length, d.width, d.height]), truth.world_T_vehicle.compose(gtsam.Pose3(gtsam.Rot3(), centre))
+
+
 def covariance_errors(result, truth) -> dict:
-    """``pose_nees`` and ``keypoint_nees`` (12,) of an estimate with covariances against its truth; {} without them."""
+    """NEES of an estimate with covariances against its truth; {} without them.
+
+    ``pose_nees``, ``keypoint_nees`` (12,) and, for a library vehicle with a
+    box, ``box_size_cm`` (3,) errors of its length, width and height against
+    the published dimensions, ``box_size_z`` (3,) the same over their sigmas,
+    ``box_heading_z``.
+    """
     out = {}
+    box = getattr(result, "box", None)
+    truth_box = true_box(truth)
+    if box is not None and truth_box is not None:
+        out["box_size_cm"] = 100.0 * (box.size - truth_box[0])
+        if box.size_sigma is not None:
+            out["box_size_z"] = (box.size - truth_box[0]) / box.size_sigma
+            R = truth.world_T_vehicle.rotation().matrix()
+            error = (box.heading - np.arctan2(R[1, 0], R[0, 0]) + np.pi) % (2 * np.pi) - np.pi
+            out["box_heading_z"] = error / box.heading_sigma
     if result.pose_covariance is not None:
         out["pose_nees"] = pose_nees(result.world_T_vehicle, result.pose_covariance, truth.world_T_vehicle)
     if result.keypoint_covariances_world is not None:
@@ -143,7 +177,8 @@ def consistency_table(rows: dict[str, list[dict]], method: str = "factor_graph",
     the chi2 95 % bound (95 % is consistent); docs/results.md says how to read it.
     """
     lines = [f"| {by.replace('_', ' ')} | vehicles | pose NEES (mean, x 6) | pose under chi2 95 % | "
-             "keypoint NEES (mean, x 3) | keypoints under chi2 95 % |", "| --- | --- | --- | --- | --- | --- |"]
+             "keypoint NEES (mean, x 3) | keypoints under chi2 95 % | box L / W / H error (cm, mean abs) | "
+             "box L / W / H / heading within 1.96 sigma |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     mine = [r for r in rows[method] if "pose_nees" in r]
     groups = [g for g in (*BODY_TYPES, "pascal3d") if any(r.get(by) == g for r in mine)] if by == "body_type" else \
         sorted({r.get(by) for r in mine}, key=str)
@@ -151,8 +186,16 @@ def consistency_table(rows: dict[str, list[dict]], method: str = "factor_graph",
         rs = [r for r in mine if group == "all" or r.get(by) == group]
         pose = nees_summary([r["pose_nees"] for r in rs], 6)
         kp = nees_summary([r["keypoint_nees"] for r in rs if "keypoint_nees" in r], 3)
+        boxes = [r for r in rs if "box_size_z" in r]
+        if boxes:
+            size_error = " / ".join(f"{e:.1f}" for e in np.mean([np.abs(r["box_size_cm"]) for r in boxes], axis=0))
+            z = np.abs([[*r["box_size_z"], r["box_heading_z"]] for r in boxes])
+            within = " / ".join(f"{100 * w:.0f}" for w in np.mean(z < 1.96, axis=0)) + " %"
+        else:
+            size_error = within = "-"
         lines.append(f"| {group} | {pose['count']} | {pose['mean']:.2f} ({pose['ratio']:.2f}x) | "
-                     f"{100 * pose['under_95']:.1f} % | {kp['mean']:.2f} ({kp['ratio']:.2f}x) | {100 * kp['under_95']:.1f} % |")
+                     f"{100 * pose['under_95']:.1f} % | {kp['mean']:.2f} ({kp['ratio']:.2f}x) | {100 * kp['under_95']:.1f} % | "
+                     f"{size_error} | {within} |")
     return "\n".join(lines)
 
 

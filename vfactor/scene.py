@@ -42,6 +42,7 @@ from typing import Any
 import gtsam
 import numpy as np
 
+from vfactor.box import box_from_dict, box_to_dict
 from vfactor.camera import Camera, check_rigid_transform
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.errors import CalibrationError, SceneError
@@ -83,6 +84,7 @@ _VEHICLE_KEYS = (
     "keypoint_covariances_world",
     "body_type",
     "body_type_probability",
+    "box",
 )
 _OK_STATUSES = (Status.CONVERGED, Status.MAX_ITERATIONS)
 #: Relative tolerance of the symmetry checks of covariance matrices.
@@ -534,7 +536,9 @@ def results_to_dict(frames: list[FrameResult]) -> dict:
     (rad) then translation (m), body frame; null when not computed); ``status``
     (the :class:`~vfactor.result.Status` value); ``iterations``;
     ``final_error`` (null when NaN); ``message`` (when non-empty); and
-    ``keypoint_covariances_world`` (12x3x3, m^2) when computed. For a
+    ``keypoint_covariances_world`` (12x3x3, m^2) when computed; ``body_type``
+    and ``body_type_probability``; ``box`` (:func:`vfactor.box.box_to_dict`:
+    ``world_T_box``, ``size`` and their sigmas). For a
     ``degenerate`` or ``failed`` vehicle the pose, keypoint and covariance
     fields are null. A covariance with non-finite entries is written as null.
 
@@ -626,6 +630,8 @@ def _vehicle_to_dict(v: VehicleResult, path: str) -> dict:
         )
         if kp_cov is not None:
             out["keypoint_covariances_world"] = kp_cov
+        if v.box is not None:
+            out["box"] = box_to_dict(v.box)
     return out
 
 
@@ -657,6 +663,7 @@ def _vehicle_from_dict(data, path: str) -> VehicleResult:
         "keypoints_vehicle",
         "pose_covariance",
         "keypoint_covariances_world",
+        "box",
     )
     if not ok:
         for name in fields:
@@ -713,11 +720,13 @@ def _vehicle_from_dict(data, path: str) -> VehicleResult:
         if not 0.0 <= body_type_probability <= 1.0:
             raise SceneError(f"{path}.body_type_probability", f"expected a probability in [0, 1], got "
                                                               f"{body_type_probability}")
+    box = box_from_dict(entry["box"], f"{path}.box") if ok and entry.get("box") is not None else None
     return VehicleResult(
         id=vid,
         status=status,
         world_T_vehicle=pose,
         wireframe=wireframe,
+        box=box,
         pose_covariance=pose_covariance,
         keypoint_covariances_world=keypoint_covariances,
         iterations=int(iterations),

@@ -15,7 +15,7 @@ from typing import Callable
 import gtsam
 import numpy as np
 
-from vfactor.box import vehicle_box
+from vfactor.box import BoxModel, vehicle_box
 from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.ground_plane import GroundPlane
@@ -75,6 +75,8 @@ class SolveOptions:
         shape_information: keep the observations' information on the shape in
             the result's ``extras["shape_information"]`` (10 kB a vehicle), for
             :func:`vfactor.shape_evidence.track_shape` over several frames.
+        box_model: the offsets from the wireframe to the result's ``box``
+            (:class:`vfactor.box.BoxModel`); None: :func:`vfactor.box.default_box_model`.
     """
 
     graph: GraphConfig = field(default_factory=GraphConfig)
@@ -88,6 +90,7 @@ class SolveOptions:
     ground_plane: GroundPlane | None = None
     estimate_noise: bool = True
     shape_information: bool = False
+    box_model: BoxModel | None = None
 
     def for_scene(self, scene: Scene) -> "SolveOptions":
         """These options, with the scene's road plane when they name none and the scene gives one."""
@@ -254,7 +257,8 @@ def solve_observations(
             result.keypoint_covariances_world = keypoint_covariances(joint, keys, world_T_vehicle, wireframe)
         except (RuntimeError, np.linalg.LinAlgError) as exc:
             result.message = f"covariance unavailable: {exc}"
-    result.box = vehicle_box(world_T_vehicle, wireframe, joint, result.extras.get("body_type_posterior"))
+    result.box = vehicle_box(world_T_vehicle, wireframe, joint, result.extras.get("body_type_posterior"),
+                             options.box_model)
     return checked(result, [obs.cameras[c] for c in np.unique(obs.camera_index)], options.covariance)  # vfactor.sanity
 
 

@@ -25,6 +25,7 @@ from typing import Callable
 import gtsam
 import numpy as np
 
+from vfactor.box import vehicle_box
 from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomic_factor
@@ -277,9 +278,11 @@ class Tracker:
         return wireframe_from_values(estimate, self.keys, track.index)
 
     def _result(self, track, estimate, key, wireframe, covariance=None, message="") -> VehicleResult:
-        result = VehicleResult(track.id, Status.CONVERGED, world_T_vehicle=estimate.atPose3(key), wireframe=wireframe,
+        pose = estimate.atPose3(key)
+        result = VehicleResult(track.id, Status.CONVERGED, world_T_vehicle=pose, wireframe=wireframe,
                                pose_covariance=covariance, message=track.notes.get(key, message),
-                               body_type=track.body_type, body_type_probability=track.body_type_probability)
+                               body_type=track.body_type, body_type_probability=track.body_type_probability,
+                               box=_box(pose, wireframe, track.body_type))
         result.extras["noise_scale"] = track.noise_scale
         return result
 
@@ -652,11 +655,17 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
         wireframe = wireframe_from_values(estimate, keys, index)
         hit = optimizer.iterations() >= options.solve.max_iterations
         for i, _, key in posed:
+            pose = estimate.atPose3(key)
             results[(i, vid)] = VehicleResult(
-                vid, Status.MAX_ITERATIONS if hit else Status.CONVERGED, world_T_vehicle=estimate.atPose3(key),
+                vid, Status.MAX_ITERATIONS if hit else Status.CONVERGED, world_T_vehicle=pose,
                 wireframe=wireframe, pose_covariance=marginals.marginalCovariance(key) if marginals else None,
                 iterations=optimizer.iterations(), final_error=graph.error(estimate), message=segments.get(i, ""),
-                body_type=body_type, body_type_probability=probability)
+                body_type=body_type, body_type_probability=probability, box=_box(pose, wireframe, body_type))
             results[(i, vid)].extras["noise_scale"] = scale
     return [FrameResult(f.t, [checked(results[(i, vid)], _seen_by(f, vid, scene.cameras), options.covariance)
                               for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
+
+
+def _box(world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, body_type: str | None):
+    """A track's box, without sigmas (the tracker keeps the poses' covariances only)."""
+    return vehicle_box(world_T_vehicle, wireframe, None, {body_type: 1.0} if body_type else None)

@@ -104,24 +104,30 @@ def linearise(graph: gtsam.NonlinearFactorGraph, projection: gtsam.NonlinearFact
 
 
 def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -> tuple[float, float]:
-    """Robust scale of the whitened keypoint residuals, corrected for the degrees of freedom of the fit.
+    """Robust scale of the whitened keypoint residuals, studentised by the fit's leverages: the solve's noise scale.
 
-    With ``e_i`` the 2-vector whitened residuals at the nominal sigmas,
-    ``s^2 = median |e_i|^2 / median chi2(2) * 2n / (2n - p(s))``, where
-    ``p(s) = tr(H_proj(s) H(s)^-1)`` is the number of parameters the keypoints
-    determine at that scale (the trace of the hat matrix: 6 for the pose plus
-    the part of the shape that the prior does not hold; ``H_proj(s) = H_proj / s^2``).
-    The residuals are those of the solution the graph would reach with the
+    With ``e_i`` the 2-vector whitened residuals at the current sigmas and
+    ``M_i = A_i H(s)^-1 A_i^T / s^2`` observation i's 2x2 block of the hat
+    matrix, ``s^2 = median(e_i^T (I - M_i)^-1 e_i) / median chi2(2)``: the
+    studentised residuals are ``s^2 chi2(2)`` whatever each observation's
+    leverage. ``p(s) = tr(H_proj(s) H(s)^-1) = sum tr(M_i)`` is the number of
+    parameters the keypoints determine (6 for the pose plus the part of the
+    shape the prior does not hold; ``H_proj(s) = H_proj / s^2``). The
+    residuals are those of the solution the graph would reach with the
     sigmas times ``s``, predicted by one Gauss-Newton step from the
     linearisation (``e(s) = A dx(s) - b``, ``dx(s) = H(s)^-1 eta(s)``): a fit
-    under the nominal sigmas, where the prior weighs more, overstates a small
-    noise. ``s``, ``p`` and the residuals are iterated to their fixed point.
-    The median ignores outliers (up to half of the keypoints). Clipped to
-    :data:`NOISE_SCALE_RANGE`.
+    under the current sigmas, where the prior weighs more, overstates a small
+    noise. ``s``, the leverages and the residuals are iterated to their fixed
+    point. The median ignores outliers (up to half of the keypoints), and gross
+    errors widen it, which keeps the solve's robust loss from locking onto
+    one camera (the covariances use :func:`inlier_noise_scale`). Observations
+    with a leverage above 0.95 are left out; without a Jacobian (or none left)
+    every residual is divided by the average share ``2n / (2n - p)``. Clipped
+    to :data:`NOISE_SCALE_RANGE`.
 
     Args:
-        whitened: (n, 2) whitened residuals of the keypoints at the solution, nominal sigmas.
-        lin: the linearisation at the solution (nominal sigmas).
+        whitened: (n, 2) whitened residuals of the keypoints at the solution, current sigmas.
+        lin: the linearisation at the solution (current sigmas).
         iterations: at most this many fixed-point iterations of ``s``, ``p`` and the
             residuals (they stop when ``s`` moves by less than 0.1 %).
 

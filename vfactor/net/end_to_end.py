@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from vfactor.evaluation import (accuracy_table, body_type_table, compare_methods, compare_tracking, summarise_methods,
-                                tracking_table)
+from vfactor.evaluation import (accuracy_table, body_type_table, compare_methods, compare_tracking, consistency_table,
+                                summarise_methods, tracking_table)
 from vfactor.net.evaluate import pck
 from vfactor.net.pipeline import detect_scene
 from vfactor.sim import load_scenario, simulate
@@ -135,7 +135,10 @@ def images_report(evaluation: dict) -> str:
         "factor_graph_simulated_noise: the factor graph on the simulator's keypoints (paper-like noise) of the "
         "same vehicles, for comparison with the network's keypoints.\n"
         + (f"\nPer body type, from the network's keypoints (each vehicle solved with a shape model learnt without "
-           f"it):\n\n{body_type_table(evaluation['rows'])}\n" if evaluation.get("rows") else "")
+           f"it):\n\n{body_type_table(evaluation['rows'])}\n\nConsistency of the factor graph's covariances from "
+           f"the network's keypoints and their heatmap covariances (NEES; consistent: 1.00x and 95 %):\n\n"
+           f"{consistency_table(evaluation['rows'])}\n\nThe same from the simulator's keypoints:\n\n"
+           f"{consistency_table(evaluation['rows'], 'factor_graph_simulated_noise')}\n" if evaluation.get("rows") else "")
         + (f"\nTracking from the network's keypoints:\n\n{tracking_table(evaluation['tracking'])}\n"
            if evaluation.get("tracking") else "")
     )

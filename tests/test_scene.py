@@ -777,3 +777,38 @@ def test_bad_box_only_detection(tmp_path, edit, field, message):
     with pytest.raises(SceneError) as info:
         scene_from_dict(data, base_dir=tmp_path)
     assert info.value.field == field and message in str(info.value)
+
+
+def test_boxes_and_covariance_kinds_round_trip_through_the_result_file(tmp_path):
+    """A solved frame's boxes (with sigmas) and a fixed-lag track's covariance kinds survive save and load."""
+    from vfactor.sim import simulate
+    from vfactor.solve import solve_scene
+    from vfactor.track import TrackOptions, track_scene
+
+    sim = simulate("intersection_2cam_track", seed=0, num_frames=6)
+    solved = solve_scene(sim.scene)
+    tracked = track_scene(sim.scene, TrackOptions(lag=0.3)).frames
+    for frames in (solved, tracked):
+        path = tmp_path / "r.json"
+        save_results(path, frames)
+        loaded = load_results(path)
+        for a, b in zip(frames, loaded):
+            for va, vb in zip(a.vehicles, b.vehicles):
+                np.testing.assert_allclose(vb.box.world_T_box.matrix(), va.box.world_T_box.matrix(), atol=1e-12)
+                np.testing.assert_allclose(vb.box.size, va.box.size)
+                assert (vb.box.size_sigma is None) == (va.box.size_sigma is None)
+                assert vb.extras.get("covariance") == va.extras.get("covariance")
+        assert results_to_dict(loaded) == results_to_dict(frames)
+    assert all(v.box.size_sigma is not None for f in solved for v in f.vehicles)
+    kinds = {v.extras.get("covariance") for f in tracked for v in f.vehicles}
+    assert kinds == {"fixed_lag"}
+    data = results_to_dict(tracked)
+    entry = data["frames"][0]["vehicles"][0]
+    for key, value, field in (("pose_covariance_kind", "guessed", "pose_covariance_kind"),
+                              ("box", {"size": [4.0, 1.8, 1.5]}, "box.world_T_box")):
+        bad = copy.deepcopy(data)
+        bad["frames"][0]["vehicles"][0][key] = value
+        with pytest.raises(SceneError) as info:
+            load_results(write_json(tmp_path / "bad.json", bad))
+        assert info.value.field == f"frames[0].vehicles[0].{field}"
+    assert entry["pose_covariance_kind"] == "fixed_lag"

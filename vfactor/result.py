@@ -50,7 +50,13 @@ class VehicleResult:
             probability; ``"noise_scale"``: the estimated pixel-noise scale
             (multiplies the detector's sigmas); ``"inlier_weights"``: (n,) robust-loss weight in
             [0, 1] of each observation, in the order of
-            :func:`vfactor.graph.observations_from_detections` (near 0: rejected).
+            :func:`vfactor.graph.observations_from_detections` (near 0: rejected);
+            ``"covariance_inflation"``: the factor the one-frame covariances carry
+            for an estimated noise scale (docs/factors.md); for tracks,
+            ``"covariance"``: which covariance ``pose_covariance`` is,
+            ``"filtered"`` (from the frames up to its own: the tracker's online
+            result), ``"smoothed"`` (from every frame of the track) or
+            ``"fixed_lag"`` (from the frames of the window, as the pose left it).
     """
 
     id: str

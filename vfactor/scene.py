@@ -85,7 +85,10 @@ _VEHICLE_KEYS = (
     "body_type",
     "body_type_probability",
     "box",
+    "pose_covariance_kind",
 )
+#: What a track result's pose covariance comes from (``VehicleResult.extras["covariance"]``).
+COVARIANCE_KINDS = ("filtered", "smoothed", "fixed_lag")
 _OK_STATUSES = (Status.CONVERGED, Status.MAX_ITERATIONS)
 #: Relative tolerance of the symmetry checks of covariance matrices.
 _SYMMETRY_RTOL = 1e-9
@@ -613,6 +616,8 @@ def _vehicle_to_dict(v: VehicleResult, path: str) -> dict:
         out["keypoints_world"] = v.keypoints_world.tolist()
         out["keypoints_vehicle"] = v.keypoints_vehicle.tolist()
         out["pose_covariance"] = _finite_or_none(v.pose_covariance, (6, 6), f"{path}.pose_covariance")
+        if out["pose_covariance"] is not None and v.extras.get("covariance") in COVARIANCE_KINDS:
+            out["pose_covariance_kind"] = v.extras["covariance"]
     else:
         out.update(world_T_vehicle=None, keypoints_world=None, keypoints_vehicle=None, pose_covariance=None)
     out["status"] = status.value
@@ -721,6 +726,10 @@ def _vehicle_from_dict(data, path: str) -> VehicleResult:
             raise SceneError(f"{path}.body_type_probability", f"expected a probability in [0, 1], got "
                                                               f"{body_type_probability}")
     box = box_from_dict(entry["box"], f"{path}.box") if ok and entry.get("box") is not None else None
+    kind = entry.get("pose_covariance_kind")
+    if kind is not None and (kind not in COVARIANCE_KINDS or pose_covariance is None):
+        raise SceneError(f"{path}.pose_covariance_kind", f"expected one of {', '.join(COVARIANCE_KINDS)} beside a "
+                                                         f"pose_covariance, got {_kind(kind)}")
     return VehicleResult(
         id=vid,
         status=status,
@@ -734,6 +743,7 @@ def _vehicle_from_dict(data, path: str) -> VehicleResult:
         message=message,
         body_type=body_type,
         body_type_probability=body_type_probability,
+        extras={} if kind is None else {"covariance": kind},
     )
 
 

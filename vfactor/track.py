@@ -229,6 +229,8 @@ class Tracker:
             try:
                 obs = observations_from_detections(frame.detections_of(vid), self.cameras, self.options.solve.graph)
                 result = self._add(vid, index, frame.t, obs)
+                if result.pose_covariance is not None:
+                    result.extras["covariance"] = "filtered"  # from the frames so far
                 vehicles.append(checked(result, _seen_by(frame, vid, self.cameras), self.options.covariance))
                 failed = result.ok and not vehicles[-1].ok  # garbage (vfactor.sanity): do not track on from it
             except (InputError, RuntimeError, np.linalg.LinAlgError) as exc:
@@ -254,7 +256,9 @@ class Tracker:
             for frame_index, _, key in track.poses:
                 if estimate.exists(key):
                     cov = track.smoother.marginalCovariance(key) if covariance else None
-                    out[(frame_index, track.id)] = self._result(track, estimate, key, wireframe, cov)
+                    out[(frame_index, track.id)] = result = self._result(track, estimate, key, wireframe, cov)
+                    if cov is not None:
+                        result.extras["covariance"] = "smoothed"  # from every frame the smoother holds
         return out
 
     # ----------------------------------------------------------------- private
@@ -547,12 +551,12 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
         online[i] = tracker.add_frame(scene.frames[i], i)
         for v in online[i].vehicles:
             final[(i, v.id)] = v
-        if options.lag is not None:  # a pose's final estimate is its last one inside the window
-            _refresh(final, tracker.estimates())
+        if options.lag is not None:  # a pose's final estimate and covariance are its last ones inside the window
+            _refresh(final, tracker.estimates(covariance=options.covariance), "fixed_lag")
         if progress is not None:
             progress(n + 1, len(order))
     tracker.finish()
-    _refresh(final, tracker.estimates(covariance=options.covariance))
+    _refresh(final, tracker.estimates(covariance=options.covariance), "smoothed" if options.lag is None else "fixed_lag")
     solved: dict[str, int] = {}
     for (_, vid), v in final.items():
         solved[vid] = solved.get(vid, 0) + int(v.ok)
@@ -564,12 +568,19 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
     return TrackRun(frames=frames, online=[online[i] for i in range(len(scene.frames))], messages=messages)
 
 
-def _refresh(final: dict, estimates: dict) -> None:
-    """Replaces results by the smoothers' current estimates, keeping a covariance that was not recomputed."""
+def _refresh(final: dict, estimates: dict, kind: str) -> None:
+    """Replaces results by the smoothers' current estimates, keeping a covariance that was not recomputed.
+
+    A recomputed covariance is labelled ``kind`` (``extras["covariance"]``).
+    """
     for key, v in estimates.items():
         old = final.get(key)
         if v.pose_covariance is None and old is not None:
             v.pose_covariance = old.pose_covariance
+            if "covariance" in old.extras:
+                v.extras["covariance"] = old.extras["covariance"]
+        elif v.pose_covariance is not None:
+            v.extras["covariance"] = kind
         final[key] = v
 
 
@@ -662,6 +673,8 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
                 iterations=optimizer.iterations(), final_error=graph.error(estimate), message=segments.get(i, ""),
                 body_type=body_type, body_type_probability=probability, box=_box(pose, wireframe, body_type))
             results[(i, vid)].extras["noise_scale"] = scale
+            if marginals:
+                results[(i, vid)].extras["covariance"] = "smoothed"
     return [FrameResult(f.t, [checked(results[(i, vid)], _seen_by(f, vid, scene.cameras), options.covariance)
                               for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
 

@@ -59,7 +59,11 @@ class GraphConfig:
         relative_pixel_sigma: keypoint pixel sigma at confidence 1, as a fraction
             of the detection's box diagonal (the sigma is divided by the confidence).
         min_pixel_sigma: lower bound of that sigma, pixels, also when the solver
-            scales the sigmas by the estimated noise scale.
+            scales the sigmas by the estimated noise scale (a detection cut by the
+            image border has a small box of seen keypoints that understates its noise).
+        covariance_min_pixel_sigma: lower bound of the sigmas the covariances are
+            computed at, pixels: they follow the noise the residuals show below
+            ``min_pixel_sigma`` (docs/factors.md, "Covariances").
         loss: robust loss per keypoint observation.
         symmetry_sigma: left/right asymmetry allowed per coordinate, metres.
         body_frame_sigma: gauge tightness (hub centroid at the origin, hubs level), metres.
@@ -95,7 +99,8 @@ class GraphConfig:
     """
 
     relative_pixel_sigma: float = 0.03
-    min_pixel_sigma: float = 0.25
+    min_pixel_sigma: float = 1.0
+    covariance_min_pixel_sigma: float = 0.25
     loss: RobustLoss = field(default_factory=RobustLoss)
     symmetry_sigma: float = 0.01
     body_frame_sigma: float = 1e-3
@@ -116,7 +121,7 @@ class GraphConfig:
 
     def __post_init__(self):
         check_numbers("GraphConfig", self, (
-            "relative_pixel_sigma", "min_pixel_sigma", "symmetry_sigma", "body_frame_sigma", "shape_prior_weight",
+            "relative_pixel_sigma", "min_pixel_sigma", "covariance_min_pixel_sigma", "symmetry_sigma", "body_frame_sigma", "shape_prior_weight",
             "plane_sigma_m", "plane_sigma_rad", "rectangle_sigma", "trapezoid_sigma_rad", "width_ratio_sigma",
             "hinge_sigma", "hwc_tolerance", "hub_height", "ground_sigma_height", "ground_sigma_tilt",
         ))

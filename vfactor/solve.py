@@ -250,7 +250,8 @@ def solve_observations(
     joint = None
     if options.covariance:
         try:
-            covariance_graph, inflation = _covariance_graph(graph, obs, estimate, keys, options)
+            covariance_graph, inflation = _covariance_graph(graph, obs, nominal, float(extras.get("noise_scale", 1.0)),
+                                                            estimate, keys, options)
             joint = inflation * pose_shape_covariance(gtsam.Marginals(covariance_graph, estimate), keys)
             result.extras["covariance_inflation"] = inflation
             result.pose_covariance = joint[:6, :6].copy()
@@ -267,33 +268,41 @@ def solve_observations(
 INLIER_BOUND = 2.0 * np.log(100.0)
 
 
-def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservations, estimate: gtsam.Values,
-                      keys: KeyScheme, options: SolveOptions) -> tuple[gtsam.NonlinearFactorGraph, float]:
+def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservations, nominal: KeypointObservations,
+                      scale: float, estimate: gtsam.Values, keys: KeyScheme,
+                      options: SolveOptions) -> tuple[gtsam.NonlinearFactorGraph, float]:
     """The graph whose marginals, times the returned factor, are the result's covariances.
 
     * **Inliers at full weight.** The Gauss-Newton information of a robust
       loss down-weights every observation by its residual, good ones too (the
-      Cauchy loss gives a keypoint 1.5 sigmas off 63 % of its information), so
-      its covariances come out too wide where the keypoints are clean.
+      Cauchy loss gives a keypoint 1.5 sigmas off 63 % of its information),
+      so its covariances come out too wide where the keypoints are clean.
       The projection factor is replaced by least squares on the inliers: the
       observations whose whitened residual's square is within
       :data:`INLIER_BOUND`, the others left out.
-    * **The inliers' noise.** With ``options.estimate_noise``, their sigmas
-      are the solve's times :func:`~vfactor.shape_evidence.inlier_noise_scale`,
+    * **The inliers' noise.** With ``options.estimate_noise``, their sigmas are
+      the nominal ones times the solve's ``scale`` times
+      :func:`~vfactor.shape_evidence.inlier_noise_scale`, held above
+      ``GraphConfig.covariance_min_pixel_sigma`` rather than the solve's
+      ``min_pixel_sigma`` (clean keypoints are sharper than the solve's floor),
       and the factor is :func:`~vfactor.shape_evidence.covariance_inflation` of
-      its degrees of freedom (the Student t of an estimated scale); else the
-      solve's sigmas and 1.
+      that scale's degrees of freedom (the Student t of an estimated scale);
+      else the solve's sigmas and 1.
 
     ``graph`` is the solved graph: factor 0 its projection factor, with the
-    observations ``obs`` (the solve's sigmas). docs/factors.md gives the maths.
+    observations ``obs`` (the solve's sigmas); ``nominal`` are the
+    detector's. docs/factors.md gives the maths.
     """
     pose_key, layer_keys = keys.pose_key(), keys.layer_keys(0)
     world_T_vehicle = estimate.atPose3(pose_key)
     points = wireframe_from_values(estimate, keys).vehicle_p_keypoints
     inflation = 1.0
     if options.estimate_noise:
+        obs = nominal.with_min_sigma(options.graph.covariance_min_pixel_sigma).scaled(scale)
+        at_scale = copy_graph(graph)
+        at_scale.replace(0, projection_factor(pose_key, layer_keys, obs, options.graph.loss))
         raw = projection_factor(pose_key, layer_keys, obs, RobustLoss("none"))
-        lin = linearise(graph, graph.at(0), None, estimate, keys, raw_projection=raw)
+        lin = linearise(at_scale, at_scale.at(0), None, estimate, keys, raw_projection=raw)
         relative, _, dof = inlier_noise_scale(whitened_residuals(obs, world_T_vehicle, points), lin)
         obs = obs.scaled(relative)
         inflation = covariance_inflation(dof)

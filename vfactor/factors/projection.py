@@ -130,6 +130,13 @@ class KeypointObservations:
         object.__setattr__(out, "_sigma_table", np.where(truncated[:, None], self._sigma_table * factor[:, None], 1.0))
         return out
 
+    def with_min_sigma(self, min_sigma: float) -> "KeypointObservations":
+        """The same observations with another :attr:`min_sigma` (the sigmas themselves unchanged)."""
+        out = object.__new__(KeypointObservations)
+        out.__dict__.update(self.__dict__)
+        object.__setattr__(out, "min_sigma", float(min_sigma))
+        return out
+
     def expected_pixels(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """What the detector is expected to measure for predicted pixels ``uv`` (n, 2), and the slope.
 

@@ -13,6 +13,7 @@ Conventions (frames, units, keypoint order) are in ``docs/conventions.md``.
 PyTorch is never imported by the core; only a keypoint network will need it.
 """
 
+from vfactor.box import Box, BoxModel, default_box_model, vehicle_box
 from vfactor.camera import Camera
 from vfactor.errors import CalibrationError, InputError, ScenarioError, SceneError
 from vfactor.factors.ground_plane import GroundPlane
@@ -42,6 +43,8 @@ from vfactor.wireframe import PRESETS, Wireframe
 __version__ = "0.1.0"
 
 __all__ = [
+    "Box",
+    "BoxModel",
     "Camera",
     "CalibrationError",
     "Detection",
@@ -74,6 +77,7 @@ __all__ = [
     "add_observation_factor",
     "add_shape_factors",
     "build_vehicle_graph",
+    "default_box_model",
     "BODY_TYPES",
     "default_hwc_bounds",
     "default_shape_model",
@@ -92,4 +96,5 @@ __all__ = [
     "smooth_scene",
     "track_scene",
     "track_shape",
+    "vehicle_box",
 ]

@@ -73,8 +73,8 @@ def linearise(graph: gtsam.NonlinearFactorGraph, projection: gtsam.NonlinearFact
         prior: its shape prior factor (or an identical one); None: ``prior`` and ``prior_eta`` are zero.
         values: the solution.
         raw_projection: the projection factor without its robust loss (``RobustLoss("none")``),
-            whose whitened system becomes ``jacobian`` and ``rhs`` (:func:`noise_scale` needs
-            it); None: that of ``projection``.
+            whose whitened system becomes ``jacobian`` and ``rhs`` (:func:`inlier_noise_scale`
+            needs it); None: that of ``projection``.
     """
     layer_keys = keys.layer_keys(vehicle)
 
@@ -121,9 +121,9 @@ def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -
     point. The median ignores outliers (up to half of the keypoints), and gross
     errors widen it, which keeps the solve's robust loss from locking onto
     one camera (the covariances use :func:`inlier_noise_scale`). Observations
-    with a leverage above 0.95 are left out; without a Jacobian (or none left)
-    every residual is divided by the average share ``2n / (2n - p)``. Clipped
-    to :data:`NOISE_SCALE_RANGE`.
+    with a leverage above 0.95 are left out; without a Jacobian every
+    observation takes the average share ``p / 2n`` (its residual divided by
+    ``1 - p / 2n``). Clipped to :data:`NOISE_SCALE_RANGE`.
 
     Args:
         whitened: (n, 2) whitened residuals of the keypoints at the solution, current sigmas.
@@ -138,39 +138,16 @@ def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -
     Raises:
         numpy.linalg.LinAlgError: the residuals or the linearisation are not finite.
     """
-    n = len(whitened)
-    if n == 0:
-        return 1.0, 0.0
-    if not (np.all(np.isfinite(whitened)) and np.all(np.isfinite(lin.total)) and np.all(np.isfinite(lin.projection))):
-        raise np.linalg.LinAlgError("the residuals or the linearisation are not finite")
-    other = lin.total - lin.projection
-    other_eta = lin.total_eta - lin.projection_eta
-    predict = lin.jacobian is not None and lin.jacobian.shape[0] == 2 * n
-    squared = np.sum(whitened**2, axis=1)
     scale, p = 1.0, 0.0
+    if not len(whitened):
+        return scale, p
     for _ in range(iterations):
         previous = scale
-        w = 1.0 / scale**2
-        H = other + w * lin.projection
-        p = float(np.trace(np.linalg.solve(H, w * lin.projection)))
-        if predict:
-            step = np.linalg.solve(H, other_eta + w * lin.projection_eta)
-            e = (lin.jacobian @ step - lin.rhs).reshape(n, 2)
-            X = np.linalg.solve(H, lin.jacobian.T).T.reshape(n, 2, -1)
-            M = w * np.einsum("nik,njk->nij", X, lin.jacobian.reshape(n, 2, -1))
-            M = 0.5 * (M + np.swapaxes(M, 1, 2))
-            usable = np.linalg.eigvalsh(M)[:, -1] < _MAX_LEVERAGE
-            if np.any(usable):
-                R = np.eye(2) - M[usable]
-                squared = np.einsum("ni,ni->n", e[usable], np.linalg.solve(R, e[usable][..., None])[..., 0])
-                base = float(np.median(squared)) / _CHI2_2_MEDIAN
-                scale = float(np.clip(np.sqrt(max(base, 0.0)), *NOISE_SCALE_RANGE))
-                if abs(scale - previous) <= 1e-3 * previous:
-                    break
-                continue
-        base = float(np.median(squared)) / _CHI2_2_MEDIAN
-        dof = max(2.0 * n - p, 2.0)
-        scale = float(np.clip(np.sqrt(max(base * 2.0 * n / dof, 0.0)), *NOISE_SCALE_RANGE))
+        p, e, M = _fit_at_scale(whitened, lin, scale)
+        q, _ = _studentised(e, M)
+        if q is None:
+            return scale, p
+        scale = float(np.clip(np.sqrt(max(float(np.median(q)) / _CHI2_2_MEDIAN, 0.0)), *NOISE_SCALE_RANGE))
         if abs(scale - previous) <= 1e-3 * previous:
             break
     return scale, p
@@ -221,33 +198,21 @@ def inlier_noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int
     Raises:
         numpy.linalg.LinAlgError: the residuals or the linearisation are not finite.
     """
-    n = len(whitened)
-    if n == 0:
-        return 1.0, 0.0, 0.0
-    if not (np.all(np.isfinite(whitened)) and np.all(np.isfinite(lin.total)) and np.all(np.isfinite(lin.projection))):
-        raise np.linalg.LinAlgError("the residuals or the linearisation are not finite")
-    other = lin.total - lin.projection
-    other_eta = lin.total_eta - lin.projection_eta
-    have_jacobian = lin.jacobian is not None and lin.jacobian.shape[0] == 2 * n
-    A = lin.jacobian.reshape(n, 2, -1) if have_jacobian else None
-    e = np.asarray(whitened, dtype=float)
     scale, p, nu = 1.0, 0.0, 0.0
+    if not len(whitened):
+        return scale, p, nu
     for _ in range(iterations):
         previous = scale
-        w = 1.0 / scale**2
-        H = other + w * lin.projection
-        p = float(np.trace(np.linalg.solve(H, w * lin.projection)))
-        if have_jacobian:
-            step = np.linalg.solve(H, other_eta + w * lin.projection_eta)
-            e = whitened + np.einsum("nij,j->ni", A, step)
-            X = np.linalg.solve(H, lin.jacobian.T).T.reshape(n, 2, -1)  # (A H^-1) per observation
-            M = w * np.einsum("nik,njk->nij", X, A)  # leverage blocks
-        else:  # no Jacobian: every observation takes an equal share of the parameters
-            M = np.broadcast_to(np.eye(2) * min(p / (2.0 * n), 0.95), (n, 2, 2))
-        estimate = _studentised_scale(e, M)
-        if estimate is None:
+        p, e, M = _fit_at_scale(whitened, lin, scale)
+        q, R = _studentised(e, M)
+        if q is None:
             return 1.0, p, 0.0
-        squared, nu = estimate
+        s0 = float(np.median(q)) / _CHI2_2_MEDIAN
+        if not s0 > 0:
+            return 1.0, p, 0.0
+        inlier = q < _CHI2_2_99 * s0
+        nu = float(np.trace(R[inlier], axis1=1, axis2=2).sum())
+        squared = float(np.mean(q[inlier])) / _CHI2_2_TRUNCATED_MEAN
         scale = float(np.clip(np.sqrt(squared), *NOISE_SCALE_RANGE))
         if abs(scale - previous) <= 1e-3 * previous:
             break
@@ -284,22 +249,47 @@ def _f_over_chi2(dim: int, nu: float, level: float) -> float:
     return float(dim * fdtri(dim, nu, level) / chdtri(dim, 1.0 - level))
 
 
-def _studentised_scale(e: np.ndarray, M: np.ndarray) -> tuple[float, float] | None:
-    """(s^2, nu) from (n, 2) residuals and their (n, 2, 2) hat blocks (:func:`noise_scale`); None when none is usable."""
+def _fit_at_scale(whitened: np.ndarray, lin: Linearisation, scale: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """What the fit would be with every sigma times ``scale``: (p, (n, 2) residuals, (n, 2, 2) leverage blocks).
+
+    ``H(s) = H - H_proj + H_proj / s^2``; ``p = tr(H_proj(s) H(s)^-1)``; the
+    residuals are predicted by one Gauss-Newton step, ``e(s) = A dx(s) - b``
+    with ``dx(s) = H(s)^-1 eta(s)``, and the leverages are
+    ``M_i = A_i H(s)^-1 A_i^T / s^2``. Without the whitened system (``lin.jacobian``)
+    the residuals stay ``whitened`` and every observation takes an equal share
+    ``p / 2n`` of the parameters.
+
+    Raises:
+        numpy.linalg.LinAlgError: the residuals or the linearisation are not finite.
+    """
+    if not (np.all(np.isfinite(whitened)) and np.all(np.isfinite(lin.total)) and np.all(np.isfinite(lin.projection))):
+        raise np.linalg.LinAlgError("the residuals or the linearisation are not finite")
+    n = len(whitened)
+    w = 1.0 / scale**2
+    H = lin.total + (w - 1.0) * lin.projection
+    p = float(np.trace(np.linalg.solve(H, w * lin.projection)))
+    if lin.jacobian is None or lin.jacobian.shape[0] != 2 * n:
+        return p, np.asarray(whitened, dtype=float), np.broadcast_to(np.eye(2) * min(p / (2.0 * n), 0.95), (n, 2, 2))
+    step = np.linalg.solve(H, lin.total_eta + (w - 1.0) * lin.projection_eta)
+    e = (lin.jacobian @ step - lin.rhs).reshape(n, 2)
+    A = lin.jacobian.reshape(n, 2, -1)
+    X = np.linalg.solve(H, lin.jacobian.T).T.reshape(n, 2, -1)  # (A H^-1) per observation
+    return p, e, w * np.einsum("nik,njk->nij", X, A)
+
+
+def _studentised(e: np.ndarray, M: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Studentised squared residuals ``q_i = e_i^T (I - M_i)^-1 e_i`` and ``I - M_i`` of the usable observations.
+
+    Observations the fit absorbs whole (leverage above :data:`_MAX_LEVERAGE`) are left out; (None, None)
+    when none is left.
+    """
     M = 0.5 * (M + np.swapaxes(M, 1, 2))
-    leverage = np.linalg.eigvalsh(M)[:, -1]
-    usable = leverage < _MAX_LEVERAGE
+    usable = np.linalg.eigvalsh(M)[:, -1] < _MAX_LEVERAGE
     if not np.any(usable):
-        return None
+        return None, None
     R = np.eye(2) - M[usable]
     q = np.einsum("ni,ni->n", e[usable], np.linalg.solve(R, e[usable][..., None])[..., 0])
-    s0 = float(np.median(q)) / _CHI2_2_MEDIAN
-    if not s0 > 0:
-        return None
-    inlier = q < _CHI2_2_99 * s0
-    squared = float(np.mean(q[inlier])) / _CHI2_2_TRUNCATED_MEAN
-    nu = float(np.trace(R[inlier], axis1=1, axis2=2).sum())
-    return squared, nu
+    return q, R
 
 
 def shape_information(lin: Linearisation, projection_factor: float = 1.0) -> tuple[np.ndarray, np.ndarray]:

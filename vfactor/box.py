@@ -35,12 +35,11 @@ from functools import lru_cache
 import gtsam
 import numpy as np
 
-from vfactor.errors import CalibrationError, SceneError
-from vfactor.vehicle_library import BODY_TYPES, vehicle_library
+from vfactor.vehicle_library import BODY_TYPES, VehicleDimensions, vehicle_library
 from vfactor.wireframe import Wireframe
 
-__all__ = ["Box", "BoxModel", "OFFSET_NAMES", "MODEL_SIGMA", "box_features", "default_box_model", "vehicle_box",
-           "box_to_dict", "box_from_dict"]
+__all__ = ["Box", "BoxModel", "OFFSET_NAMES", "MODEL_SIGMA", "box_features", "published_box", "default_box_model",
+           "vehicle_box"]
 
 #: The offsets of :class:`BoxModel`, in order (metres).
 OFFSET_NAMES = ("length", "width", "roof", "tyre_radius", "centre_x")
@@ -136,6 +135,17 @@ def box_features(vehicle_p_keypoints: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return np.array([front - back, width, top, 0.0, 0.5 * (front + back)]), J
 
 
+def published_box(dimensions: VehicleDimensions) -> tuple[np.ndarray, np.ndarray]:
+    """A library vehicle's true box from its published dimensions: (size (3,), centre (3,) in the body frame), metres.
+
+    The ends at ``+-(wheelbase / 2 + overhang)``, the road a tyre radius below
+    the hubs (docs/vehicles.md).
+    """
+    front, rear = dimensions.overhangs()
+    centre = np.array([0.5 * (front - rear), 0.0, 0.5 * dimensions.height - dimensions.wheel_radius])
+    return np.array([dimensions.length, dimensions.width, dimensions.height]), centre
+
+
 @lru_cache(maxsize=16)
 def default_box_model(exclude: frozenset = frozenset()) -> BoxModel:
     """The box offsets learnt from the vehicle library, without the vehicles ``exclude`` (ids).
@@ -151,11 +161,10 @@ def default_box_model(exclude: frozenset = frozenset()) -> BoxModel:
             continue
         d = vehicle.dimensions
         features, _ = box_features(vehicle.wireframe.vehicle_p_keypoints)
-        front_oh, rear_oh = d.overhangs()
-        centre_x = 0.5 * (front_oh - rear_oh)  # the ends at +-(wheelbase / 2) + overhangs
+        (length, width, height), centre = published_box(d)
         r = d.wheel_radius
-        rows[d.body_type].append([d.length - features[0], d.width - features[1], d.height - r - features[2], r,
-                                  centre_x - features[4]])
+        rows[d.body_type].append([length - features[0], width - features[1], height - r - features[2], r,
+                                  centre[0] - features[4]])
     extra = np.diag(MODEL_SIGMA**2)
     mean, cov = {}, {}
     for key, values in [*rows.items(), ("any", [v for vs in rows.values() for v in vs])]:
@@ -224,68 +233,3 @@ def vehicle_box(world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, covariance: 
 
 def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-_BOX_KEYS = ("world_T_box", "size", "size_sigma", "heading", "heading_sigma", "centre_sigma")
-
-
-def box_to_dict(box: Box) -> dict:
-    """The result file's ``box`` (docs/scene-format.md): metres and radians, null sigmas where not computed."""
-    def listed(a):
-        return None if a is None or not np.all(np.isfinite(a)) else np.asarray(a, dtype=float).tolist()
-
-    return {"world_T_box": np.asarray(box.world_T_box.matrix(), dtype=float).tolist(), "size": listed(box.size),
-            "size_sigma": listed(box.size_sigma), "heading": float(box.heading),
-            "heading_sigma": None if box.heading_sigma is None or not math.isfinite(box.heading_sigma)
-            else float(box.heading_sigma), "centre_sigma": listed(box.centre_sigma)}
-
-
-def box_from_dict(data, path: str) -> Box:
-    """A result file's ``box`` back as a :class:`Box`.
-
-    Raises:
-        SceneError: a field is missing or wrong (the error names it, under ``path``).
-    """
-    from vfactor.camera import check_rigid_transform
-
-    if not isinstance(data, dict):
-        raise SceneError(path, f"expected an object with {', '.join(_BOX_KEYS)}, got {type(data).__name__}")
-    unknown = sorted(set(data) - set(_BOX_KEYS))
-    if unknown:
-        raise SceneError(f"{path}.{unknown[0]}", f"unknown field; expected {', '.join(_BOX_KEYS)}")
-    for name in ("world_T_box", "size", "heading"):
-        if data.get(name) is None:
-            raise SceneError(f"{path}.{name}", "missing")
-
-    def array(name, shape, positive=False, optional=False):
-        value = data.get(name)
-        if value is None and optional:
-            return None
-        try:
-            a = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
-            a = None
-        if a is None or a.shape != shape or not np.all(np.isfinite(a)) or (positive and np.any(a < 0)):
-            what = "non-negative " if positive else ""
-            raise SceneError(f"{path}.{name}", f"expected {shape[0]} finite {what}numbers" +
-                             (" or null" if optional else "") + f", got {value!r}"[:200])
-        return a
-
-    T = array("world_T_box", (4, 4))
-    try:
-        check_rigid_transform(T, f"{path}.world_T_box")
-    except CalibrationError as exc:
-        raise SceneError(exc.field, exc.problem) from None
-    size = array("size", (3,), positive=True)
-    size_sigma = array("size_sigma", (3,), positive=True, optional=True)
-    centre_sigma = array("centre_sigma", (3,), positive=True, optional=True)
-    heading = data["heading"]
-    if isinstance(heading, bool) or not isinstance(heading, (int, float)) or not math.isfinite(heading):
-        raise SceneError(f"{path}.heading", f"expected a finite number (radians), got {heading!r}")
-    heading_sigma = data.get("heading_sigma")
-    if heading_sigma is not None and (isinstance(heading_sigma, bool) or not isinstance(heading_sigma, (int, float))
-                                      or not math.isfinite(heading_sigma) or heading_sigma < 0):
-        raise SceneError(f"{path}.heading_sigma", f"expected a non-negative number (radians) or null, got "
-                                                   f"{heading_sigma!r}")
-    return Box(gtsam.Pose3(T), size, size_sigma, float(heading),
-               None if heading_sigma is None else float(heading_sigma), centre_sigma)

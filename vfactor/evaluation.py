@@ -20,7 +20,7 @@ import gtsam
 import numpy as np
 
 from vfactor.baselines import known_shape, pnp, triangulation
-from vfactor.box import BoxModel, default_box_model
+from vfactor.box import BoxModel, default_box_model, published_box
 from vfactor.graph import observations_from_detections
 from vfactor.metrics import keypoint_nees, nees_summary, pose_errors, pose_nees
 from vfactor.shape_model import ShapeModel, car_hwc_bounds, default_shape_model, default_shape_prior, pascal3d_wireframes
@@ -137,10 +137,8 @@ def true_box(truth) -> tuple[np.ndarray, gtsam.Pose3] | None:
     vehicle = vehicle_library().get(truth.preset)
     if vehicle is None:
         return None
-    d = vehicle.dimensions
-    front, rear = d.overhangs()
-    centre = np.array([0.5 * (front - rear), 0.0, 0.5 * d.height - d.wheel_radius])
-    return np.array([d.length, d.width, d.height]), truth.world_T_vehicle.compose(gtsam.Pose3(gtsam.Rot3(), centre))
+    size, centre = published_box(vehicle.dimensions)
+    return size, truth.world_T_vehicle.compose(gtsam.Pose3(gtsam.Rot3(), centre))
 
 
 def covariance_errors(result, truth) -> dict:

@@ -11,7 +11,11 @@ import numpy as np
 from vfactor.box import Box
 from vfactor.wireframe import Wireframe
 
-__all__ = ["Status", "VehicleResult", "FrameResult"]
+__all__ = ["Status", "VehicleResult", "FrameResult", "COVARIANCE_KINDS"]
+
+#: What a track result's pose covariance comes from (``VehicleResult.extras["covariance"]``, the result file's
+#: ``pose_covariance_kind``): the frames up to its own, every frame of the track, or the fixed-lag window as it left it.
+COVARIANCE_KINDS = ("filtered", "smoothed", "fixed_lag")
 
 
 class Status(str, enum.Enum):

@@ -42,7 +42,7 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from vfactor.box import box_from_dict, box_to_dict
+from vfactor.box import Box
 from vfactor.camera import Camera, check_rigid_transform
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.errors import CalibrationError, SceneError
@@ -50,7 +50,7 @@ from vfactor.heatmaps import decode_heatmaps
 from vfactor.jsonio import NonFinite, OutOfRange, read_json, write_text_atomic
 from vfactor.keypoints import NUM_KEYPOINTS
 from vfactor.observations import DEFAULT_VEHICLE_ID, Detection, Frame, Scene, resolve_path
-from vfactor.result import FrameResult, Status, VehicleResult
+from vfactor.result import COVARIANCE_KINDS, FrameResult, Status, VehicleResult
 from vfactor.wireframe import Wireframe
 
 __all__ = [
@@ -62,6 +62,8 @@ __all__ = [
     "results_from_dict",
     "save_results",
     "results_to_dict",
+    "box_to_dict",
+    "box_from_dict",
 ]
 
 _TOP_KEYS = ("cameras", "frames", "ground_plane")
@@ -87,8 +89,6 @@ _VEHICLE_KEYS = (
     "box",
     "pose_covariance_kind",
 )
-#: What a track result's pose covariance comes from (``VehicleResult.extras["covariance"]``).
-COVARIANCE_KINDS = ("filtered", "smoothed", "fixed_lag")
 _OK_STATUSES = (Status.CONVERGED, Status.MAX_ITERATIONS)
 #: Relative tolerance of the symmetry checks of covariance matrices.
 _SYMMETRY_RTOL = 1e-9
@@ -540,7 +540,7 @@ def results_to_dict(frames: list[FrameResult]) -> dict:
     (the :class:`~vfactor.result.Status` value); ``iterations``;
     ``final_error`` (null when NaN); ``message`` (when non-empty); and
     ``keypoint_covariances_world`` (12x3x3, m^2) when computed; ``body_type``
-    and ``body_type_probability``; ``box`` (:func:`vfactor.box.box_to_dict`:
+    and ``body_type_probability``; ``box`` (:func:`box_to_dict`:
     ``world_T_box``, ``size`` and their sigmas). For a
     ``degenerate`` or ``failed`` vehicle the pose, keypoint and covariance
     fields are null. A covariance with non-finite entries is written as null.
@@ -745,6 +745,54 @@ def _vehicle_from_dict(data, path: str) -> VehicleResult:
         body_type_probability=body_type_probability,
         extras={} if kind is None else {"covariance": kind},
     )
+
+
+_BOX_KEYS = ("world_T_box", "size", "size_sigma", "heading", "heading_sigma", "centre_sigma")
+
+
+def box_to_dict(box: Box) -> dict:
+    """A result vehicle's ``box`` (docs/scene-format.md): metres and radians, null sigmas where not computed."""
+    def listed(a):
+        return None if a is None or not np.all(np.isfinite(a)) else np.asarray(a, dtype=float).tolist()
+
+    sigma = box.heading_sigma
+    return {"world_T_box": np.asarray(box.world_T_box.matrix(), dtype=float).tolist(), "size": listed(box.size),
+            "size_sigma": listed(box.size_sigma), "heading": float(box.heading),
+            "heading_sigma": None if sigma is None or not math.isfinite(sigma) else float(sigma),
+            "centre_sigma": listed(box.centre_sigma)}
+
+
+def box_from_dict(data, path: str) -> Box:
+    """A result vehicle's ``box`` back as a :class:`vfactor.box.Box`.
+
+    Raises:
+        SceneError: a field is missing or wrong (the error names it, under ``path``).
+    """
+    entry = _object(data, path, _BOX_KEYS, required=("world_T_box", "size", "heading"))
+    T = _matrix(entry["world_T_box"], _join(path, "world_T_box"), (4, 4))
+    try:
+        check_rigid_transform(T, _join(path, "world_T_box"))
+    except CalibrationError as exc:
+        raise SceneError(exc.field, exc.problem) from None
+
+    def lengths(name, optional):
+        if optional and entry.get(name) is None:
+            return None
+        values = _numbers(entry[name], _join(path, name), "3 non-negative numbers (m)" + (" or null" if optional else ""),
+                          (3,))
+        if np.any(values < 0):
+            raise SceneError(_join(path, name), f"expected 3 non-negative numbers (m), got {values.tolist()}")
+        return values
+
+    heading_sigma = None
+    if entry.get("heading_sigma") is not None:
+        heading_sigma = _number(entry["heading_sigma"], _join(path, "heading_sigma"),
+                                "a non-negative number (rad) or null")
+        if heading_sigma < 0:
+            raise SceneError(_join(path, "heading_sigma"), f"expected a non-negative number (rad), got {heading_sigma}")
+    return Box(gtsam.Pose3(T), lengths("size", False), lengths("size_sigma", True),
+               _number(entry["heading"], _join(path, "heading"), "a finite number (rad)"), heading_sigma,
+               lengths("centre_sigma", True))
 
 
 def _check_symmetric(S: np.ndarray, field: str) -> None:

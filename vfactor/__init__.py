@@ -13,6 +13,7 @@ Conventions (frames, units, keypoint order) are in ``docs/conventions.md``.
 PyTorch is never imported by the core; only a keypoint network will need it.
 """
 
+from vfactor._version import __version__
 from vfactor.box import Box, BoxModel, default_box_model, vehicle_box
 from vfactor.camera import Camera
 from vfactor.errors import CalibrationError, InputError, ScenarioError, SceneError
@@ -39,8 +40,6 @@ from vfactor.solve import SolveOptions, solve_frame, solve_observations, solve_s
 from vfactor.track import Tracker, TrackOptions, TrackRun, smooth_scene, track_scene
 from vfactor.vehicle_library import BODY_TYPES
 from vfactor.wireframe import PRESETS, Wireframe
-
-__version__ = "0.1.0"
 
 __all__ = [
     "Box",

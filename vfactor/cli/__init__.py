@@ -1,0 +1,338 @@
+"""The ``vfactor`` command: solve scene files, simulate scenarios, run the demo and the accuracy evaluation.
+
+This package holds the parser and the dispatch; each group of commands has its
+own module: :mod:`vfactor.cli.estimate` (solve, track), :mod:`vfactor.cli.simulation`
+(simulate, demo), :mod:`vfactor.cli.evaluate` (eval), :mod:`vfactor.cli.tools`
+(schema, plot, import), :mod:`vfactor.cli.common` (checks and messages they share).
+The keypoint network's commands (train, detect, calibrate, score) are forwarded
+to :mod:`vfactor.net.commands`, so that PyTorch is imported only for them.
+
+Options every command takes, before or after its name: ``--debug`` (tracebacks
+of internal errors), ``-v`` / ``-vv`` (more messages on stderr: the ``vfactor``
+logger at INFO / DEBUG) and ``-q`` (nothing but errors).
+
+Exit codes (:data:`EXIT_CODES`, docs/reliability.md): 0 success (every vehicle
+solved); 2 bad input (a malformed or contradictory scene, scenario or
+calibration, or a bad option: one line naming the field); 3 the input was
+good but some vehicles could not be solved (each reported ``degenerate`` or
+``failed`` in the result file and on stderr); 1 an internal error (run again
+with ``--debug`` for the traceback); 130 interrupted.
+
+Everything printed as a message (errors, notes, unsolved vehicles) goes
+through :func:`vfactor.sanity.one_line`: one line, no terminal escapes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from vfactor._version import __version__
+from vfactor.cli.common import EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, EXIT_UNSOLVED, configure_logging, say
+from vfactor.errors import InputError
+from vfactor.sanity import one_line
+
+__all__ = ["main", "build_parser", "EXIT_CODES", "EXIT_OK", "EXIT_INTERNAL", "EXIT_INPUT", "EXIT_UNSOLVED",
+           "NET_COMMANDS"]
+
+#: Exit code -> meaning (the epilog of ``vfactor --help`` and docs/reliability.md).
+EXIT_CODES = {
+    EXIT_OK: "success: every vehicle solved",
+    EXIT_INTERNAL: "internal error (a bug: run again with --debug for the traceback)",
+    EXIT_INPUT: "bad input: a malformed scene, scenario, calibration or option (one line names the field)",
+    EXIT_UNSOLVED: "some vehicles could not be solved: reported degenerate or failed (result file and stderr)",
+    EXIT_INTERRUPTED: "interrupted",
+}
+
+_DESCRIPTION = """\
+vfactor estimates each vehicle's 6-DoF pose (world_T_vehicle), its 12-keypoint
+wireframe (metres) and their covariances from several fixed, calibrated cameras
+that each see the vehicle from their own side, as a GTSAM factor graph.
+
+Start here:
+  vfactor demo                          simulate a two-camera intersection, solve it,
+                                        compare with triangulation, write pictures
+  vfactor simulate --list               the packaged scenarios (camera rigs, vehicles, noise)
+  vfactor simulate intersection_2cam --out scene.json --truth truth.json
+  vfactor solve scene.json --out result.json      every frame on its own
+  vfactor track scene.json --out result.json      tracks over frames (iSAM2: shared shape, motion)
+  vfactor eval                          accuracy against ground truth, beside baselines
+
+Scene and result formats, conventions and the factors' maths: docs/ in the
+repository (conventions.md, factors.md, tutorial.md); limits and exit codes:
+docs/reliability.md."""
+
+_EPILOG = "exit codes:\n" + "\n".join(f"  {code:<4}{text}" for code, text in EXIT_CODES.items())
+
+
+#: The keypoint network's commands, forwarded to :mod:`vfactor.net.commands` (they need torch): name -> help.
+NET_COMMANDS = {
+    "train": "train the keypoint network (progress bar, checkpoints, resume, PCK per epoch); needs torch",
+    "detect": "keypoints, confidences, covariances and heatmaps per vehicle box: IMAGE --roi X0 Y0 X1 Y1; needs torch",
+    "calibrate": "fit the network's keypoint covariances to its errors on held-out crops; needs torch",
+    "score": "PCK@0.1 of network weights on crops with known keypoints; needs torch",
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors (exit 2)."""
+
+    def error(self, message):
+        self.exit(EXIT_INPUT, f"{self.prog}: error: {one_line(message)} (see {self.prog} --help)\n")
+
+
+def _common_options(defaults: bool) -> argparse.ArgumentParser:
+    """The options of every command: on the main parser with their defaults, on each command without (so that
+    an option given before the command name is not reset by the command's parser)."""
+    p = argparse.ArgumentParser(add_help=False)
+    g = p.add_argument_group("options of every command")
+
+    def default(value):
+        return value if defaults else argparse.SUPPRESS
+
+    g.add_argument("--debug", action="store_true", default=default(False),
+                   help="show the traceback of an internal error")
+    g.add_argument("-v", "--verbose", action="count", default=default(0),
+                   help="more messages on stderr: -v what each step does (INFO), -vv details (DEBUG)")
+    g.add_argument("-q", "--quiet", action="store_true", default=default(False),
+                   help="print nothing but errors (no summaries, notes or progress bars)")
+    return p
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``vfactor`` parser (the network's commands, :data:`NET_COMMANDS`, only as names: their own parser
+    lives in :mod:`vfactor.net.commands`)."""
+    parser = _Parser(
+        prog="vfactor", description=_DESCRIPTION, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
+        parents=[_common_options(defaults=True)],
+    )
+    parser.add_argument("--version", action="version", version=f"vfactor {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    common = [_common_options(defaults=False)]
+
+    def add(name, **kwargs):
+        return sub.add_parser(name, parents=common, **kwargs)
+
+    p = add(
+        "solve", help="estimate every vehicle of every frame of a scene file (frames solved one by one)",
+        description="Estimate every vehicle of every frame of SCENE on its own (Levenberg-Marquardt, robust to "
+        "outlier keypoints and left/right swaps) and write RESULT with poses, wireframes, 3D boxes, covariances and a "
+        "status per vehicle. A vehicle that cannot be solved is reported with status 'degenerate' or 'failed' and a "
+        "message; the others are still solved. Detections given as boxes in the frames' images go through the "
+        "keypoint network first (needs torch). Scene format: docs/scene-format.md (vfactor schema prints its "
+        "JSON Schema).",
+    )
+    p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md)")
+    p.add_argument("--out", required=True, help="result file to write (written atomically)")
+    _estimate_options(p)
+    p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
+    p.add_argument("--loss", default="cauchy", choices=("none", "huber", "cauchy", "geman_mcclure"),
+                   help="robust loss per keypoint (default: cauchy)")
+
+    p = add(
+        "track", help="track every vehicle through the frames of a scene (iSAM2, shared shape, motion model)",
+        description="Track every vehicle (by its track id) through the frames of SCENE with one incremental "
+        "smoother (iSAM2) per track: one pose per frame, one shape per track, a non-holonomic motion model between "
+        "poses, and a ground-plane factor when the scene gives a road plane. Writes RESULT in the format of "
+        "'vfactor solve' (final, smoothed estimates; --online for the estimates as each frame arrived). Frames out "
+        "of time order are tracked in time order and reported. Scene format: docs/scene-format.md.",
+    )
+    p.add_argument("scene", help="scene file (JSON) with track ids in the detections' 'vehicle'")
+    p.add_argument("--out", required=True, help="result file to write (written atomically)")
+    _estimate_options(p)
+    p.add_argument("--lag", type=float, help="fixed lag in seconds: bounded memory and time per frame for long streams")
+    p.add_argument("--batch", action="store_true", help="offline batch smoothing (Levenberg-Marquardt over each whole track)")
+    p.add_argument("--online", action="store_true", help="write the estimates as each frame arrived (filtered)")
+    p.add_argument("--plot", help="also write a PNG of the trajectories with covariance ellipses")
+    p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
+
+    for name, text in NET_COMMANDS.items():
+        p = sub.add_parser(name, help=text, add_help=False)
+        p.add_argument("net_args", nargs=argparse.REMAINDER)
+
+    p = add(
+        "simulate", help="write a simulated scene (and its ground truth) from a scenario",
+        description="Simulate SCENARIO (a packaged name such as intersection_2cam, or a scenario JSON file, "
+        "docs/scenarios.md) and write the scene file the solver reads, plus the ground truth.",
+    )
+    p.add_argument("scenario", nargs="?", help="packaged scenario name or scenario file")
+    p.add_argument("--out", help="scene file to write")
+    p.add_argument("--truth", help="ground-truth file to write (default: next to --out, NAME_truth.json)")
+    p.add_argument("--seed", type=int, help="random seed (default: the scenario's)")
+    p.add_argument("--frames", type=int, help="number of frames (default: the scenario's)")
+    p.add_argument("--list", action="store_true", help="list the packaged scenarios and exit")
+
+    p = add(
+        "demo", help="simulate, solve, compare with triangulation, write overlays and a 3D plot",
+        description="The main job on a packaged scenario: simulate it, solve every frame, print the errors against "
+        "ground truth next to a triangulation baseline, and write an overlay image per camera (projected "
+        "wireframe on a drawn view) and a 3D plot with the position covariance ellipse. With --images the "
+        "cameras' images are rendered, the keypoint network finds the keypoints in the vehicles' boxes, and the "
+        "overlays show the images with the heatmaps, keypoints and the projected wireframe.",
+    )
+    p.add_argument("scenario", nargs="?", default="intersection_2cam", help="scenario (default: intersection_2cam)")
+    p.add_argument("--out", default="vfactor_demo_out", help="output folder (default: ./vfactor_demo_out)")
+    p.add_argument("--seed", type=int, help="random seed (default: the scenario's)")
+    p.add_argument("--frames", type=int, help="number of frames (default: the scenario's; 3 with --images)")
+    p.add_argument("--frame", type=int, default=0, help="the frame the overlays and the 3D plot show (default: 0)")
+    p.add_argument("--images", action="store_true",
+                   help="render the cameras' images and find the keypoints with the network (needs torch, moderngl)")
+
+    p = add(
+        "plot", help="overlays per camera and a 3D plot of one frame of a scene and its result",
+        description="Draw frame N of SCENE with the estimates of RESULT: one overlay PNG per camera (the "
+        "detections, the projected wireframes and boxes, labelled by vehicle) and a 3D and top-down plot with the "
+        "position covariance ellipses, into the folder --out.",
+    )
+    p.add_argument("scene", help="scene file (JSON)")
+    p.add_argument("result", help="result file of vfactor solve or track (JSON)")
+    p.add_argument("--out", required=True, help="folder for the pictures")
+    p.add_argument("--frame", type=int, default=0, help="frame index in the scene file (default: 0)")
+    p.add_argument("--truth", help="ground-truth file of vfactor simulate: also draw the true wireframes")
+    p.add_argument("--allow-outside-paths", action="store_true",
+                   help="accept heatmap and image paths outside the scene file's folder (refused by default)")
+
+    p = add(
+        "schema", help="print the JSON Schema of the scene file (or of the result file)",
+        description="Print the JSON Schema (draft 2020-12) of vfactor's scene file, or with 'result' of its result "
+        "file; docs/scene-format.md explains every field. The loader checks more than a schema can (e.g. that a "
+        "rotation is a rotation, that detections name existing cameras) and names the field of any problem.",
+    )
+    p.add_argument("which", nargs="?", default="scene", choices=("scene", "result"),
+                   help="scene (default) or result")
+    p.add_argument("--out", help="write the schema to this file instead of standard output")
+
+    p = add("help", help="show the help of a command: vfactor help solve",
+            description="Show the help of COMMAND (the same as vfactor COMMAND --help), or of vfactor itself.")
+    p.add_argument("topic", nargs="?", metavar="COMMAND", help="a command")
+
+    p = add(
+        "eval", help="accuracy against simulated ground truth: one-frame methods, or tracking",
+        description="frames (default): run the factor graph (each vehicle solved with a shape model learnt without "
+        "it), the factor graph with the old car prior, multi-view triangulation, PnP and the known-shape reference "
+        "(true wireframe given, pose solved from the truth) on the same simulated scenes, at clean noise (0.3% of the "
+        "box), paper-like noise and a harder setting (15% outliers, 8% left/right swaps, 10% missing), and print "
+        "the paper's metrics side by side, overall and per body type. "
+        "tracks: track the vehicles of a simulated multi-frame scene with iSAM2 (online, final, fixed lag) and batch "
+        "smoothing, beside frame-by-frame solving of the same frames. "
+        "paper: the paper's comparison (its Tables I and II) on its three vehicles: the factor graph, CPO + HWC as "
+        "published, the single-view deformable method, PnP and stereo, plus plots of the error against the noise "
+        "and against the number of cameras (--figures). "
+        "images: render the camera images of a simulated scenario, find the keypoints with the keypoint network in "
+        "the vehicles' boxes and run the methods on them (needs torch and moderngl).",
+    )
+    p.add_argument("experiment", nargs="?", default="frames", choices=("frames", "tracks", "paper", "images"),
+                   help="frames (one-frame accuracy), tracks (tracking), paper (the paper's tables) or images "
+                   "(rendered images -> keypoint network -> graph); default: frames")
+    p.add_argument("--figures", help="paper: folder for the plots (the Markdown links them as figures/NAME.png)")
+    p.add_argument("--sweep-frames", type=int, default=30, help="paper: vehicles per point of the plots (default: 30)")
+    p.add_argument("--scenario", help="scenario (default: library_2cam for frames, tracks_3veh for tracks, "
+                   "accuracy_2cam for images)")
+    p.add_argument("--levels", default="clean,paper,hard",
+                   help="frames: noise levels, comma-separated, of clean, paper, hard (default: all three)")
+    p.add_argument("--frames", type=int, help="number of scenes or frames (default: the scenario's)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    p.add_argument("--seeds", type=int, default=1,
+                   help="frames, tracks: how many seeds from --seed on (frames: pooled in one table; default: 1)")
+    p.add_argument("--draws", type=int, default=0,
+                   help="tracks: also batch-smooth each seed's tracks over this many new draws of the keypoint noise "
+                   "and report each final shape's mean error, bias and spread (default: 0)")
+    p.add_argument("--lag", type=float, default=0.5,
+                   help="tracks: the fixed lag of the isam2_lag row, seconds (default: 0.5)")
+    p.add_argument("--markdown", help="also write the tables to this Markdown file")
+    return parser
+
+
+def _estimate_options(p: argparse.ArgumentParser) -> None:
+    """The options ``solve`` and ``track`` share: paths, the keypoint network."""
+    p.add_argument("--allow-outside-paths", action="store_true",
+                   help="accept heatmap and image paths outside the scene file's folder (refused by default)")
+    p.add_argument("--weights", help="keypoint-network weights for detections given as image boxes "
+                   "(default: the shipped weights; needs torch)")
+    p.add_argument("--save-detections", metavar="SCENE_OUT",
+                   help="also write the scene with the network's keypoints (and its heatmaps in SCENE_OUT's folder)")
+
+
+def main(argv=None) -> int:
+    """Runs the ``vfactor`` command on ``argv`` (default: ``sys.argv[1:]``); returns the exit code (:data:`EXIT_CODES`)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = next((a for a in argv if not a.startswith("-")), None)
+    if command in NET_COMMANDS:  # the network's own parser; torch is imported only here
+        return _net(argv, command)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    configure_logging(args.verbose, args.quiet)
+    if args.command is None:
+        parser.print_help()
+        return EXIT_OK
+    if args.command == "help":
+        return _help(parser, args.topic)
+    from vfactor.cli import estimate, evaluate, simulation, tools
+
+    handlers = {"solve": estimate.solve, "track": estimate.track, "simulate": simulation.simulate,
+                "demo": simulation.demo, "eval": evaluate.evaluate, "plot": tools.plot, "schema": tools.schema}
+    return _guarded(args.command, lambda: handlers[args.command](args), args.debug)
+
+
+def _help(parser: argparse.ArgumentParser, topic: str | None) -> int:
+    """``vfactor help [COMMAND]``."""
+    if topic is None:
+        parser.print_help()
+        return EXIT_OK
+    if topic in NET_COMMANDS:
+        return _net([topic, "--help"], topic)
+    commands = parser._subparsers._group_actions[0].choices  # argparse keeps the sub-parsers only there
+    if topic not in commands:
+        say(f"vfactor help: error: no command {topic!r}; the commands: {', '.join(commands)}")
+        return EXIT_INPUT
+    commands[topic].print_help()
+    return EXIT_OK
+
+
+def _guarded(command: str, run, debug: bool) -> int:
+    """Runs a command; any failure becomes one line on stderr and its exit code, never a traceback."""
+    try:
+        return run()
+    except InputError as exc:
+        say(f"vfactor {command}: error: {exc}")
+        return EXIT_INPUT
+    except OSError as exc:
+        say(f"vfactor {command}: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "))
+        return EXIT_INPUT
+    except MemoryError:
+        say(f"vfactor {command}: error: out of memory (is an input far larger than it should be?)")
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        say("vfactor: interrupted")
+        return EXIT_INTERRUPTED
+    except Exception as exc:  # noqa: BLE001 - the CLI reports, never dumps a bare traceback
+        if debug:
+            raise
+        say(f"vfactor {command}: internal error: {type(exc).__name__}: {exc} (run with --debug for details)")
+        return EXIT_INTERNAL
+
+
+def _net(argv: list[str], command: str) -> int:
+    """``vfactor train|detect|calibrate|score``: the keypoint network's commands (:mod:`vfactor.net.commands`).
+
+    The options of every command are taken out of ``argv`` wherever they stand; ``-q`` is passed on as the
+    network's ``--quiet`` (no progress bar) where the command has one.
+    """
+    debug = "--debug" in argv
+    verbose = sum(a.count("v") for a in argv if a in ("-v", "-vv", "-vvv")) + argv.count("--verbose")
+    quiet = "-q" in argv or "--quiet" in argv
+    rest = [a for a in argv if a not in ("--debug", "-v", "-vv", "-vvv", "--verbose", "-q", "--quiet")]
+    if quiet and command == "train":
+        rest.append("--quiet")
+    configure_logging(verbose, quiet)
+
+    def run():
+        try:
+            from vfactor.net.commands import main as net_main
+        except ImportError as exc:
+            from vfactor.cli.common import missing_extra
+
+            raise missing_extra("", exc, "net") from None
+        return net_main(rest, prog="vfactor")
+
+    return _guarded(command, run, debug)

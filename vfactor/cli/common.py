@@ -1,0 +1,191 @@
+"""What the ``vfactor`` commands share: exit codes, messages and logging, checks of options, the keypoint network.
+
+Messages: everything the commands say goes to stderr through the ``vfactor``
+logger (:func:`say` for errors and the unsolved vehicles, :data:`log` for
+notes), one line each, without terminal escapes (:func:`vfactor.sanity.one_line`).
+Results and summaries go to stdout, and not at all with ``-q``.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+import time
+from pathlib import Path
+
+from vfactor.errors import InputError
+from vfactor.sanity import one_line
+
+__all__ = ["EXIT_OK", "EXIT_INTERNAL", "EXIT_INPUT", "EXIT_UNSOLVED", "EXIT_INTERRUPTED", "configure_logging", "say",
+           "note", "progress", "missing_extra", "check_positive", "check_out_file", "check_out_dir", "report_unsolved",
+           "detect", "check_outputs"]
+
+EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_UNSOLVED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+
+#: The library's logger: modules log under ``vfactor.<module>``; the commands show WARNING and above, INFO
+#: with ``-v``, DEBUG with ``-vv``, ERROR only with ``-q``.
+log = logging.getLogger("vfactor")
+
+
+class _OneLine(logging.Formatter):
+    """A record as one line without escapes; INFO and DEBUG records name their module."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = record.getMessage()
+        if record.levelno < logging.WARNING:
+            text = f"[{record.name}] {text}"
+        return one_line(text, limit=2000)
+
+
+class _StderrHandler(logging.StreamHandler):
+    """Writes to whatever ``sys.stderr`` is when a record comes (tests and callers may swap it)."""
+
+    def __init__(self):
+        super().__init__(sys.stderr)
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value):  # StreamHandler sets it; the current sys.stderr is always used
+        pass
+
+
+def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
+    """Shows the ``vfactor`` logger's records on stderr: ERROR with ``quiet``, else WARNING, INFO (``verbose``
+    1) or DEBUG (2 and more). Idempotent: one handler however often it is called."""
+    if quiet:
+        level = logging.ERROR
+    else:
+        level = {0: logging.WARNING, 1: logging.INFO}.get(verbose, logging.DEBUG)
+    if not any(isinstance(h, _StderrHandler) for h in log.handlers):
+        handler = _StderrHandler()
+        handler.setFormatter(_OneLine())
+        log.addHandler(handler)
+    log.setLevel(level)
+    log.propagate = False
+
+
+def say(text: str) -> None:
+    """An error or an unsolved vehicle: shown even with ``-q``."""
+    log.error(text)
+
+
+def note(text: str) -> None:
+    """A note (``note: ...``) on stderr: hidden by ``-q``."""
+    log.warning(f"note: {text}")
+
+
+def progress(label: str, enabled: bool = True):
+    """The progress callback of a command: a bar on a terminal, nothing otherwise."""
+    from vfactor.progress import Progress
+
+    return Progress(desc=label, enabled=enabled, tty_only=True)
+
+
+def missing_extra(field: str, exc: ImportError, extras: str, context: str = "") -> InputError:
+    """The error for a command part that needs an optional extra ("net": PyTorch, "render": moderngl)."""
+    needs = {"net": "PyTorch", "render": "moderngl"}
+    what = " and ".join(needs[e] for e in extras.split(","))
+    return InputError(field, f"{context}this needs {what} ({exc}); install with "
+                             f"pip install -c constraints.txt -e '.[{extras}]'")
+
+
+def check_positive(value, name):
+    if value is not None and value < 1:
+        raise InputError(name, f"expected an integer >= 1, got {value}")
+    return value
+
+
+def check_out_file(value, option: str, inputs=()) -> Path:
+    """Checks an output file option before the work starts: not a folder, not one of ``inputs``,
+    and in a folder that exists (or can be made) and is writable.
+
+    Raises:
+        InputError: (field: ``option``) what is wrong.
+    """
+    path = Path(value)
+    if path.is_dir() or str(value).endswith(("/", os.sep)):
+        raise InputError(option, f"{value} is a folder; give a file name")
+    for name, given in inputs:
+        if given is not None and Path(given).exists() and path.exists() and os.path.samefile(path, given):
+            raise InputError(option, f"{value} is the {name} itself; write the output to another file")
+    folder = path.absolute().parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise InputError(option, f"cannot create {path.parent}: {folder} is not a folder")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(option, f"cannot write into {folder}: permission denied")
+    return path
+
+
+def check_out_dir(path: Path) -> Path:
+    if path.exists() and not path.is_dir():
+        raise InputError("--out", f"{path} exists and is not a folder")
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def report_unsolved(results, scene, quiet: bool) -> int:
+    """Prints a line per vehicle that was not solved; returns the exit code (3 when any, else 0)."""
+    code = EXIT_OK
+    camera_index = {name: i for i, name in enumerate(scene.cameras)}
+    for f, frame in enumerate(results):
+        for v in frame.vehicles:
+            if v.ok:
+                continue
+            message = v.message
+            for name, i in camera_index.items():
+                message = message.replace(f"camera '{name}'", f"camera '{name}' (cameras[{i}])")
+            say(f"frames[{f}] vehicle '{v.id}': {v.status.value}: {message}")
+            code = EXIT_UNSOLVED
+    return code
+
+
+def detect(scene, args):
+    """Runs the keypoint network on the scene's box-only detections (if any); optionally saves the result."""
+    pending = scene.undetected()
+    if not pending:
+        if args.weights:
+            note("every detection gives keypoints; --weights is not used")
+        if args.save_detections:
+            raise InputError("--save-detections", "no detection of the scene needs the keypoint network")
+        return scene
+    try:
+        from vfactor.net.infer import KeypointDetector
+        from vfactor.net.pipeline import detect_scene
+    except ImportError as exc:
+        f, j = pending[0]
+        raise missing_extra(f"frames[{f}].detections[{j}]", exc, "net", "given as an image box: ") from None
+    try:
+        detector = KeypointDetector(args.weights)
+    except Exception as exc:  # noqa: BLE001 - any failure to read the weights file is bad input
+        raise InputError("--weights", str(exc)) from None
+    t0 = time.perf_counter()
+    heatmaps_dir = None
+    if args.save_detections:
+        out = Path(args.save_detections)
+        heatmaps_dir = out.with_name(out.stem + "_heatmaps")
+    scene = detect_scene(scene, detector, heatmaps_dir=heatmaps_dir, progress=progress("keypoints", not args.quiet))
+    if args.save_detections:
+        from vfactor.scene import save_scene
+
+        save_scene(scene, args.save_detections)
+    if not args.quiet:
+        print(f"keypoint network: {len(pending)} boxes ({time.perf_counter() - t0:.2f} s)"
+              + (f"; wrote {args.save_detections} and {heatmaps_dir}/" if args.save_detections else ""))
+    return scene
+
+
+def check_outputs(args) -> None:
+    """``solve`` and ``track``: --out and --save-detections checked before any work."""
+    check_out_file(args.out, "--out", [("scene file", args.scene)])
+    if args.save_detections:
+        check_out_file(args.save_detections, "--save-detections",
+                        [("scene file", args.scene), ("result file --out", args.out)])
+        if os.path.abspath(args.save_detections) == os.path.abspath(args.out):
+            raise InputError("--save-detections", f"{args.save_detections} is also --out; give another file")
+

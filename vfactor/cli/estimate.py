@@ -1,0 +1,72 @@
+"""``vfactor solve`` and ``vfactor track``: estimate every vehicle of a scene file, write the result."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from vfactor.cli.common import check_out_file, check_outputs, detect, note, progress, report_unsolved
+from vfactor.errors import InputError
+
+__all__ = ["solve", "track"]
+
+
+def solve(args) -> int:
+    from vfactor.factors.robust import RobustLoss
+    from vfactor.graph import GraphConfig
+    from vfactor.scene import load_scene, save_results
+    from vfactor.solve import SolveOptions, solve_scene
+
+    check_outputs(args)
+    scene = detect(load_scene(args.scene, allow_outside_paths=args.allow_outside_paths), args)
+    options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
+    t0 = time.perf_counter()
+    results = solve_scene(scene, options, progress=progress("solving", not args.quiet))
+    save_results(args.out, results)
+    vehicles = [v for fr in results for v in fr.vehicles]
+    solved = sum(v.ok for v in vehicles)
+    if not args.quiet:
+        print(f"solved {solved} of {len(vehicles)} vehicles in {len(results)} frames "
+              f"({time.perf_counter() - t0:.2f} s); wrote {args.out}")
+    return report_unsolved(results, scene, args.quiet)
+
+
+def track(args) -> int:
+    from vfactor.scene import load_scene, save_results
+    from vfactor.solve import SolveOptions
+    from vfactor.track import TrackOptions, smooth_scene, track_scene
+
+    if args.lag is not None and not (np.isfinite(args.lag) and args.lag > 0):
+        raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
+    if args.batch and (args.lag is not None or args.online):
+        raise InputError("--batch", "batch smoothing uses every frame: it takes neither --lag nor --online")
+    check_outputs(args)
+    if args.plot:
+        check_out_file(args.plot, "--plot", [("scene file", args.scene), ("result file --out", args.out)])
+    scene = detect(load_scene(args.scene, allow_outside_paths=args.allow_outside_paths), args)
+    options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance)
+    t0 = time.perf_counter()
+    if args.batch:
+        results, messages = smooth_scene(scene, options), []
+    else:
+        run = track_scene(scene, options, progress=progress("tracking", not args.quiet))
+        results, messages = (run.online if args.online else run.frames), run.messages
+    save_results(args.out, results)
+    for message in messages:
+        note(message)
+    vehicles = [v for fr in results for v in fr.vehicles]
+    tracks = {v.id for v in vehicles}
+    if not args.quiet:
+        print(f"tracked {len(tracks)} vehicles over {len(results)} frames: {sum(v.ok for v in vehicles)} of "
+              f"{len(vehicles)} poses solved ({time.perf_counter() - t0:.2f} s); wrote {args.out}")
+    if args.plot:
+        from vfactor.viz import plot_trajectories
+
+        Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
+        plot_trajectories(scene.cameras, results, args.plot)
+        if not args.quiet:
+            print(f"wrote {args.plot}")
+    return report_unsolved(results, scene, args.quiet)
+

@@ -1,0 +1,113 @@
+"""``vfactor eval``: accuracy and consistency against simulated ground truth (frames, tracks, paper, images)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from vfactor.cli.common import EXIT_OK, check_out_file, check_positive, missing_extra, progress
+from vfactor.errors import InputError
+from vfactor.jsonio import write_text_atomic
+
+__all__ = ["evaluate"]
+
+
+def evaluate(args) -> int:
+    t0 = time.perf_counter()
+    if args.markdown:
+        check_out_file(args.markdown, "--markdown")
+    frames = check_positive(args.frames, "--frames")
+    check_positive(args.seeds, "--seeds")
+    if args.draws < 0:
+        raise InputError("--draws", f"expected an integer >= 0, got {args.draws}")
+    if not (np.isfinite(args.lag) and args.lag > 0):
+        raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
+    if args.experiment == "frames":
+        sections = _eval_frames(args.scenario or "library_2cam", frames, args.seed, _levels(args.levels), args.seeds)
+    elif args.experiment == "tracks":
+        sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws, args.lag)
+    elif args.experiment == "images":
+        sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed)
+    else:
+        if args.scenario:
+            raise InputError("--scenario", "the paper comparison uses its own scenario (paper_webots)")
+        from vfactor.paper_comparison import paper_report
+
+        sections = [paper_report(frames, args.seed, args.figures, check_positive(args.sweep_frames, "--sweep-frames"))]
+    default = {"frames": "library_2cam", "tracks": "tracks_3veh", "paper": None, "images": "accuracy_2cam"}[
+        args.experiment]
+    command = "vfactor eval" + (f" {args.experiment}" if args.experiment != "frames" else "") + \
+        (f" --scenario {args.scenario}" if args.scenario and args.scenario != default else "") + \
+        (f" --frames {args.frames}" if args.frames else "") + (f" --seed {args.seed}" if args.seed else "") + \
+        (f" --seeds {args.seeds}" if args.seeds != 1 else "") + (f" --draws {args.draws}" if args.draws else "") + \
+        (f" --lag {args.lag:g}" if args.experiment == "tracks" and args.lag != 0.5 else "") + \
+        (f" --levels {args.levels}" if args.experiment == "frames" and args.levels != "clean,paper,hard" else "") + \
+        (f" --figures {args.figures}" if args.figures else "") + \
+        (f" --sweep-frames {args.sweep_frames}" if args.experiment == "paper" and args.sweep_frames != 30 else "")
+    for section in sections:
+        print(section)
+    print(f"({command}; {time.perf_counter() - t0:.1f} s)")
+    if args.markdown:
+        write_text_atomic(args.markdown, f"<!-- made by: {command} -->\n\n" + "\n".join(sections))
+    return EXIT_OK
+
+
+def _levels(text: str) -> tuple[str, ...]:
+    from vfactor.evaluation import NOISE_LEVELS
+
+    levels = tuple(t.strip() for t in text.split(",") if t.strip())
+    unknown = [t for t in levels if t not in NOISE_LEVELS]
+    if not levels or unknown:
+        raise InputError("--levels", f"expected a comma-separated list of {', '.join(NOISE_LEVELS)}, got {text!r}")
+    return levels
+
+
+def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper", "hard"), seeds: int = 1) -> list[str]:
+    from vfactor.evaluation import (accuracy_table, body_type_table, consistency_table, keypoint_table, run_accuracy,
+                                    summarise_methods)
+
+    sections = []
+    which = f"seed {seed}" if seeds == 1 else f"seeds {seed}-{seed + seeds - 1}"
+    for scenario, rows in run_accuracy(scenario_name, frames, seed, levels, seeds=seeds):
+        n = scenario.noise
+        summary = summarise_methods(rows)
+        title = (f"### {scenario.name}: {n.outlier_rate:.0%} outliers, {n.swap_rate:.0%} left/right swaps, "
+                 f"{n.missing_rate:.0%} missing, sigma {n.relative_sigma:.1%} of the box diagonal "
+                 f"(x{n.occluded_factor:g} when self-occluded), {which}")
+        sections.append(f"{title}\n\n{accuracy_table(summary)}\n\nPer body type (each vehicle solved with a "
+                        f"shape model learnt without it):\n\n{body_type_table(rows)}\n\nConsistency of the factor "
+                        f"graph's covariances (NEES; consistent: 1.00x and 95 %):\n\n{consistency_table(rows)}\n\n"
+                        f"Mean error per keypoint (cm):\n\n{keypoint_table(summary)}\n")
+    return sections
+
+
+def _eval_images(scenario_name: str, frames, seed: int) -> list[str]:
+    try:
+        from vfactor.net.end_to_end import evaluate_images, images_report
+    except ImportError as exc:
+        raise missing_extra("images", exc, "net,render") from None
+    return [images_report(evaluate_images(scenario_name, frames, seed, progress=progress("rendering")))]
+
+
+def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int = 0, lag: float = 0.5) -> list[str]:
+    from vfactor.evaluation import compare_tracking, shape_draws_table, shape_over_noise_draws, tracking_table
+    from vfactor.sim import load_scenario, simulate
+
+    scenario = load_scenario(scenario_name)
+    if scenario.motion is None:
+        raise InputError("--scenario", f"{scenario.name!r} has no motion: each frame holds new vehicles, so there "
+                         "is nothing to track; use a scenario with tracks, e.g. tracks_3veh or tracks_3cam")
+    sections = []
+    for s in range(seed, seed + seeds):
+        sim = simulate(scenario, seed=s, num_frames=frames)
+        ids = sorted({vid for f in sim.scene.frames for vid in f.vehicle_ids()})
+        title = (f"### {scenario.name}, seed {s}: {len(sim.scene.frames)} frames, {len(ids)} vehicles, "
+                 f"{len(sim.scene.cameras)} cameras" + (", road plane given" if sim.scene.ground_plane else ""))
+        sections.append(f"{title}\n\n{tracking_table(compare_tracking(sim, lag=lag))}\n")
+        if draws:
+            sections.append(f"Final shapes of batch smoothing over {draws} draws of the keypoint noise (same "
+                            f"vehicles and motion):\n\n{shape_draws_table(shape_over_noise_draws(sim, draws))}\n")
+    return sections
+
+

@@ -98,7 +98,7 @@ def test_demo_writes_pictures_and_results(tmp_path, capsys):
     assert main(["demo", "--out", str(out), "--frames", "2"]) == 0
     text = capsys.readouterr().out
     assert "mean vfactor" in text and "mean triangulation" in text
-    for name in ("scene.json", "truth.json", "result.json", "overlay_cam0.png", "overlay_cam1.png", "estimate_3d.png"):
+    for name in ("scene.json", "scene_truth.json", "result.json", "overlay_cam0.png", "overlay_cam1.png", "estimate_3d.png"):
         assert (out / name).stat().st_size > 0, name
 
 

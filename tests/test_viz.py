@@ -259,6 +259,30 @@ def test_plot_estimates_writes_a_png(tmp_path, vehicle):
         viz.plot_estimates(cameras, [result], None, tmp_path / "d.png", sigma=0)
 
 
+def test_plot_estimates_grows_a_panel_per_vehicle_and_a_table_row_per_result(tmp_path, vehicle):
+    import dataclasses
+
+    result, truth = vehicle
+    cameras = {"cam0": make_camera("cam0")}
+    many = [dataclasses.replace(result, id=f"v{k}", world_T_vehicle=gtsam.Pose3(
+        gtsam.Rot3.Yaw(0.4 * k), np.array([6.0 * (k % 4), 6.0 * (k // 4), 0.32]))) for k in range(8)]
+    one = cv2.imread(str(viz.plot_estimates(cameras, many[:1], None, tmp_path / "one.png")))
+    eight = cv2.imread(str(viz.plot_estimates(cameras, many, None, tmp_path / "eight.png")))
+    # a second row of panels (six to a row) and seven more table rows make the figure taller, not more crowded
+    assert eight.shape[0] > one.shape[0] + 250 and eight.shape[1] == one.shape[1]
+
+
+def test_vehicle_tags_never_overlap():
+    img = np.full((200, 300, 3), 128, np.uint8)
+    anchors = [(150.0, 100.0 + d) for d in (0, 2, 4, 6, 8)] + [(5.0, 3.0), (298.0, 199.0)]
+    rects = viz._draw_tags(img, [(f"v{k}", a) for k, a in enumerate(anchors)], 0.6)
+    assert len(rects) == len(anchors)
+    for i, a in enumerate(rects):
+        assert 0 <= a[0] < a[2] <= 300 and 0 <= a[1] < a[3] <= 200, a
+        for b in rects[i + 1:]:
+            assert not (a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]), (a, b)
+
+
 # ------------------------------------------------------------------- overlays
 def test_write_overlays_one_file_per_camera(tmp_path, vehicle):
     result, truth = vehicle

@@ -48,7 +48,7 @@ class CalibrationError(InputError):
 
 
 class ScenarioError(InputError):
-    """A simulation scenario file (``vfactor/graphs/*.json`` or the user's own) is malformed."""
+    """A simulation scenario file (``graphs/*.json`` or the user's own) is malformed."""
 
 
 def check_numbers(owner: str, obj, names, minimum: float = 0.0, strict: bool = True) -> None:

@@ -9,6 +9,7 @@ still solved; :func:`solve_scene` does every frame.
 from __future__ import annotations
 
 import dataclasses
+import logging
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -42,6 +43,8 @@ from vfactor.shape_evidence import (NOISE_SCALE_RANGE, choose_body_type, covaria
                                     noise_scale, shape_information)
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
 from vfactor.wireframe import Wireframe
+
+log = logging.getLogger(__name__)
 
 __all__ = ["SolveOptions", "solve_vehicle", "solve_observations", "solve_frame", "solve_scene", "pose_shape_covariance",
            "keypoint_covariances"]
@@ -528,6 +531,13 @@ def solve_scene(
     out = []
     for i, frame in enumerate(scene.frames):
         out.append(solve_frame(frame, scene.cameras, options, **kwargs))
+        for v in out[-1].vehicles:
+            log.debug("frame %d (t = %g s) vehicle %r: %s after %d iterations, body type %s, noise scale %.2f%s", i,
+                      frame.t, v.id, v.status.value, v.iterations, v.body_type, v.extras.get("noise_scale", float("nan")),
+                      f": {v.message}" if v.message else "")
         if progress is not None:
             progress(i + 1, len(scene.frames))
+    solved = sum(v.ok for fr in out for v in fr.vehicles)
+    log.info("solved %d of %d vehicles in %d frames, %d cameras", solved, sum(len(fr.vehicles) for fr in out), len(out),
+             len(scene.cameras))
     return out

@@ -19,6 +19,7 @@ gives a road plane, the ground-plane factor on every pose.
 from __future__ import annotations
 
 import dataclasses
+import logging
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -51,6 +52,8 @@ from vfactor.shape_evidence import track_shape
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
 from vfactor.solve import SolveOptions, solve_observations
 from vfactor.wireframe import Wireframe
+
+log = logging.getLogger(__name__)
 
 __all__ = ["TrackOptions", "Tracker", "TrackRun", "track_scene", "smooth_scene", "frame_order"]
 
@@ -565,6 +568,9 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
             messages.append(f"vehicle '{vid}' was solved in one frame only: no motion information")
     frames = [FrameResult(f.t, [checked(final[(i, vid)], _seen_by(f, vid, scene.cameras), options.covariance)
                                 for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
+    log.info("tracked %d vehicles over %d frames (%s): %d of %d poses solved", len(solved), len(frames),
+             "smoothed" if options.lag is None else f"fixed lag {options.lag:g} s",
+             sum(v.ok for fr in frames for v in fr.vehicles), sum(len(fr.vehicles) for fr in frames))
     return TrackRun(frames=frames, online=[online[i] for i in range(len(scene.frames))], messages=messages)
 
 

@@ -29,8 +29,8 @@ black (figures); observed keypoints coloured red (low confidence) to green
 
 from __future__ import annotations
 
+import logging
 import math
-import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
@@ -43,6 +43,8 @@ from vfactor.keypoints import NUM_KEYPOINTS, WIREFRAME_EDGES, layer_of
 from vfactor.observations import Detection, Frame, resolve_path
 from vfactor.result import VehicleResult
 from vfactor.wireframe import Wireframe
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "LAYER_COLORS_BGR",
@@ -68,7 +70,9 @@ LAYER_COLORS_RGB: dict[str, tuple[float, float, float]] = {
 }
 
 _NEAR = 0.1  # metres: nearest depth drawn
-_MAX_SIDE_PANELS = 3
+_MAX_SIDE_PANELS = 12
+#: Overlays write each observed keypoint's index only up to this many vehicles in a frame (beyond, they clutter).
+_MAX_NUMBERED_VEHICLES = 3
 _SKY_TOP = np.array([200.0, 140.0, 80.0])  # BGR
 _SKY_HORIZON = np.array([235.0, 215.0, 190.0])
 _GROUND = np.array([105.0, 105.0, 105.0])
@@ -214,6 +218,60 @@ def _label_box(img, lines, corner="tl", scale=0.6, pad=6, alpha=0.55):
         baseline_y = y0 + pad + line_h * (k + 1) - 4
         cv2.putText(img, t, (x0 + pad, baseline_y), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1, cv2.LINE_AA)
     return (x0, y0, x1, y1)
+
+
+def _vehicle_anchor(camera: Camera, size, keypoints_world, detection) -> tuple[float, float] | None:
+    """Where a vehicle's label goes in an image: above the middle of its projected estimate, else of its
+    observed keypoints; None when neither is in view."""
+    if keypoints_world is not None:
+        uv, _, valid = _project_valid(camera, _check_points(keypoints_world, "keypoints_world"), size,
+                                      _max_valid_r2(camera, size))
+        if np.any(valid):
+            return float(uv[valid, 0].mean()), float(uv[valid, 1].min())
+    if detection is not None:
+        kp, conf = np.asarray(detection.keypoints, dtype=float), np.asarray(detection.confidence, dtype=float)
+        seen = np.isfinite(conf) & (conf > 0) & np.all(np.isfinite(kp), axis=1)
+        if np.any(seen):
+            return float(kp[seen, 0].mean()), float(kp[seen, 1].min())
+    return None
+
+
+def _draw_tags(img, tags, scale, placed: list | None = None) -> list:
+    """Labels on dark tags above their anchors, moved up (or down at the top edge) until no two overlap.
+
+    Args:
+        img: the BGR image, drawn on.
+        tags: (text, (u, v) anchor) pairs.
+        scale: font scale.
+        placed: tag rectangles ``(x0, y0, x1, y1)`` already on the image (extended in place).
+
+    Returns:
+        The rectangles of every tag on the image.
+    """
+    H, W = img.shape[:2]
+    placed = [] if placed is None else placed
+    font, thick, pad = cv2.FONT_HERSHEY_SIMPLEX, 2, 4
+    for text, (u, v) in sorted(tags, key=lambda tag: tag[1][1]):
+        (tw, th), base = cv2.getTextSize(text, font, scale * 0.8, thick)
+        w, h = tw + 2 * pad, th + base + 2 * pad
+        x0 = int(np.clip(u - w / 2, 0, max(W - w, 0)))
+        y0 = int(v - 10 - h)
+        step = -(h + 2)
+        for _ in range(4 * len(placed) + 2):
+            if y0 < 0:
+                y0, step = int(v + 10), h + 2  # no room above: below the anchor, moving down
+            rect = (x0, y0, x0 + w, y0 + h)
+            if not any(rect[0] < q[2] and q[0] < rect[2] and rect[1] < q[3] and q[1] < rect[3] for q in placed):
+                break
+            y0 += step
+        y0 = int(np.clip(y0, 0, max(H - h, 0)))
+        rect = (x0, y0, x0 + w, y0 + h)
+        roi = img[rect[1]:rect[3], rect[0]:rect[2]]
+        roi[:] = (roi * 0.25).astype(np.uint8)
+        cv2.rectangle(img, rect[:2], (rect[2] - 1, rect[3] - 1), (235, 235, 235), 1, cv2.LINE_AA)
+        cv2.putText(img, text, (x0 + pad, y0 + pad + th), font, scale * 0.8, (255, 255, 255), thick, cv2.LINE_AA)
+        placed.append(rect)
+    return placed
 
 
 def _font_scale(size: tuple[int, int]) -> float:
@@ -414,6 +472,7 @@ def draw_overlay(
     roi: Sequence[float] | None = None,
     label: str | None = None,
     legend: bool = True,
+    keypoint_numbers: bool = True,
 ) -> np.ndarray:
     """Draws keypoints, wireframes and heatmaps of one vehicle on a camera image.
 
@@ -439,8 +498,9 @@ def draw_overlay(
         roi: ``(x0, y0, x1, y1)`` box the heatmaps cover, in image pixel
             edges as in :mod:`vfactor.heatmaps` (``(0, 0, W, H)`` is the whole
             image); defaults to ``detection.roi``, else to the whole image.
-        label: text written above the vehicle (e.g. its track id).
+        label: text written in a tag above the vehicle (e.g. its track id).
         legend: whether to draw a small legend in the bottom-left corner.
+        keypoint_numbers: whether to write each observed keypoint's index beside it.
 
     Returns:
         A new (H, W, 3) ``uint8`` BGR image.
@@ -468,7 +528,6 @@ def draw_overlay(
                 _dashed(img, uv, _TRUTH_BGR, 1, outline=(30, 30, 30))
         legend_items.append(("truth", None))
 
-    label_anchor = None
     if keypoints_world is not None:
         est = _check_points(keypoints_world, "keypoints_world")
         for (i, j), lines in _edge_polylines(camera, est, size, r2_max):
@@ -479,9 +538,6 @@ def draw_overlay(
         uv, _, valid = _project_valid(camera, est, size, r2_max)
         for k in np.nonzero(valid)[0]:
             cv2.circle(img, tuple(_fixed(uv[k])), 3 << _SHIFT, LAYER_COLORS_BGR[layer_of(k)], -1, cv2.LINE_AA, _SHIFT)
-        if np.any(valid):
-            top = uv[valid]
-            label_anchor = (top[:, 0].mean(), top[:, 1].min())
         legend_items.append(("estimate", None))
 
     if detection is not None:
@@ -499,14 +555,14 @@ def draw_overlay(
             centre = tuple(_fixed(kp[k]))
             cv2.circle(img, centre, int(round((r + 1.5) * (1 << _SHIFT))), (0, 0, 0), -1, cv2.LINE_AA, _SHIFT)
             cv2.circle(img, centre, int(round(r * (1 << _SHIFT))), _confidence_colour(c), -1, cv2.LINE_AA, _SHIFT)
-            _text(img, str(k), (kp[k, 0] + r + 2, kp[k, 1] - r), scale * 0.55, (255, 255, 255), 1)
-        if label_anchor is None and np.any(seen):
-            label_anchor = (kp[seen, 0].mean(), kp[seen, 1].min())
+            if keypoint_numbers:
+                _text(img, str(k), (kp[k, 0] + r + 2, kp[k, 1] - r), scale * 0.55, (255, 255, 255), 1)
         legend_items.append(("observed", None))
 
-    if label and label_anchor is not None:
-        tw = cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, scale * 0.8, 2)[0][0]
-        _text(img, label, (label_anchor[0] - tw / 2, label_anchor[1] - 12), scale * 0.8, (255, 255, 255), 2)
+    if label:
+        anchor = _vehicle_anchor(camera, size, keypoints_world, detection)
+        if anchor is not None:
+            _draw_tags(img, [(label, anchor)], scale)
 
     if legend and legend_items:
         _draw_legend(img, [name for name, _ in legend_items], scale)
@@ -721,10 +777,13 @@ def plot_estimates(
       (body x) per vehicle, the ``sigma``-sigma position ellipse, and each
       camera (or, when it lies outside the view, an arrow at the border
       pointing at it with its distance).
-    - One small panel per vehicle (at most three) with the ellipse at its true
-      size in centimetres around the estimate, the 1-sigma standard deviations
-      along its axes, the vertical and yaw standard deviations, and the
-      offset of the true position when known.
+    - One small panel per vehicle (up to twelve, six to a row) with the
+      ellipse at its true size in centimetres around the estimate and the
+      true position when known.
+    - A table of every vehicle (those without a pose too, with their status):
+      body type, the 1-sigma standard deviations along the ellipse's axes,
+      the vertical and yaw standard deviations, and the offset of the true
+      position (cm and Mahalanobis) when known.
 
     Position ellipses are metres-scale pictures of centimetre-scale
     uncertainties: in the 3D and top-down panels they are magnified by a round
@@ -756,7 +815,6 @@ def plot_estimates(
     results = list(results)
     truth = dict(truth or {})
     drawn = [r for r in results if r.world_T_vehicle is not None and r.wireframe is not None]
-    not_drawn = [r for r in results if r not in drawn]
 
     est_pts = {r.id: r.keypoints_world for r in drawn}
     truth_pts = {vid: wf.in_world(pose) for vid, (pose, wf) in truth.items()}
@@ -771,14 +829,14 @@ def plot_estimates(
     mag = _nice_factor(0.25 * vehicle_size / largest) if largest > 0 else 1.0
 
     n_side = min(len(drawn), _MAX_SIDE_PANELS)
-    fig = _new_figure((17.0 if n_side else 13.5, 7.6))
-    if n_side:
-        gs = fig.add_gridspec(
-            1, 3, width_ratios=[1.2, 1.1, 0.55], wspace=0.3, left=0.02, right=0.985, top=0.91, bottom=0.08
-        )
-        side = gs[0, 2].subgridspec(2 * n_side, 1, height_ratios=[3.0, 1.0] * n_side, hspace=0.3)
-    else:
-        gs = fig.add_gridspec(1, 2, width_ratios=[1.2, 1.1], wspace=0.3, left=0.02, right=0.985, top=0.91, bottom=0.08)
+    cols = min(n_side, 6)
+    panel_rows = math.ceil(n_side / cols) if n_side else 0
+    table_rows = len(results)
+    heights = [7.0] + ([2.6 * panel_rows] if panel_rows else []) + ([0.5 + 0.26 * (table_rows + 1)] if table_rows else [])
+    fig = _new_figure((15.5, sum(heights) + 0.9))
+    outer = fig.add_gridspec(len(heights), 1, height_ratios=heights, hspace=0.28, left=0.04, right=0.985,
+                             top=1 - 0.55 / (sum(heights) + 0.9), bottom=0.15 / (sum(heights) + 0.9))
+    gs = outer[0].subgridspec(1, 2, width_ratios=[1.15, 1.0], wspace=0.18)
     ax3 = fig.add_subplot(gs[0, 0], projection="3d")
     ax2 = fig.add_subplot(gs[0, 1])
 
@@ -836,9 +894,6 @@ def plot_estimates(
     ax3.set_zlabel("z [m]")
     ax3.view_init(elev=28, azim=-60)
     ax3.set_title("Camera rig and vehicles (3D)", fontsize=11)
-    if pos_cov:
-        note = f"red wire ellipsoids: position {sigma:g}\u03c3" + (f", magnified \u00d7{mag:g}" if mag > 1 else "")
-        ax3.text2D(0.5, 0.02, note, transform=ax3.transAxes, ha="center", fontsize=8.5, color=_ELLIPSE_RGB)
 
     # ------------------------------------------------------------ top-down panel
     if all_pts:
@@ -893,49 +948,84 @@ def plot_estimates(
         handles.append(
             Polygon(
                 [[0, 0]], closed=True, fc=(*_ELLIPSE_RGB, 0.18), ec=_ELLIPSE_RGB,
-                label=f"position {sigma:g}\u03c3 ellipse{mag_txt}",
+                label=f"position {sigma:g}\u03c3 ellipse (3D: ellipsoid){mag_txt}",
             )
         )
     handles.append(Line2D([], [], color="0.1", marker=r"$\rightarrow$", ls="", ms=12, label="heading (body x)"))
-    ax2.legend(handles=handles, loc="upper left", fontsize=8.5, framealpha=0.9)
+    # below the 3D panel, where it covers no vehicle however many there are
+    ax3.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0.06), ncol=3, fontsize=8.5, framealpha=0.9)
 
     # --------------------------------------------------------- per-vehicle panels
-    for k, r in enumerate(drawn[:n_side]):
-        ax = fig.add_subplot(side[2 * k, 0])
-        ax_text = fig.add_subplot(side[2 * k + 1, 0])
-        ax_text.axis("off")
-        _plot_uncertainty_panel(ax, ax_text, r, pos_cov.get(r.id), truth.get(r.id), sigma)
-
-    if not_drawn:
-        lines = [f"{r.id}: {getattr(r.status, 'value', r.status)}" for r in not_drawn]
-        lines = [t + (f" ({r.message})" if r.message else "") for t, r in zip(lines, not_drawn)]
-        fig.text(0.02, 0.015, "Not drawn: " + "; ".join(lines), fontsize=9, color="0.3")
+    rows_of_table = {}
+    if n_side:
+        panels = outer[1].subgridspec(panel_rows, 6, wspace=0.45, hspace=0.5)
+        for k, r in enumerate(drawn[:n_side]):
+            ax = fig.add_subplot(panels[k // cols, k % cols])
+            rows_of_table[r.id] = _plot_uncertainty_panel(ax, r, pos_cov.get(r.id), truth.get(r.id), sigma)
+    if table_rows:
+        ax_table = fig.add_subplot(outer[-1])
+        ax_table.axis("off")
+        header = ["vehicle", "status", "body type", "1\u03c3 position (cm)", "major axis", "1\u03c3 height",
+                  "1\u03c3 yaw", "truth off", "Mahalanobis"]
+        cells = []
+        for r in results:
+            row = rows_of_table.get(r.id) or _uncertainty_row(r, pos_cov.get(r.id), truth.get(r.id))
+            status = getattr(r.status, "value", str(r.status))
+            cells.append([r.id, status + (f": {r.message[:40]}" if r.message and not r.ok else ""),
+                          r.body_type or "-", *row])
+        table = ax_table.table(cellText=cells, colLabels=header, loc="upper center", cellLoc="center")
+        table.auto_set_font_size(False)
+        table.set_fontsize(8.5)
+        table.scale(1.0, 1.15)
+        ax_table.set_title(f"Per vehicle: position uncertainty ({sigma:g}\u03c3 shaded, 1\u03c3 dashed in the panels "
+                           "above, at true scale), offset of the truth", fontsize=9.5, loc="left")
     if len(drawn) > n_side:
-        fig.text(0.98, 0.015, f"uncertainty panels for the first {n_side} of {len(drawn)} vehicles", ha="right",
-                 fontsize=8.5, color="0.3")
-    fig.suptitle(title or "Vehicle pose and shape estimates", fontsize=13, y=0.985)
+        fig.text(0.985, 0.005, f"uncertainty panels for the first {n_side} of {len(drawn)} vehicles", ha="right",
+                 va="bottom", fontsize=8.5, color="0.3")
+    fig.suptitle(title or "Vehicle pose and shape estimates", fontsize=13, y=1 - 0.12 / (sum(heights) + 0.9))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     return path
 
 
-def _plot_uncertainty_panel(ax, ax_text, result: VehicleResult, cov_world, truth_entry, sigma: float) -> None:
-    """The position ellipse of one vehicle at true scale, in cm around the estimate."""
+def _uncertainty_row(result: VehicleResult, cov_world, truth_entry) -> list[str]:
+    """The table cells of one vehicle: 1-sigma position ellipse (cm), its major axis, height and yaw sigmas,
+    the truth's offset (cm) and Mahalanobis distance."""
+    if result.world_T_vehicle is None:
+        return ["-"] * 6
+    cells = ["no covariance", "-", "-", "-"]
+    if cov_world is not None:
+        cov_cm = cov_world * 1e4
+        vals, vecs = _eig_sorted(cov_cm[:2, :2])
+        std = np.sqrt(vals)
+        angle = math.degrees(math.atan2(vecs[1, 0], vecs[0, 0])) % 180.0
+        yaw_std = math.degrees(math.sqrt(max(float(result.pose_covariance[2, 2]), 0.0)))
+        cells = [f"{std[0]:.1f} \u00d7 {std[1]:.1f}", f"{angle:.0f}\u00b0 to x",
+                 f"{math.sqrt(max(cov_cm[2, 2], 0)):.1f} cm", f"{yaw_std:.2f}\u00b0"]
+    off, maha = "-", "-"
+    if truth_entry is not None:
+        d_cm = (np.asarray(truth_entry[0].translation()) - result.world_T_vehicle.translation()) * 100.0
+        off = f"{np.linalg.norm(d_cm):.1f} cm"
+        if cov_world is not None:
+            try:
+                maha = f"{float(np.sqrt(d_cm @ np.linalg.solve(cov_world * 1e4, d_cm))):.1f}\u03c3 (3D)"
+            except np.linalg.LinAlgError:
+                pass
+    return cells + [off, maha]
+
+
+def _plot_uncertainty_panel(ax, result: VehicleResult, cov_world, truth_entry, sigma: float) -> list[str]:
+    """The position ellipse of one vehicle at true scale, in cm around the estimate; returns its table cells."""
     from matplotlib.patches import Polygon
 
-    ax.set_title(f"{result.id}: position uncertainty, top view", fontsize=9.5, loc="left")
+    ax.set_title(f"{result.id} (top view, cm)", fontsize=9)
     ax.set_aspect("equal")
-    ax.set_anchor("S")  # sit right above its text
     ax.grid(True, color="0.88", lw=0.6)
     ax.set_axisbelow(True)
-    ax.tick_params(labelsize=8)
-    ax.set_xlabel("\u0394x [cm]", fontsize=8.5, labelpad=1)
-    ax.set_ylabel("\u0394y [cm]", fontsize=8.5, labelpad=1)
+    ax.tick_params(labelsize=7.5)
     ax.axhline(0, color="0.7", lw=0.6)
     ax.axvline(0, color="0.7", lw=0.6)
     extent = 1.0
-    lines = []
-    p_est = result.world_T_vehicle.translation()
     if cov_world is not None:
         cov_cm = cov_world * 1e4
         e_k = _ellipse_xy(cov_cm[:2, :2], sigma)
@@ -943,35 +1033,19 @@ def _plot_uncertainty_panel(ax, ax_text, result: VehicleResult, cov_world, truth
         ax.add_patch(Polygon(e_k, closed=True, fc=(*_ELLIPSE_RGB, 0.15), ec=_ELLIPSE_RGB, lw=1.3))
         ax.plot(e_1[:, 0], e_1[:, 1], color=_ELLIPSE_RGB, lw=0.8, ls="--")
         vals, vecs = _eig_sorted(cov_cm[:2, :2])
-        std = np.sqrt(vals)
-        for s, v in zip(std, vecs.T):
+        for s, v in zip(np.sqrt(vals), vecs.T):
             ax.plot([-s * v[0], s * v[0]], [-s * v[1], s * v[1]], color=_ELLIPSE_RGB, lw=0.8)
         extent = max(extent, float(np.abs(e_k).max()))
-        angle = math.degrees(math.atan2(vecs[1, 0], vecs[0, 0])) % 180.0
-        lines.append(f"1\u03c3 along axes: {std[0]:.2f} \u00d7 {std[1]:.2f} cm, major at {angle:.0f}\u00b0 to x")
-        yaw_std = math.degrees(math.sqrt(max(float(result.pose_covariance[2, 2]), 0.0)))
-        lines.append(f"1\u03c3 height: {math.sqrt(max(cov_cm[2, 2], 0)):.2f} cm, heading (yaw): {yaw_std:.2f}\u00b0")
     else:
-        lines.append("no covariance")
+        ax.text(0.5, 0.5, "no covariance", transform=ax.transAxes, ha="center", va="center", fontsize=8)
     if truth_entry is not None:
-        d_cm = (np.asarray(truth_entry[0].translation()) - p_est) * 100.0
+        d_cm = (np.asarray(truth_entry[0].translation()) - result.world_T_vehicle.translation()) * 100.0
         ax.plot(d_cm[0], d_cm[1], marker="x", color="k", ms=7, mew=1.6, ls="")
         extent = max(extent, float(np.abs(d_cm[:2]).max()))
-        txt = f"truth (\u00d7): {np.linalg.norm(d_cm):.2f} cm off"
-        if cov_world is not None:
-            try:
-                m = float(np.sqrt(d_cm @ np.linalg.solve(cov_world * 1e4, d_cm)))
-                txt += f" = {m:.1f}\u03c3 (Mahalanobis, 3D)"
-            except np.linalg.LinAlgError:
-                pass
-        lines.append(txt)
     lim = 1.2 * extent
     ax.set_xlim(-lim, lim)
     ax.set_ylim(-lim, lim)
-    ax_text.text(
-        0.0, 1.0, "\n".join(lines) + f"\nshaded: {sigma:g}\u03c3, dashed: 1\u03c3 (true scale)",
-        transform=ax_text.transAxes, ha="left", va="top", fontsize=8, linespacing=1.35,
-    )
+    return _uncertainty_row(result, cov_world, truth_entry)
 
 
 # ---------------------------------------------------------------- trajectories
@@ -1466,7 +1540,10 @@ def write_overlays(
     one and it can be read, else :func:`draw_view`. On it, for every vehicle
     (estimated or only detected): that camera's detection, the estimated
     wireframe, the true wireframe when ``truth`` is given, and the detection's
-    heatmaps when it names a readable file and ``show_heatmaps`` is set.
+    heatmaps when it names a readable file and ``show_heatmaps`` is set. Each
+    vehicle's id is on a tag above it, tags moved apart so that none hides
+    another; keypoint indices are written only when at most
+    :data:`_MAX_NUMBERED_VEHICLES` vehicles are in the frame.
 
     Args:
         out_dir: output folder (created).
@@ -1499,11 +1576,12 @@ def write_overlays(
         if image_path is not None:
             img = cv2.imread(str(image_path), cv2.IMREAD_COLOR)
             if img is None:
-                warnings.warn(f"frame image for camera {name!r} not readable: {image_path}; drawing a stand-in")
+                log.warning("frame image for camera %r not readable: %s; drawing a stand-in", name, image_path)
         if img is None:
             img = draw_view(camera)
         else:
             _label_box(img, [name], corner="tl", scale=_font_scale(img.shape[1::-1]) * 1.1)
+        tags = []
         for vid in ids:
             result = by_id.get(vid)
             detection = next((d for d in frame.detections if d.vehicle == vid and d.camera == name), None)
@@ -1515,14 +1593,18 @@ def write_overlays(
                 if hp is not None and hp.is_file():
                     heat = np.load(hp)
                 else:
-                    warnings.warn(f"heatmaps of {vid!r} in camera {name!r} not found: {hp}")
+                    log.warning("heatmaps of %r in camera %r not found: %s", vid, name, hp)
             if detection is None and est is None and tr is None:
                 continue
             img = draw_overlay(
                 img, camera, detection=detection, keypoints_world=est, truth_keypoints_world=tr,
-                heatmaps=heat, label=vid, legend=False,
+                heatmaps=heat, legend=False, keypoint_numbers=len(ids) <= _MAX_NUMBERED_VEHICLES,
             )
+            anchor = _vehicle_anchor(camera, img.shape[1::-1], est, detection)
+            if anchor is not None:
+                tags.append((vid, anchor))
         scale = _font_scale(img.shape[1::-1])
+        _draw_tags(img, tags, scale)  # last, so that no vehicle's lines cover another's label
         _label_box(img, [f"t = {frame.t:.2f} s"], corner="tr", scale=scale * 0.8)
         _draw_legend(img, ["observed", "estimate"] + (["truth"] if truth else []), scale)
         path = out_dir / f"overlay_{name}.png"

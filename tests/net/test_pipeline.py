@@ -138,7 +138,7 @@ def test_demo_images_writes_overlays_with_heatmaps(rendered, tmp_path, capsys):
     assert main(["demo", "--images", "--frames", "1", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "keypoint network: 2 boxes" in text and "mean vfactor" in text
-    for name in ("scene.json", "scene_keypoints.json", "truth.json", "result.json", "overlay_cam0.png",
+    for name in ("scene.json", "scene_keypoints.json", "scene_truth.json", "result.json", "overlay_cam0.png",
                  "overlay_cam1.png", "estimate_3d.png", "images/f0000_cam0.png"):
         assert (out / name).is_file(), name
     assert load_scene(out / "scene.json").undetected() == [(0, 0), (0, 1)]

@@ -25,6 +25,7 @@ through :func:`vfactor.sanity.one_line`: one line, no terminal escapes.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from vfactor._version import __version__
@@ -53,7 +54,7 @@ Start here:
   vfactor demo                          simulate a two-camera intersection, solve it,
                                         compare with triangulation, write pictures
   vfactor simulate --list               the packaged scenarios (camera rigs, vehicles, noise)
-  vfactor simulate intersection_2cam --out scene.json --truth truth.json
+  vfactor simulate intersection_2cam --out scene.json   (truth: scene_truth.json)
   vfactor solve scene.json --out result.json      every frame on its own
   vfactor track scene.json --out result.json      tracks over frames (iSAM2: shared shape, motion)
   vfactor eval                          accuracy against ground truth, beside baselines
@@ -296,6 +297,12 @@ def _guarded(command: str, run, debug: bool) -> int:
     except InputError as exc:
         say(f"vfactor {command}: error: {exc}")
         return EXIT_INPUT
+    except BrokenPipeError:  # the reader of stdout went away (vfactor ... | head): nothing left to say
+        try:
+            sys.stdout = open(os.devnull, "w")  # so that the interpreter's final flush does not fail again
+        except OSError:
+            pass
+        return EXIT_OK
     except OSError as exc:
         say(f"vfactor {command}: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "))
         return EXIT_INPUT

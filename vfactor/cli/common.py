@@ -18,7 +18,7 @@ from vfactor.errors import InputError
 from vfactor.sanity import one_line
 
 __all__ = ["EXIT_OK", "EXIT_INTERNAL", "EXIT_INPUT", "EXIT_UNSOLVED", "EXIT_INTERRUPTED", "configure_logging", "say",
-           "note", "progress", "missing_extra", "check_positive", "check_out_file", "check_out_dir", "report_unsolved",
+           "note", "output", "progress", "missing_extra", "check_positive", "check_out_file", "check_out_dir", "report_unsolved",
            "detect", "check_outputs"]
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_UNSOLVED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
@@ -66,6 +66,15 @@ def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
         log.addHandler(handler)
     log.setLevel(level)
     log.propagate = False
+
+
+def output(args):
+    """The ``print`` of a command's results and summaries on stdout: a no-op with ``-q``."""
+    return _silent if getattr(args, "quiet", False) else print
+
+
+def _silent(*args, **kwargs) -> None:
+    return None
 
 
 def say(text: str) -> None:

@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from vfactor.cli.common import EXIT_OK, check_out_file, check_positive, missing_extra, progress
+from vfactor.cli.common import EXIT_OK, check_out_file, check_positive, missing_extra, output, progress
 from vfactor.errors import InputError
 from vfactor.jsonio import write_text_atomic
 
@@ -45,9 +45,10 @@ def evaluate(args) -> int:
         (f" --levels {args.levels}" if args.experiment == "frames" and args.levels != "clean,paper,hard" else "") + \
         (f" --figures {args.figures}" if args.figures else "") + \
         (f" --sweep-frames {args.sweep_frames}" if args.experiment == "paper" and args.sweep_frames != 30 else "")
+    echo = output(args)
     for section in sections:
-        print(section)
-    print(f"({command}; {time.perf_counter() - t0:.1f} s)")
+        echo(section)
+    echo(f"({command}; {time.perf_counter() - t0:.1f} s)")
     if args.markdown:
         write_text_atomic(args.markdown, f"<!-- made by: {command} -->\n\n" + "\n".join(sections))
     return EXIT_OK

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from vfactor.cli.common import EXIT_OK, check_out_dir, check_out_file, check_positive, missing_extra, progress, report_unsolved
+from vfactor.cli.common import (EXIT_OK, check_out_dir, check_out_file, check_positive, missing_extra, output, progress,
+                                report_unsolved)
 from vfactor.errors import InputError
 
 __all__ = ["simulate", "demo"]
@@ -23,6 +24,7 @@ def simulate(args) -> int:
         return EXIT_OK
     if not args.scenario or not args.out:
         raise InputError("", "give a SCENARIO and --out SCENE.json (or --list)")
+    echo = output(args)
     out = check_out_file(args.out, "--out", [("scenario file", args.scenario)])
     truth = check_out_file(args.truth if args.truth else out.with_name(out.stem + "_truth.json"), "--truth",
                             [("scenario file", args.scenario), ("scene file --out", args.out)])
@@ -31,7 +33,7 @@ def simulate(args) -> int:
     sim = simulate(load_scenario(args.scenario), seed=args.seed, num_frames=check_positive(args.frames, "--frames"))
     write_simulation(sim, out, truth)
     ids = {vid for f in sim.scene.frames for vid in f.vehicle_ids()}
-    print(f"wrote {out} ({len(sim.scene.frames)} frames, {len(ids)} vehicle ids, {len(sim.scene.cameras)} cameras) "
+    echo(f"wrote {out} ({len(sim.scene.frames)} frames, {len(ids)} vehicle ids, {len(sim.scene.cameras)} cameras) "
           f"and {truth}")
     return EXIT_OK
 
@@ -46,24 +48,27 @@ def demo(args) -> int:
     from vfactor.solve import SolveOptions, solve_observations
     from vfactor.viz import plot_estimates, write_overlays
 
+    echo = output(args)
     out = check_out_dir(Path(args.out))
     scenario = load_scenario(args.scenario)
     frames = check_positive(args.frames, "--frames")
     if args.images and frames is None:
         frames = min(scenario.num_frames, 3)  # rendering takes about a second per image
     sim = simulate(scenario, seed=args.seed, num_frames=frames)
+    if not 0 <= args.frame < len(sim.scene.frames):
+        raise InputError("--frame", f"expected a frame index from 0 to {len(sim.scene.frames) - 1}, got {args.frame}")
     if args.images:  # the scene file is the rendered one (images and boxes), written by _demo_images
-        save_truth(sim, out / "truth.json")
+        save_truth(sim, out / "scene_truth.json")
     else:
-        write_simulation(sim, out / "scene.json", out / "truth.json")
-    print(f"scenario {scenario.name}: {len(sim.scene.cameras)} cameras, {len(sim.scene.frames)} frames "
+        write_simulation(sim, out / "scene.json", out / "scene_truth.json")
+    echo(f"scenario {scenario.name}: {len(sim.scene.cameras)} cameras, {len(sim.scene.frames)} frames "
           f"(seed {sim.seed}); " + (f"truth in {out}/" if args.images else f"scene and truth in {out}/"))
-    scene = _demo_images(sim, out) if args.images else sim.scene
+    scene = _demo_images(sim, out, echo) if args.images else sim.scene
     options = SolveOptions()
     results, rows = [], []
     header = f"{'frame':>5} {'vehicle':<8} {'body':<13} {'status':<10} | {'vfactor: rot deg':>16} {'trans cm':>9} {'kp cm':>7} | {'triangulation: rot':>18} {'trans':>7} {'kp':>7}"
-    print(header)
-    print("-" * len(header))
+    echo(header)
+    echo("-" * len(header))
     for f, frame in enumerate(scene.frames):
         vehicles = []
         for vid in frame.vehicle_ids():
@@ -75,24 +80,25 @@ def demo(args) -> int:
                     if r.ok else None for r in (ours, tri)]
             rows.append(errs)
             cells = [_error_cells(e, widths) for e, widths in zip(errs, ((16, 9, 7), (18, 7, 7)))]
-            print(f"{f:>5} {vid:<8} {truth.preset:<13} {ours.status.value:<10} | {cells[0]} | {cells[1]}")
+            echo(f"{f:>5} {vid:<8} {truth.preset:<13} {ours.status.value:<10} | {cells[0]} | {cells[1]}")
         results.append(FrameResult(frame.t, vehicles))
     save_results(out / "result.json", results)
     for name, col in (("vfactor", 0), ("triangulation", 1)):
         ok = [r[col] for r in rows if r[col]]
         if ok:
-            print(f"mean {name:<14} rotation {np.mean([e['rotation_deg'] for e in ok]):6.2f} deg   "
+            echo(f"mean {name:<14} rotation {np.mean([e['rotation_deg'] for e in ok]):6.2f} deg   "
                   f"translation {np.mean([e['translation_cm'] for e in ok]):6.1f} cm   "
                   f"keypoints {np.mean([e['mean_keypoint_cm'] for e in ok]):6.1f} cm   ({len(ok)}/{len(rows)} solved)")
-    truth0 = {vid: (t.world_T_vehicle, t.wireframe) for vid, t in sim.truth[0].items()}
-    overlays = write_overlays(out, scene.cameras, scene.frames[0], results[0], truth=truth0, base_dir=scene.base_dir)
-    plot = plot_estimates(scene.cameras, results[0].vehicles, truth0, out / "estimate_3d.png",
-                          title=f"{scenario.name}, frame 0: estimate (solid) and truth (dashed), 3-sigma position")
-    print("wrote " + ", ".join(str(p) for p in [out / "result.json", *overlays, plot]))
+    f = args.frame
+    truth_f = {vid: (t.world_T_vehicle, t.wireframe) for vid, t in sim.truth[f].items()}
+    overlays = write_overlays(out, scene.cameras, scene.frames[f], results[f], truth=truth_f, base_dir=scene.base_dir)
+    plot = plot_estimates(scene.cameras, results[f].vehicles, truth_f, out / "estimate_3d.png",
+                          title=f"{scenario.name}, frame {f}: estimate (solid) and truth (dashed), 3-sigma position")
+    echo("wrote " + ", ".join(str(p) for p in [out / "result.json", *overlays, plot]))
     return report_unsolved(results, scene, quiet=False)
 
 
-def _demo_images(sim, out: Path):
+def _demo_images(sim, out: Path, echo=print):
     """``vfactor demo --images``: renders the simulation's camera images and finds the keypoints with the network."""
     try:
         from vfactor.net.infer import KeypointDetector
@@ -109,13 +115,13 @@ def _demo_images(sim, out: Path):
         raise InputError("--images", f"cannot render: {exc}") from None
     except ValueError as exc:  # e.g. a scenario camera without image_size
         raise InputError("--images", str(exc)) from None
-    print(f"rendered {sum(len(f.images) for f in rendered.scene.frames)} camera images into {out / 'images'}/ "
+    echo(f"rendered {sum(len(f.images) for f in rendered.scene.frames)} camera images into {out / 'images'}/ "
           f"({time.perf_counter() - t0:.1f} s); boxes only in {rendered.path}")
     t0 = time.perf_counter()
     scene = detect_scene(rendered.scene, KeypointDetector(), heatmaps_dir=out / "heatmaps")
     save_scene(scene, out / "scene_keypoints.json")
     boxes = sum(len(f.detections) for f in scene.frames)
-    print(f"keypoint network: {boxes} boxes ({time.perf_counter() - t0:.1f} s); keypoints in "
+    echo(f"keypoint network: {boxes} boxes ({time.perf_counter() - t0:.1f} s); keypoints in "
           f"{out / 'scene_keypoints.json'}, heatmaps in {out / 'heatmaps'}/")
     return scene
 

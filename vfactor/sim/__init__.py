@@ -7,7 +7,7 @@ Typical use::
     sim = simulate(load_scenario("intersection_2cam"), seed=1)
     sim.scene        # a vfactor.observations.Scene: cameras and noisy detections
     sim.truth[0]     # frame 0: vehicle id -> VehicleTruth(world_T_vehicle, wireframe, preset, ..., speed, yaw_rate)
-    write_simulation(sim, "scene.json", "truth.json")
+    write_simulation(sim, "scene.json", "scene_truth.json")
 
 Tracks (vehicles driving routes through the intersection, entering and leaving the views)::
 

@@ -1,6 +1,6 @@
 """Simulation scenarios: camera rig, vehicles, placement, noise and frames, from JSON.
 
-A scenario file (``vfactor/graphs/*.json``) is validated field by field on
+A scenario file (``graphs/*.json``, installed as ``vfactor.graphs``) is validated field by field on
 load; every problem raises :class:`vfactor.errors.ScenarioError` whose
 ``field`` is the path of the offending entry (``cameras[1].height``,
 ``noise.outlier_rate``). The fields are listed in :data:`SCENARIO_FIELDS` and in
@@ -313,7 +313,7 @@ def scenario_path(name_or_path: str | Path) -> Path:
     """Resolves a packaged scenario name (``"intersection_2cam"``) or a file path.
 
     A value naming an existing file is returned as is; otherwise a bare name
-    (with or without ``.json``) is looked up in ``vfactor/graphs/``.
+    (with or without ``.json``) is looked up among the packaged scenarios (``graphs/``).
 
     Raises:
         ScenarioError: neither a file nor a packaged scenario (the message lists the packaged ones).
@@ -331,12 +331,12 @@ def scenario_path(name_or_path: str | Path) -> Path:
 
 
 def list_scenarios() -> list[str]:
-    """Names of the scenarios packaged in ``vfactor/graphs/``."""
+    """Names of the scenarios packaged in ``graphs/`` (``vfactor.graphs``)."""
     return sorted(p.stem for p in _graphs_dir().glob("*.json"))
 
 
 def _graphs_dir() -> Path:
-    return Path(str(resources.files("vfactor") / "graphs"))
+    return Path(str(resources.files("vfactor.graphs")))
 
 
 def load_scenario(name_or_path: str | Path) -> Scenario:

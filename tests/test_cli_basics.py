@@ -1,0 +1,123 @@
+"""What a newcomer meets first: --version, help, options anywhere, -q / -v, the licence, py.typed, the package list."""
+
+from __future__ import annotations
+
+import json
+import re
+import tomllib
+from pathlib import Path
+
+import pytest
+
+import vfactor
+from vfactor.cli import NET_COMMANDS, main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_version_is_the_package_version(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0
+    assert capsys.readouterr().out.strip() == f"vfactor {vfactor.__version__}"
+    assert re.fullmatch(r"\d+\.\d+\.\d+", vfactor.__version__)
+
+
+def test_help_command_shows_a_command_help(capsys):
+    assert main(["help", "solve"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: vfactor solve") and "--out" in out
+    assert main(["help", "nosuch"]) == 2
+    assert "no command 'nosuch'" in capsys.readouterr().err
+    assert main(["help"]) == 0
+    assert "Start here" in capsys.readouterr().out
+
+
+def test_help_texts_have_no_literal_percent_escapes(capsys):
+    for command in ("eval", "solve", "track", "simulate", "demo", "plot", "schema"):
+        assert main(["help", command]) == 0
+        assert "%%" not in capsys.readouterr().out, command
+
+
+@pytest.mark.parametrize("command", sorted(NET_COMMANDS))
+def test_network_commands_are_reachable_from_vfactor(command, capsys):
+    pytest.importorskip("torch")
+    with pytest.raises(SystemExit) as exit_:
+        main([command, "--help"])
+    assert exit_.value.code == 0
+    assert capsys.readouterr().out.startswith(f"usage: vfactor {command}")
+
+
+def test_common_options_before_or_after_the_command(tmp_path, capsys):
+    scene = tmp_path / "scene.json"
+    assert main(["simulate", "intersection_2cam", "--out", str(scene), "--frames", "1", "-q", "--debug"]) == 0
+    assert capsys.readouterr().out == ""
+    assert main(["-q", "solve", str(scene), "--out", str(tmp_path / "r.json")]) == 0
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err == ""
+    assert main(["solve", str(scene), "--out", str(tmp_path / "r.json"), "-v"]) == 0
+    err = capsys.readouterr().err
+    assert "[vfactor.solve] solved 1 of 1 vehicles in 1 frames, 2 cameras" in err
+    assert main(["solve", str(scene), "--out", str(tmp_path / "r.json"), "-vv"]) == 0
+    assert re.search(r"\[vfactor\.solve\] frame 0 \(t = 0 s\) vehicle 'v1': converged after \d+ iterations",
+                     capsys.readouterr().err)
+
+
+def test_errors_still_show_with_quiet(tmp_path, capsys):
+    assert main(["solve", str(tmp_path / "missing.json"), "--out", str(tmp_path / "r.json"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("vfactor solve: error:") and "missing.json" in err and "Traceback" not in err
+
+
+def test_licence_file_matches_the_metadata():
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert meta["license"]["text"] == "BSD-3-Clause"
+    text = (ROOT / "LICENSE").read_text()
+    assert text.startswith("BSD 3-Clause License") and "Neither the name of the copyright holder" in text
+
+
+def test_package_is_typed_and_lists_every_package():
+    assert (Path(vfactor.__file__).parent / "py.typed").is_file()
+    setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    found = {".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "vfactor").rglob("__init__.py")}
+    mapped = {name: ROOT / folder for name, folder in setuptools["package-dir"].items()}
+    assert set(setuptools["packages"]) == found | set(mapped)
+    assert all((folder / "__init__.py").is_file() for folder in mapped.values())
+
+
+def test_scenarios_live_in_the_top_level_graphs_folder():
+    from vfactor.sim import list_scenarios
+
+    files = sorted(p.stem for p in (ROOT / "graphs").glob("*.json"))
+    assert files and list_scenarios() == files
+    assert not (ROOT / "vfactor" / "graphs").exists()
+
+
+def test_demo_and_simulate_name_the_truth_file_alike(tmp_path, capsys):
+    assert main(["simulate", "intersection_2cam", "--out", str(tmp_path / "scene.json"), "--frames", "1"]) == 0
+    assert (tmp_path / "scene_truth.json").is_file()
+    capsys.readouterr()
+    assert main(["demo", "--out", str(tmp_path / "demo"), "--frames", "2", "--frame", "1", "-q"]) == 0
+    assert capsys.readouterr().out == ""
+    assert {"scene.json", "scene_truth.json"} <= {p.name for p in (tmp_path / "demo").iterdir()}
+    assert main(["demo", "--out", str(tmp_path / "demo"), "--frames", "2", "--frame", "2"]) == 2
+    assert "--frame: expected a frame index from 0 to 1, got 2" in capsys.readouterr().err
+
+
+def test_plot_draws_any_frame_of_a_solved_scene(tmp_path, capsys):
+    scene, result = tmp_path / "scene.json", tmp_path / "result.json"
+    assert main(["simulate", "intersection_multi", "--out", str(scene), "--frames", "2", "-q"]) == 0
+    assert main(["solve", str(scene), "--out", str(result), "-q"]) == 0
+    truth = tmp_path / "scene_truth.json"
+    assert main(["plot", str(scene), str(result), "--out", str(tmp_path / "pics"), "--frame", "1",
+                 "--truth", str(truth)]) == 0
+    assert "estimate_3d.png" in capsys.readouterr().out
+    assert {p.name for p in (tmp_path / "pics").iterdir()} == {"overlay_cam0.png", "overlay_cam1.png",
+                                                               "overlay_cam2.png", "estimate_3d.png"}
+    assert main(["plot", str(scene), str(result), "--out", str(tmp_path / "pics"), "--frame", "5"]) == 2
+    assert "--frame: expected a frame index from 0 to 1" in capsys.readouterr().err
+    other = json.loads(result.read_text())
+    other["frames"][1]["t"] = 9.0
+    (tmp_path / "other.json").write_text(json.dumps(other))
+    assert main(["plot", str(scene), str(tmp_path / "other.json"), "--out", str(tmp_path / "pics"), "--frame", "1"]) == 2
+    assert "no frame at t = 0.1 s" in capsys.readouterr().err

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -319,3 +320,18 @@ def test_bad_options_and_cameras(tmp_path, sim):
     with pytest.raises(SceneError) as info:
         coco_to_scene(cams, {"cam0": path}, "vfactor12")
     assert info.value.field == f"{cams}.cameras[1].K"
+
+
+def test_documented_tables_match_the_code():
+    """docs/keypoint-sets.md lists every point of every set with its partner and its vfactor keypoint, as coded."""
+    text = (Path(__file__).resolve().parents[2] / "docs" / "keypoint-sets.md").read_text(encoding="utf-8")
+    for name, kps in KEYPOINT_SETS.items():
+        section = text.split(f"### `{name}`\n", 1)[1].strip("\n").split("\n\n", 1)[0]
+        rows = [line.strip("| ").split(" | ") for line in section.splitlines()[2:]]
+        assert [r[0] for r in rows] == [str(i) for i in range(kps.num_keypoints)]
+        assert [r[1].strip("`") for r in rows] == list(kps.keypoint_names)
+        flip = kps.flip_permutation()
+        for i, row in enumerate(rows):
+            assert row[2] == ("-" if flip[i] == i else str(flip[i]))
+            given = [k for k, src in enumerate(kps.sources) if i in src]
+            assert row[3] == (f"{given[0]} `{KEYPOINT_NAMES[given[0]]}`" if given else "-"), (name, i)

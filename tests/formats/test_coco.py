@@ -247,6 +247,7 @@ def error(exc_info) -> str:
     ({"image_id": -1}, "[0].image_id", "non-negative integer"),
     ({"image_id": True}, "[0].image_id", "integer or a non-empty string"),
     ({"score": "high"}, "[0].score", "finite number"),
+    ({"category_id": [1]}, "[0].category_id", "integer or a non-empty string"),
     ({"track_id": 1, "vehicle": "2"}, "[0].vehicle", "differs from track_id"),
 ])
 def test_bad_entries_name_file_and_field(tmp_path, sim, entry, field, words):
@@ -306,7 +307,7 @@ def test_bad_options_and_cameras(tmp_path, sim):
     for options, field in [({"keypoint_set": "coco17"}, "keypoint_set"), ({"fps": 0}, "fps"),
                            ({"values": "scores"}, "values"), ({"pixel_origin": "middle"}, "pixel_origin"),
                            ({"min_confidence": 2}, "min_confidence"), ({"frames": "file_name"}, "images.cam0"),
-                           ({"results": {"cam9": path}}, "results.cam9")]:
+                           ({"results": {"cam9": path}}, "results.cam9"), ({"images": {"cam9": path}}, "images.cam9")]:
         kwargs = {"keypoint_set": "vfactor12", "results": {"cam0": path}, **options}
         with pytest.raises(InputError) as info:
             coco_to_scene(sim.scene, kwargs.pop("results"), kwargs.pop("keypoint_set"), **kwargs)

@@ -39,7 +39,6 @@ import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -148,9 +147,12 @@ def coco_to_scene_dict(
     names = [c["name"] for c in camera_dicts]
     if not isinstance(results, Mapping) or not results:
         raise InputError("results", "expected a non-empty mapping camera name -> COCO file")
-    for name in list(results) + list(images or {}):
-        if name not in names:
-            raise InputError(f"results.{name}", f"unknown camera {name!r}; known: {', '.join(names)}")
+    if images is not None and not isinstance(images, Mapping):
+        raise InputError("images", f"expected a mapping camera name -> COCO annotation file, got {_kind(images)}")
+    for option, given in (("results", results), ("images", images or {})):
+        for name in given:
+            if name not in names:
+                raise InputError(f"{option}.{name}", f"unknown camera {name!r}; known: {', '.join(names)}")
     files = {name: _read_coco(path, kps) for name, path in results.items()}
     for name, path in (images or {}).items():
         if name in files:
@@ -393,8 +395,8 @@ def _categories(items, where: str, kps: KeypointSet) -> dict[Any, str]:
             raise SceneError(f"{path}.keypoints", f"expected {kps.num_keypoints} keypoint names for {kps.name}, "
                                                   f"got {got}")
         name = item.get("name")
-        if "id" in item and isinstance(name, str) and name:
-            out[item["id"]] = name
+        if isinstance(name, str) and name and item.get("id") is not None:
+            out[_image_id(item["id"], f"{path}.id")] = name
     return out
 
 
@@ -430,7 +432,7 @@ def _detection(entry, where: str, camera: str, kps: KeypointSet, kind: str, opts
     if entry.get("bbox") is not None:
         det.roi = _roi(entry["bbox"], f"{where}.bbox", opts.shift)
     category = entry.get("category_id")
-    if category is not None and category in categories:
+    if category is not None and _image_id(category, f"{where}.category_id") in categories:
         det.vehicle_class = categories[category]
     return det
 
@@ -479,6 +481,7 @@ def _roi(value, where: str, shift: float) -> list[float]:
 
 
 def _image_id(value, where: str):
+    """An image (or category) id: an integer or a non-empty string."""
     if (isinstance(value, int) and not isinstance(value, bool)) or (isinstance(value, str) and value):
         return value
     raise SceneError(where, f"expected an integer or a non-empty string, got {_kind(value)}")

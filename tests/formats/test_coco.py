@@ -336,3 +336,27 @@ def test_documented_tables_match_the_code():
             assert row[2] == ("-" if flip[i] == i else str(flip[i]))
             given = [k for k, src in enumerate(kps.sources) if i in src]
             assert row[3] == (f"{given[0]} `{KEYPOINT_NAMES[given[0]]}`" if given else "-"), (name, i)
+
+
+# ------------------------------------------------------------------ the command
+def test_import_command_writes_a_scene_that_solves_as_the_inline_one(tmp_path, sim, capsys):
+    from vfactor.cli import main
+    from vfactor.scene import load_results, save_scene
+
+    save_scene(sim.scene, tmp_path / "inline.json")
+    paths = write_results(sim.scene, KEYPOINT_SETS["apollocar3d66"], tmp_path)
+    args = ["import", "coco", "--cameras", str(tmp_path / "inline.json"), "--keypoints", "apollocar3d66",
+            "--out", str(tmp_path / "imported.json"), "--fps", "10"]
+    args += [a for name, path in paths.items() for a in ("--results", f"{name}={path}")]
+    assert main(args) == 0
+    assert "wrote" in capsys.readouterr().out
+    for name in ("inline", "imported"):
+        assert main(["solve", str(tmp_path / f"{name}.json"), "--out", str(tmp_path / f"{name}_result.json"),
+                     "--no-covariance", "-q"]) == 0
+    got, want = (poses(load_results(tmp_path / f"{n}_result.json")) for n in ("imported", "inline"))
+    np.testing.assert_allclose(got, want, atol=1e-6)
+    # thresholds that leave detections out say so
+    assert main(args + ["--min-score", "0.9"]) == 0
+    assert "left out 4 detections: 4 score" in capsys.readouterr().err
+    assert main(args[:-2] + ["--results", "cam0"]) == 2
+    assert "--results: expected CAMERA=FILE, got 'cam0'" in capsys.readouterr().err

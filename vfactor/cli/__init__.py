@@ -3,7 +3,7 @@
 This package holds the parser and the dispatch; each group of commands has its
 own module: :mod:`vfactor.cli.estimate` (solve, track), :mod:`vfactor.cli.simulation`
 (simulate, demo), :mod:`vfactor.cli.evaluate` (eval), :mod:`vfactor.cli.tools`
-(schema, plot, import), :mod:`vfactor.cli.common` (checks and messages they share).
+(schema, plot), :mod:`vfactor.cli.interop` (import), :mod:`vfactor.cli.common` (checks and messages they share).
 The keypoint network's commands (train, detect, calibrate, score) are forwarded
 to :mod:`vfactor.net.commands`, so that PyTorch is imported only for them.
 
@@ -203,6 +203,37 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scene (default) or result")
     p.add_argument("--out", help="write the schema to this file instead of standard output")
 
+    p = add(
+        "import", help="detections of other tools into a scene file (COCO keypoint results or annotations)",
+        description="Build a scene file from a keypoint detector's or a data set's files: coco reads, per camera, a "
+        "COCO keypoint results list (mmpose, OpenPifPaf, detectron2) or a COCO annotation file, in a named "
+        "keypoint set (vfactor12, carfusion14, apollocar3d24, apollocar3d66) mapped to vfactor's 12 keypoints; "
+        "docs/keypoint-sets.md gives the tables and every option. The cameras come from a scene or cameras file.",
+    )
+    p.add_argument("source", choices=("coco",), help="the files' format: coco")
+    p.add_argument("--cameras", required=True, help="JSON file with the calibrated cameras (a scene file's 'cameras')")
+    p.add_argument("--results", action="append", metavar="CAMERA=FILE", required=True,
+                   help="a camera's COCO keypoint file (repeat for each camera)")
+    p.add_argument("--keypoints", required=True, choices=("vfactor12", "carfusion14", "apollocar3d24", "apollocar3d66"),
+                   help="the files' keypoint set")
+    p.add_argument("--out", required=True, help="scene file to write")
+    p.add_argument("--fps", type=float, help="frames per second: frame k at t = k / fps (default: the images' "
+                   "timestamps, else t = k)")
+    p.add_argument("--values", default="auto", choices=("auto", "confidence", "visibility"),
+                   help="the third number per keypoint (default auto: confidence in results lists, COCO visibility "
+                   "in annotation files)")
+    p.add_argument("--min-score", type=float, default=0.0, help="leave out detections scored lower (default 0)")
+    p.add_argument("--min-confidence", type=float, default=0.0,
+                   help="a keypoint with a lower confidence is not seen (default 0)")
+    p.add_argument("--frames", default="auto", choices=("auto", "image_id", "file_name"),
+                   help="image -> frame: image_id is the frame index, or the k-th image by file_name is frame k "
+                   "(default auto: file_name when every camera has an images list)")
+    p.add_argument("--images", action="append", metavar="CAMERA=FILE",
+                   help="a COCO annotation file whose 'images' a camera's results list refers to (repeatable)")
+    p.add_argument("--pixel-origin", default="centre", choices=("centre", "corner"),
+                   help="where pixel (0, 0) is: the centre of the top-left pixel (COCO, vfactor; default) or its "
+                   "outer corner (0.5 px is subtracted)")
+
     p = add("help", help="show the help of a command: vfactor help solve",
             description="Show the help of COMMAND (the same as vfactor COMMAND --help), or of vfactor itself.")
     p.add_argument("topic", nargs="?", metavar="COMMAND", help="a command")
@@ -268,10 +299,11 @@ def main(argv=None) -> int:
         return EXIT_OK
     if args.command == "help":
         return _help(parser, args.topic)
-    from vfactor.cli import estimate, evaluate, simulation, tools
+    from vfactor.cli import estimate, evaluate, interop, simulation, tools
 
     handlers = {"solve": estimate.solve, "track": estimate.track, "simulate": simulation.simulate,
-                "demo": simulation.demo, "eval": evaluate.evaluate, "plot": tools.plot, "schema": tools.schema}
+                "demo": simulation.demo, "eval": evaluate.evaluate, "plot": tools.plot, "schema": tools.schema,
+                "import": interop.import_detections}
     return _guarded(args.command, lambda: handlers[args.command](args), args.debug)
 
 

@@ -56,6 +56,7 @@ __all__ = [
     "FRAME_MODES",
     "PIXEL_ORIGINS",
     "DEFAULT_VISIBILITY_CONFIDENCE",
+    "SKIP_REASONS",
     "coco_to_scene_dict",
     "coco_to_scene",
     "import_coco",
@@ -78,6 +79,9 @@ PIXEL_ORIGINS = ("centre", "corner")
 DEFAULT_VISIBILITY_CONFIDENCE = (0.5, 1.0)
 
 _ID_KEYS = ("track_id", "vehicle")
+#: Why a detection of a file is left out of the scene: a crowd annotation (``iscrowd`` 1), a ``score`` under
+#: ``min_score``, or no keypoint of vfactor's 12 seen (after ``min_confidence``).
+SKIP_REASONS = ("crowd", "score", "no keypoint")
 
 
 # ================================================================ public API
@@ -94,6 +98,7 @@ def coco_to_scene_dict(
     images: Mapping[str, str | os.PathLike] | None = None,
     fps: float | None = None,
     pixel_origin: str = "centre",
+    skipped: dict | None = None,
 ) -> dict:
     """A scene-file dictionary (docs/scene-format.md) from COCO keypoint files, one per camera.
 
@@ -126,6 +131,8 @@ def coco_to_scene_dict(
             frame's images) when every frame has one, else ``t = k``.
         pixel_origin: :data:`PIXEL_ORIGINS`; ``"corner"`` subtracts 0.5 px from
             keypoints and boxes.
+        skipped: when given, a dict filled with why detections were left out
+            (:data:`SKIP_REASONS`) -> how many, so that the caller can say so.
 
     Returns:
         ``{"cameras", "frames"(, "ground_plane")}``, frames in frame-index order,
@@ -160,8 +167,9 @@ def coco_to_scene_dict(
     frame_of = _frame_maps(files, frames)
 
     detections: dict[int, list[_Det]] = {}
+    reasons: dict = {} if skipped is None else skipped
     for name, f in files.items():
-        for det in f.detections(name, kps, opts):
+        for det in f.detections(name, kps, opts, reasons):
             index = frame_of[name].index(det.image_id, f"{det.where}.image_id")
             detections.setdefault(index, []).append(det)
     indices = set(detections)
@@ -326,12 +334,15 @@ class _CocoFile:
         self.images, self.images_where = other.images, other.images_where
         self.categories = {**other.categories, **self.categories}
 
-    def detections(self, camera: str, kps: KeypointSet, opts: _Options) -> list[_Det]:
+    def detections(self, camera: str, kps: KeypointSet, opts: _Options, skipped: dict) -> list[_Det]:
+        """The file's detections; those left out are counted by reason in ``skipped``."""
         kind = opts.values if opts.values != "auto" else ("confidence" if self.kind == "results" else "visibility")
         out = []
         for where, entry in self.entries:
             det = _detection(entry, where, camera, kps, kind, opts, self.categories)
-            if det is not None:
+            if isinstance(det, str):
+                skipped[det] = skipped.get(det, 0) + 1
+            else:
                 out.append(det)
         return out
 
@@ -401,25 +412,26 @@ def _categories(items, where: str, kps: KeypointSet) -> dict[Any, str]:
 
 
 def _detection(entry, where: str, camera: str, kps: KeypointSet, kind: str, opts: _Options,
-               categories: dict) -> _Det | None:
+               categories: dict) -> _Det | str:
+    """The detection of a file entry, or why it is left out (one of :data:`SKIP_REASONS`)."""
     if not isinstance(entry, dict):
         raise SceneError(where, f"expected an object, got {_kind(entry)}")
     if "image_id" not in entry:
         raise SceneError(f"{where}.image_id", "missing (required)")
     image_id = _image_id(entry["image_id"], f"{where}.image_id")
     if entry.get("iscrowd") in (1, True):
-        return None
+        return "crowd"
     score = entry.get("score")
     if score is not None:
         if not (_is_number(score) and math.isfinite(float(score))):
             raise SceneError(f"{where}.score", f"expected a finite number, got {_kind(score)}")
         if float(score) < opts.min_score:
-            return None
+            return "score"
     xy, conf = _keypoints(entry.get("keypoints"), f"{where}.keypoints", kps, kind, opts)
     conf[conf < opts.min_confidence] = 0.0
     uv, confidence = kps.to_vfactor(xy + opts.shift, conf)
     if not np.any(confidence > 0):
-        return None
+        return "no keypoint"
     det = _Det(where, camera, image_id, uv, confidence)
     ids = {key: entry[key] for key in _ID_KEYS if entry.get(key) is not None}
     for key, value in ids.items():

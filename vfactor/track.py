@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -133,6 +134,13 @@ class TrackOptions:
 
 
 _REANCHOR_FRAMES = 5  # frames seen by two cameras over which a young track is re-solved by LM
+#: A track's keypoints "jump" when a pose found from them alone (PnP / triangulation of the track's shape)
+#: explains them at under this share of the cost at the motion model's prediction, and lies beyond
+#: :func:`_jump`'s gate from it: then they are another vehicle's, and the track starts a new segment.
+_JUMP_COST_RATIO = 0.25
+#: The gate of :func:`_jump`: metres beyond the constant-twist prediction (plus what the motion model's
+#: acceleration allows over the step), and radians of heading (plus its yaw rate bound over the step).
+_JUMP_DISTANCE, _JUMP_HEADING = 1.5, math.radians(30.0)
 
 
 @dataclass
@@ -157,6 +165,7 @@ class _TrackState:
     body_type_probability: float | None = None
     noise_scale: float = 1.0  # multiplies the detections' pixel sigmas
     notes: dict = field(default_factory=dict)  # pose key -> message of every result of it (a new segment)
+    jumps: list = field(default_factory=list)  # (frame index, t, what) of each jump beyond the motion model
 
     def restart(self) -> None:
         """Drops the smoother and the young-track state: the track starts again from its next solvable frame."""
@@ -211,6 +220,12 @@ class Tracker:
     @property
     def track_ids(self) -> list[str]:
         return list(self._tracks)
+
+    @property
+    def jumps(self) -> dict[str, list[tuple[int, float, str]]]:
+        """Track id -> (frame index, t, what) of each frame whose keypoints lay beyond the motion model's gate
+        from the track's prediction (another vehicle under the same id): there the track started a new segment."""
+        return {vid: list(track.jumps) for vid, track in self._tracks.items() if track.jumps}
 
     def add_frame(self, frame: Frame, frame_index: int | None = None) -> FrameResult:
         """Adds a frame and returns the current estimates of its vehicles.
@@ -400,11 +415,19 @@ class Tracker:
         guess = self._predict(track, estimate, t)
         # a poor prediction (a long gap, a sharp manoeuvre) is replaced by the best PnP/triangulation start
         loss = options.graph.loss
-        if cross_projection_cost(obs, guess, wireframe, loss) > 2.0 * len(obs):
-            starts = best_candidates(obs, wireframe, loss, 1, min_keypoints_in_one_view=options.min_keypoints_in_one_view)
-            if starts and starts[0].cost < cross_projection_cost(obs, guess, wireframe, loss):
-                guess = starts[0].world_T_vehicle
         key = self.keys.pose_key(track.index, frame_index)
+        predicted_cost = cross_projection_cost(obs, guess, wireframe, loss)
+        if predicted_cost > 2.0 * len(obs):
+            starts = best_candidates(obs, wireframe, loss, 1, min_keypoints_in_one_view=options.min_keypoints_in_one_view)
+            if starts and starts[0].cost < predicted_cost:
+                jump = _jump(guess, starts[0].world_T_vehicle, t - track.poses[-1][1], self.options)
+                if jump and starts[0].cost < _JUMP_COST_RATIO * predicted_cost:
+                    # the keypoints are those of a vehicle elsewhere: the id does not follow one vehicle here
+                    track.restart()
+                    track.jumps.append((frame_index, t, jump))
+                    track.notes[key] = f"a new segment of the track: {jump}; the detections' id may not follow one vehicle"
+                    return self._start(track, frame_index, t, raw)
+                guess = starts[0].world_T_vehicle
         graph, motion, values = gtsam.NonlinearFactorGraph(), gtsam.NonlinearFactorGraph(), gtsam.Values()
         add_observation_factor(graph, self.keys, obs, track.index, frame_index, options.graph)
         _add_pose_factors(motion, track.poses, key, t, self.options)
@@ -497,6 +520,23 @@ def _acceleration_applies(poses, t: float, options: TrackOptions) -> bool:
     return options.lag is None or t - poses[-2][1] < options.lag
 
 
+def _jump(predicted: gtsam.Pose3, found: gtsam.Pose3, dt: float, options: TrackOptions) -> str:
+    """What makes ``found`` a jump from the motion model's ``predicted`` pose over ``dt`` seconds, or "".
+
+    A jump: the positions more than ``_JUMP_DISTANCE + sigma_acceleration dt^2`` metres apart, or the headings
+    (body x on the road) more than ``_JUMP_HEADING + max_yaw_rate dt`` radians.
+    """
+    motion = options.motion
+    distance = float(np.linalg.norm(found.translation() - predicted.translation()))
+    if distance > _JUMP_DISTANCE + motion.sigma_acceleration * dt * dt:
+        return f"its keypoints put it {distance:.1f} m from where its motion predicts"
+    a, b = predicted.rotation().matrix()[:2, 0], found.rotation().matrix()[:2, 0]
+    heading = abs(math.atan2(a[0] * b[1] - a[1] * b[0], a @ b))
+    if heading > _JUMP_HEADING + motion.max_yaw_rate * dt:
+        return f"its keypoints turn it {math.degrees(heading):.0f} deg from the heading its motion predicts"
+    return ""
+
+
 def _segment_message(gap: float, max_gap: float) -> str:
     return (f"new segment of the track: {gap:.3g} s since its previous frame exceed the motion model's reach "
             f"(TrackOptions.max_gap = {max_gap:g} s); no motion factors across the gap")
@@ -566,6 +606,10 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
     for vid, count in solved.items():
         if count == 1:
             messages.append(f"vehicle '{vid}' was solved in one frame only: no motion information")
+    for vid, jumps in tracker.jumps.items():
+        where = ", ".join(f"frames[{f}]" for f, _, _ in jumps[:5]) + (", ..." if len(jumps) > 5 else "")
+        messages.append(f"vehicle '{vid}': {len(jumps)} jumps beyond the motion model ({where}; first: {jumps[0][2]}): "
+                        "its id does not follow one vehicle there; tracked as new segments")
     frames = [FrameResult(f.t, [checked(final[(i, vid)], _seen_by(f, vid, scene.cameras), options.covariance)
                                 for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
     log.info("tracked %d vehicles over %d frames (%s): %d of %d poses solved", len(solved), len(frames),

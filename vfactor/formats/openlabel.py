@@ -10,7 +10,8 @@ the schema leaves a choice. docs/output-formats.md gives every field; in short:
   = ``world_T_camera`` flattened row-major (it maps camera points to world
   points, ``X_world = M X_camera``, as the VCD library reads it).
 * ``streams``: one ``camera`` stream per camera (same name as its coordinate
-  system) with ``intrinsics_pinhole``: ``camera_matrix`` (K with a zero fourth
+  system), ``uri`` empty (a frame's image of the camera, when the scene names
+  one, is ``frame_properties.streams.<camera>.uri``), with ``intrinsics_pinhole``: ``camera_matrix`` (K with a zero fourth
   column, 12 numbers row-major: the schema's key), ``camera_matrix_3x4`` (the
   same 3x4 as rows: the key of the TUM Traffic files and the VCD library),
   ``distortion_coeffs`` and ``distortion_coeffs_1xN`` (OpenCV ``k1 k2 p1 p2
@@ -101,7 +102,7 @@ def openlabel_dict(results: list[FrameResult], scene: Scene, name: str | None = 
                    "distortion_coeffs_1xN": [number(x, 12) for x in cam.dist]}
         if cam.image_size is not None:
             pinhole["width_px"], pinhole["height_px"] = int(cam.image_size[0]), int(cam.image_size[1])
-        streams[cam_name] = {"type": "camera", "description": f"camera {cam_name} (OpenCV pinhole, "
+        streams[cam_name] = {"type": "camera", "uri": "", "description": f"camera {cam_name} (OpenCV pinhole, "
                              "x right, y down, z forward)", "stream_properties": {"intrinsics_pinhole": pinhole}}
 
     uids: dict[str, str] = {}
@@ -116,7 +117,10 @@ def openlabel_dict(results: list[FrameResult], scene: Scene, name: str | None = 
             if v.ok and v.body_type is not None:
                 body_types.setdefault(v.id, Counter())[v.body_type] += 1
             objects[uid] = {"object_data": _object_data(v, scene_frame.detections_of(v.id), world)}
-        frames[str(i)] = {"frame_properties": {"timestamp": number(frame.t, 9)}, "objects": objects}
+        properties: dict = {"timestamp": number(frame.t, 9)}
+        if scene_frame.images:
+            properties["streams"] = {cam: {"uri": str(image)} for cam, image in scene_frame.images.items()}
+        frames[str(i)] = {"frame_properties": properties, "objects": objects}
     objects = {}
     for vid, uid in uids.items():
         counts = body_types.get(vid)

@@ -108,6 +108,16 @@ def real():
     return sim.scene, solve_scene(sim.scene)
 
 
+@pytest.fixture(scope="session")
+def real_track():
+    """A real track of three simulated frames (intersection_2cam, seed 0): boxes without sigmas."""
+    from vfactor.sim import load_scenario, simulate
+    from vfactor.track import track_scene
+
+    sim = simulate(load_scenario("intersection_2cam"), seed=0, num_frames=3)
+    return sim.scene, track_scene(sim.scene).frames
+
+
 def rotation_error(R1, R2) -> float:
     """Angle (rad) of R1^T R2."""
     c = (np.trace(np.asarray(R1).T @ np.asarray(R2)) - 1.0) / 2.0

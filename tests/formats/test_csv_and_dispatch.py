@@ -82,10 +82,11 @@ def test_a_failed_write_leaves_the_old_file(known, tmp_path):
     assert path.read_text() == before and [p.name for p in tmp_path.iterdir()] == ["r.json"]
 
 
-def test_every_format_gives_a_real_solve_back(real, tmp_path):
-    scene, results = real
+@pytest.mark.parametrize("run", ["real", "real_track"])
+def test_every_format_gives_a_real_solve_back(run, request, tmp_path):
+    scene, results = request.getfixturevalue(run)
     boxes = {(f, v.id): v.box for f, frame in enumerate(results) for v in frame.vehicles}
-    assert all(b is not None for b in boxes.values()) and len(boxes) == 2
+    assert all(b is not None for b in boxes.values()) and len(boxes) == len(results)
     for name in FORMATS:
         report = write_results(tmp_path / name, results, scene, name)
         assert report.unsolved == [] and report.note() == ""

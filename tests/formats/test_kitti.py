@@ -12,7 +12,6 @@ from tests.formats.helpers import DEG, MM, assert_same_box, make_box, solved
 from vfactor.errors import InputError
 from vfactor.formats import read_kitti, write_kitti
 from vfactor.formats.common import box_corners
-from vfactor.formats.kitti import kitti_label_frame
 from vfactor.observations import Scene
 from vfactor.result import FrameResult
 

@@ -21,8 +21,15 @@ import gtsam
 import numpy as np
 
 from vfactor.errors import InputError
-from vfactor.formats.common import ReadBox, WriteReport, box_from_centre, check_output_path, check_results, solved_box
-from vfactor.formats.common import unsolved_of
+from vfactor.formats.common import (
+    ReadBox,
+    WriteReport,
+    box_from_centre,
+    check_output_path,
+    check_results,
+    solved_box,
+    unsolved_of,
+)
 from vfactor.jsonio import write_text_atomic
 from vfactor.observations import Scene
 from vfactor.result import FrameResult

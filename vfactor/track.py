@@ -139,8 +139,12 @@ _REANCHOR_FRAMES = 5  # frames seen by two cameras over which a young track is r
 #: :func:`_jump`'s gate from it: then they are another vehicle's, and the track starts a new segment.
 _JUMP_COST_RATIO = 0.25
 #: The gate of :func:`_jump`: metres beyond the constant-twist prediction (plus what the motion model's
-#: acceleration allows over the step), and radians of heading (plus its yaw rate bound over the step).
+#: acceleration allows over the step), and radians of heading (plus its yaw rate bound over the step). Set on
+#: tracks_3veh, tracks_3cam, library_tracks(_2cam) and intersection_2cam_track (no jump on any) and
+#: intersection_multi (tests/test_track.py).
 _JUMP_DISTANCE, _JUMP_HEADING = 1.5, math.radians(30.0)
+#: Speed (m/s) a track of one pose may have had, for the gate of :func:`_jump`: 72 km/h, above urban traffic.
+_JUMP_SPEED = 20.0
 
 
 @dataclass
@@ -420,7 +424,8 @@ class Tracker:
         if predicted_cost > 2.0 * len(obs):
             starts = best_candidates(obs, wireframe, loss, 1, min_keypoints_in_one_view=options.min_keypoints_in_one_view)
             if starts and starts[0].cost < predicted_cost:
-                jump = _jump(guess, starts[0].world_T_vehicle, t - track.poses[-1][1], self.options)
+                jump = _jump(guess, starts[0].world_T_vehicle, t - track.poses[-1][1], self.options,
+                             velocity_known=len(track.poses) >= 2)
                 if jump and starts[0].cost < _JUMP_COST_RATIO * predicted_cost:
                     # the keypoints are those of a vehicle elsewhere: the id does not follow one vehicle here
                     track.restart()
@@ -520,15 +525,18 @@ def _acceleration_applies(poses, t: float, options: TrackOptions) -> bool:
     return options.lag is None or t - poses[-2][1] < options.lag
 
 
-def _jump(predicted: gtsam.Pose3, found: gtsam.Pose3, dt: float, options: TrackOptions) -> str:
+def _jump(predicted: gtsam.Pose3, found: gtsam.Pose3, dt: float, options: TrackOptions,
+          velocity_known: bool = True) -> str:
     """What makes ``found`` a jump from the motion model's ``predicted`` pose over ``dt`` seconds, or "".
 
-    A jump: the positions more than ``_JUMP_DISTANCE + sigma_acceleration dt^2`` metres apart, or the headings
-    (body x on the road) more than ``_JUMP_HEADING + max_yaw_rate dt`` radians.
+    A jump: the positions more than ``_JUMP_DISTANCE + sigma_acceleration dt^2`` metres apart (plus
+    ``_JUMP_SPEED dt`` when the track has one pose so far, so no velocity), or the headings (body x on the
+    road) more than ``_JUMP_HEADING + max_yaw_rate dt`` radians.
     """
     motion = options.motion
+    gate = _JUMP_DISTANCE + motion.sigma_acceleration * dt * dt + (0.0 if velocity_known else _JUMP_SPEED * dt)
     distance = float(np.linalg.norm(found.translation() - predicted.translation()))
-    if distance > _JUMP_DISTANCE + motion.sigma_acceleration * dt * dt:
+    if distance > gate:
         return f"its keypoints put it {distance:.1f} m from where its motion predicts"
     a, b = predicted.rotation().matrix()[:2, 0], found.rotation().matrix()[:2, 0]
     heading = abs(math.atan2(a[0] * b[1] - a[1] * b[0], a @ b))

@@ -124,7 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
         "JSON Schema).",
     )
     p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md)")
-    p.add_argument("--out", required=True, help="result file to write (written atomically)")
+    p.add_argument("--out", required=True, help="result file to write (written atomically; a folder for --format kitti)")
     _estimate_options(p)
     p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
     p.add_argument("--loss", default="cauchy", choices=("none", "huber", "cauchy", "geman_mcclure"),
@@ -139,7 +139,7 @@ def build_parser() -> argparse.ArgumentParser:
         "of time order are tracked in time order and reported. Scene format: docs/scene-format.md.",
     )
     p.add_argument("scene", help="scene file (JSON) with track ids in the detections' 'vehicle'")
-    p.add_argument("--out", required=True, help="result file to write (written atomically)")
+    p.add_argument("--out", required=True, help="result file to write (written atomically; a folder for --format kitti)")
     _estimate_options(p)
     p.add_argument("--lag", type=float, help="fixed lag in seconds: bounded memory and time per frame for long streams")
     p.add_argument("--batch", action="store_true", help="offline batch smoothing (Levenberg-Marquardt over each whole track)")
@@ -276,7 +276,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _estimate_options(p: argparse.ArgumentParser) -> None:
-    """The options ``solve`` and ``track`` share: paths, the keypoint network."""
+    """The options ``solve`` and ``track`` share: output format, paths, the keypoint network."""
+    p.add_argument("--format", default="vfactor", choices=("vfactor", "openlabel", "kitti", "nuscenes", "csv"),
+                   help="the result's format (docs/output-formats.md): vfactor (default; JSON with poses, wireframes, "
+                   "covariances, boxes), openlabel (ASAM OpenLABEL 1.0 JSON), kitti (a folder of label files per "
+                   "camera), nuscenes (detection results JSON), csv")
     p.add_argument("--allow-outside-paths", action="store_true",
                    help="accept heatmap and image paths outside the scene file's folder (refused by default)")
     p.add_argument("--weights", help="keypoint-network weights for detections given as image boxes "

@@ -190,8 +190,14 @@ def detect(scene, args):
 
 
 def check_outputs(args) -> None:
-    """``solve`` and ``track``: --out and --save-detections checked before any work."""
-    check_out_file(args.out, "--out", [("scene file", args.scene)])
+    """``solve`` and ``track``: --out (a folder for ``--format kitti``) and --save-detections checked before any
+    work."""
+    if getattr(args, "format", "vfactor") == "kitti":
+        if Path(args.out).exists() and not Path(args.out).is_dir():
+            raise InputError("--out", f"{args.out} exists and is not a folder (--format kitti writes a folder)")
+        check_out_file(Path(args.out) / "label.txt", "--out", [("scene file", args.scene)])
+    else:
+        check_out_file(args.out, "--out", [("scene file", args.scene)])
     if args.save_detections:
         check_out_file(args.save_detections, "--save-detections",
                         [("scene file", args.scene), ("result file --out", args.out)])

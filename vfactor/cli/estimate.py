@@ -10,13 +10,23 @@ import numpy as np
 from vfactor.cli.common import check_out_file, check_outputs, detect, note, progress, report_unsolved
 from vfactor.errors import InputError
 
-__all__ = ["solve", "track"]
+__all__ = ["solve", "track", "write_output"]
+
+
+def write_output(args, results, scene) -> None:
+    """Writes the results to ``--out`` in ``--format`` (vfactor.formats); says which unsolved vehicles a format
+    has no place for."""
+    from vfactor.formats import write_results
+
+    report = write_results(args.out, results, scene, args.format)
+    if report.skipped:
+        note(report.note())
 
 
 def solve(args) -> int:
     from vfactor.factors.robust import RobustLoss
     from vfactor.graph import GraphConfig
-    from vfactor.scene import load_scene, save_results
+    from vfactor.scene import load_scene
     from vfactor.solve import SolveOptions, solve_scene
 
     check_outputs(args)
@@ -24,7 +34,7 @@ def solve(args) -> int:
     options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
     t0 = time.perf_counter()
     results = solve_scene(scene, options, progress=progress("solving", not args.quiet))
-    save_results(args.out, results)
+    write_output(args, results, scene)
     vehicles = [v for fr in results for v in fr.vehicles]
     solved = sum(v.ok for v in vehicles)
     if not args.quiet:
@@ -34,7 +44,7 @@ def solve(args) -> int:
 
 
 def track(args) -> int:
-    from vfactor.scene import load_scene, save_results
+    from vfactor.scene import load_scene
     from vfactor.solve import SolveOptions
     from vfactor.track import TrackOptions, smooth_scene, track_scene
 
@@ -53,7 +63,7 @@ def track(args) -> int:
     else:
         run = track_scene(scene, options, progress=progress("tracking", not args.quiet))
         results, messages = (run.online if args.online else run.frames), run.messages
-    save_results(args.out, results)
+    write_output(args, results, scene)
     for message in messages:
         note(message)
     vehicles = [v for fr in results for v in fr.vehicles]

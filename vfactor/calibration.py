@@ -39,6 +39,7 @@ __all__ = [
     "Calibration",
     "decompose_projection_matrix",
     "detect_format",
+    "kalibr_cameras",
     "load_calibration",
     "read_calibration",
 ]
@@ -504,6 +505,19 @@ def _read_kalibr(where: str, content: bytes, chain_camera: str | None) -> Calibr
     return _checked(where, "kalibr", K, dist, model, None, image_size, str(key),
                     {"K": f"{key}.intrinsics", "dist": f"{key}.distortion_coeffs", "model": f"{key}.distortion_model",
                      "image_size": f"{key}.resolution"})
+
+
+def kalibr_cameras(path) -> list[str]:
+    """The camera keys of a Kalibr camchain (``["cam0", "cam1"]``), in file order.
+
+    Raises:
+        CalibrationError: (field: the file) unreadable, or not a mapping.
+    """
+    where = str(path)
+    data = _parse_yaml(_text(_read_bytes(Path(path), where), where), where)
+    if not isinstance(data, dict) or not data:
+        raise CalibrationError(where, f"expected a YAML mapping of cameras (cam0, cam1, ...), got {_kind(data)}")
+    return [str(k) for k in data]
 
 
 # ================================================================ projection matrices

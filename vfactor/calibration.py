@@ -652,12 +652,30 @@ def _text(content: bytes, where: str) -> str:
         raise CalibrationError(where, "not a text file (not UTF-8)") from None
 
 
+_YAML_LOADER = None
+
+
+def _yaml_loader():
+    """PyYAML's safe loader, reading ``1e-05`` as the number it is (YAML 1.2; 1.1 wants ``1.0e-05``)."""
+    global _YAML_LOADER
+    if _YAML_LOADER is None:
+        import yaml
+
+        class Loader(yaml.SafeLoader):
+            pass
+
+        Loader.add_implicit_resolver("tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+                                     list("-+0123456789"))
+        _YAML_LOADER = Loader
+    return _YAML_LOADER
+
+
 def _parse_yaml(text: str, where: str):
     """YAML (safe: plain data only) with parse errors as one-line CalibrationErrors."""
     import yaml
 
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_yaml_loader())  # noqa: S506 - a SafeLoader subclass
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""

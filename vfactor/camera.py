@@ -418,14 +418,18 @@ def project_pinhole(camera_p, fx, fy, skew, cx, cy, dist=None, jacobian: bool = 
     n = len(camera_p)
     inv_z = 1.0 / Z
     x, y = X * inv_z, Y * inv_z
-    fish = np.broadcast_to(np.asarray(fisheye, dtype=bool), (n,))
-    if dist is None and not fish.any():
+    if fisheye is False:  # the common case, without the per-row checks
+        some_fisheye = all_fisheye = False
+    else:
+        fish = np.broadcast_to(np.asarray(fisheye, dtype=bool), (n,))
+        some_fisheye, all_fisheye = bool(fish.any()), bool(fish.all())
+    if dist is None and not some_fisheye:
         xd, yd, D = x, y, (1.0, 0.0, 0.0, 1.0)
     else:
         d = np.zeros(5) if dist is None else np.asarray(dist, dtype=float)
-        if fish.all():
+        if all_fisheye:
             xd, yd, D = _fisheye_lens(x, y, d, jacobian)
-        elif not fish.any():
+        elif not some_fisheye:
             xd, yd, D = _pinhole_lens(x, y, d, jacobian)
         else:  # cameras of both models: each on its own rows
             rows = np.broadcast_to(d, (n, d.shape[-1]))

@@ -95,8 +95,9 @@ class KeypointObservations:
         object.__setattr__(self, "_intrinsics", (K[:, 0, 0], K[:, 1, 1], K[:, 0, 1], K[:, 0, 2], K[:, 1, 2]))
         # the lens of each camera as the kernel takes it: a code and 14 coefficients (Camera.kernel_lens)
         lenses = [c.kernel_lens() for c in self.cameras]
-        codes = np.array([code for code, _ in lenses], dtype=np.int64)[np.asarray(self.camera_index, dtype=np.int64)]
-        dist_table = np.array([lenses[c][1] for c in self.camera_index], dtype=float).reshape(n, 14)
+        index = np.asarray(self.camera_index, dtype=np.int64)
+        codes = np.array([code for code, _ in lenses], dtype=np.int64)[index]
+        dist_table = np.array([d for _, d in lenses], dtype=float).reshape(-1, 14)[index]
         fisheye = codes == LENS_FISHEYE
         object.__setattr__(self, "_fisheye", fisheye if fisheye.any() else False)
         # NumPy projection: None without distortion; 5 columns for the common lens (the original formula)

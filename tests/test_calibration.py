@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import zlib
 import textwrap
 
 import cv2
@@ -527,3 +528,47 @@ def test_fisheye_scene_round_trips_and_solves(tmp_path, inline_scene):
     assert len(fish) == len(plain) > 0
     for ours, theirs in zip(fish, plain, strict=True):
         assert np.abs(ours[:3, 3] - theirs[:3, 3]).max() < 1e-4
+
+
+# ----------------------------------------------------------------------------- mutated files: CalibrationError or a camera
+TOKENS = ["", "-", "[", "]", "{", "}", ":", ",", "'", '"', "!!binary", "&a", "*a", ".nan", ".inf", "1e400", "-1",
+          "0", "100000", "yes", "null", "~", "\t", "rows: 3", "data: []", "cam0:", "  - [1, 2]", "%YAML:1.0", "<a>",
+          "\\x00", "0x7fffffffffffffff", "?", "|", ">", "#"]
+
+
+@pytest.mark.parametrize("fmt, text", [("opencv", OPENCV_FISHEYE), ("opencv", OPENCV_XML_14), ("ros", ROS_RATIONAL),
+                                       ("kalibr", KALIBR_CHAIN), ("projection", "1 0 0 0\n0 1 0 0\n0 0 1 5\n"),
+                                       ("projection", '{"P": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 5]]}')],
+                         ids=["opencv_yaml", "opencv_xml", "ros", "kalibr", "projection_text", "projection_json"])
+def test_mutated_files_give_a_calibration_error_or_a_valid_camera(tmp_path, fmt, text):
+    """Lines replaced, cut, duplicated or spliced with tokens: never a raw cv2 / YAML / JSON error, KeyError, ..."""
+    rng = np.random.default_rng(zlib.crc32(text.encode()))
+    path = tmp_path / "mutated.yaml"
+    outcomes = {"loaded": 0, "error": 0}
+    for _ in range(60):
+        lines = text.splitlines()
+        for _ in range(int(rng.integers(1, 4))):
+            i = int(rng.integers(len(lines)))
+            op = rng.integers(4)
+            token = TOKENS[int(rng.integers(len(TOKENS)))]
+            if op == 0:
+                lines[i] = token
+            elif op == 1:
+                cut = int(rng.integers(len(lines[i]) + 1))
+                lines[i] = lines[i][:cut] + token + lines[i][cut:]
+            elif op == 2:
+                lines.insert(i, lines[i])
+            else:
+                lines[i] = lines[i][: int(rng.integers(len(lines[i]) + 1))]
+        path.write_text("\n".join(lines) + "\n")
+        for given in (fmt, None):
+            try:
+                camera = load_calibration(path, "c", format=given, world_T_camera=None if fmt in ("opencv", "projection")
+                                          else WORLD_T_CAMERA, chain_camera="cam0" if fmt == "kalibr" and given else None)
+            except CalibrationError as exc:
+                assert "\n" not in str(exc) and exc.field.startswith(str(path)) or exc.field == "world_T_camera", exc
+                outcomes["error"] += 1
+            else:
+                assert np.all(np.isfinite(camera.K)) and camera.K[0, 0] > 0
+                outcomes["loaded"] += 1
+    assert outcomes["error"] > 0

@@ -109,8 +109,8 @@ class Calibration:
             raise CalibrationError(f"{where}:{self.nodes.get('world_T_camera', 'world_T_camera')}",
                                    "the file gives the extrinsic; world_T_camera given as well (give it once)")
         if world_T_camera is None and self.world_T_camera is None:
-            raise CalibrationError(f"{where}:world_T_camera", f"missing extrinsic: a {self.format} file "
-                                   f"{_EXTRINSIC_HINT[self.format]}; give world_T_camera (4x4, camera -> world)")
+            raise CalibrationError(f"{where}:world_T_camera", f"missing extrinsic: {_EXTRINSIC_HINT[self.format]}; "
+                                   "give world_T_camera (4x4, camera -> world) beside the file")
         if image_size is not None and self.image_size is not None:
             raise CalibrationError(f"{where}:{self.nodes.get('image_size', 'image_size')}",
                                    "the file gives the image size; image_size given as well (give it once)")
@@ -128,10 +128,10 @@ class Calibration:
 
 
 _EXTRINSIC_HINT = {
-    "opencv": "without world_T_camera, camera_T_world or rvec + tvec nodes has none",
-    "ros": "(sensor_msgs/CameraInfo) holds intrinsics only",
-    "kalibr": "holds intrinsics and poses relative to other cameras or an IMU only",
-    "projection": "always has one",
+    "opencv": "the file has no world_T_camera, camera_T_world or rvec + tvec node",
+    "ros": "a ROS camera_info file holds intrinsics only",
+    "kalibr": "a Kalibr camchain holds poses relative to other cameras or an IMU only",
+    "projection": "a projection matrix always has one",
 }
 
 

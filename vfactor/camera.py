@@ -25,8 +25,8 @@ import numpy as np
 
 from vfactor.errors import CalibrationError
 
-__all__ = ["Camera", "LENS_MODELS", "DIST_SIZES", "as_pose3", "check_rigid_transform", "project_pinhole",
-           "tilt_matrix"]
+__all__ = ["Camera", "DIST_SIZES", "LENS_FISHEYE", "LENS_FULL", "LENS_MODELS", "LENS_PLAIN", "as_pose3",
+           "check_rigid_transform", "project_pinhole", "tilt_matrix"]
 
 _ROTATION_TOL = 1e-4
 

@@ -505,7 +505,7 @@ def test_fisheye_scene_round_trips_and_solves(tmp_path, inline_scene):
     """A fisheye camera given inline (model, 4 coefficients) saves, loads and solves to the truth of its pixels."""
     import dataclasses
 
-    from vfactor.observations import Detection, Frame, Scene
+    from vfactor.observations import Frame, Scene
 
     sim = simulate("intersection_2cam_noiseless", seed=3, num_frames=1)
     cameras = {name: dataclasses.replace(c, model="fisheye", dist=[0.03, -0.01, 0.002, 0.0])

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vfactor.camera import DIST_SIZES, Camera, _check_dist, _check_K, check_rigid_transform
+from vfactor.camera import Camera, _check_dist, _check_K, check_rigid_transform
 from vfactor.errors import CalibrationError
 
 __all__ = [
@@ -759,4 +759,3 @@ def _one_line(exc) -> str:
     return " ".join(str(text).split())[:200] or "parse error"
 
 
-assert set(_OPENCV_MODELS.values()) <= set(DIST_SIZES)

@@ -17,7 +17,7 @@ Calibration files are read by :mod:`vfactor.calibration`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import gtsam
@@ -312,83 +312,6 @@ class Camera:
         fs.write("distortion_coefficients", np.asarray(self.dist).reshape(1, -1))
         fs.write("world_T_camera", np.asarray(self.world_T_camera))
         fs.release()
-
-
-#: Largest rows / cols of a matrix node read from a calibration file (a 4x4 transform is the largest
-#: vfactor reads); checked before OpenCV reads the data, as ``rows: 100000`` makes it allocate gigabytes.
-_MAX_MATRIX_SIZE = 16
-#: Largest image side accepted, pixels.
-_MAX_IMAGE_SIDE = 1 << 20
-
-
-def _node_kind(node) -> str:
-    """A short description of a FileStorage node for error messages."""
-    if node.isString():
-        text = node.string()
-        return f"the string {text if len(text) <= 40 else text[:37] + '...'!r}"
-    if node.isInt() or node.isReal():
-        return repr(node.real())
-    if node.isSeq():
-        return f"a list of {node.size()}"
-    if node.isMap():
-        return "a map"
-    return "an empty node"
-
-
-def _read_matrix(node, field: str) -> np.ndarray | None:
-    """A matrix node (``!!opencv-matrix`` with rows, cols, data), checked before OpenCV reads it; None when absent.
-
-    Raises:
-        CalibrationError: (field: ``field``) not a matrix, rows / cols not small positive integers,
-            data not ``rows * cols`` numbers, or OpenCV cannot read it.
-    """
-    import cv2
-
-    if node.empty():
-        return None
-    what = "an OpenCV matrix (!!opencv-matrix with rows, cols, dt, data)"
-    if not node.isMap():
-        raise CalibrationError(field, f"expected {what}, got {_node_kind(node)}")
-    sizes = node.getNode("sizes")  # !!opencv-nd-matrix (what FileStorage writes for a 1-D array)
-    if sizes.isSeq():
-        dims = [(f"sizes[{i}]", sizes.at(i)) for i in range(min(sizes.size(), 3))]
-        if not 1 <= sizes.size() <= 2:
-            raise CalibrationError(field, f"sizes: expected 1 or 2 sizes, got {_node_kind(sizes)}")
-    else:
-        dims = [(key, node.getNode(key)) for key in ("rows", "cols")]
-    shape = []
-    for key, n in dims:
-        if not n.isInt() or not 1 <= n.real() <= _MAX_MATRIX_SIZE:
-            raise CalibrationError(field, f"{key}: expected an integer from 1 to {_MAX_MATRIX_SIZE}, got {_node_kind(n)}")
-        shape.append(int(n.real()))
-    count = int(np.prod(shape))
-    data = node.getNode("data")
-    if not data.isSeq() or data.size() != count:
-        raise CalibrationError(field, f"data: expected {' x '.join(map(str, shape))} = {count} numbers, "
-                               f"got {_node_kind(data)}")
-    try:
-        matrix = node.mat()
-    except cv2.error as exc:
-        detail = _cv_message(exc)
-        raise CalibrationError(field, f"expected {what}, OpenCV cannot read it ({detail})") from None
-    if matrix is None:
-        raise CalibrationError(field, f"expected {what}, got one OpenCV cannot read")
-    return np.asarray(matrix, dtype=float)
-
-
-def _cv_message(exc) -> str:
-    """The message of a ``cv2.error`` without its source location, one line."""
-    text = getattr(exc, "err", None) or str(exc)
-    return " ".join(str(text).split())[:200] or "parse error"
-
-
-def _read_size(node, field: str) -> int:
-    """An image side (a positive integer of pixels) from a FileStorage node."""
-    value = node.real() if (node.isInt() or node.isReal()) else None
-    if value is None or not np.isfinite(value) or value != int(value) or not 0 < value <= _MAX_IMAGE_SIDE:
-        raise CalibrationError(field, f"expected a positive integer of pixels (at most {_MAX_IMAGE_SIDE}), "
-                               f"got {_node_kind(node)}")
-    return int(value)
 
 
 def project_pinhole(camera_p, fx, fy, skew, cx, cy, dist=None, jacobian: bool = True, fisheye=False):

@@ -336,6 +336,16 @@ image_height: 720
 K_NODE = "camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 900., 0., 640., 0., 900., 360., 0., 0., 1. ]"
 
 
+def test_a_ros_camera_info_read_as_opencv_says_so(tmp_path):
+    """A ROS YAML is readable by cv2.FileStorage, but its plain rows/cols/data map is no OpenCV matrix."""
+    path = tmp_path / "ost.yaml"
+    path.write_text("image_width: 1280\nimage_height: 720\ncamera_name: cam\ncamera_matrix:\n  rows: 3\n  cols: 3\n"
+                    "  data: [900.0, 0.0, 640.0, 0.0, 900.0, 360.0, 0.0, 0.0, 1.0]\ndistortion_model: plumb_bob\n")
+    with pytest.raises(CalibrationError) as info:
+        Camera.from_opencv_file(path)
+    assert info.value.field == f"{path}:camera_matrix" and "ROS camera_info" in info.value.problem
+
+
 @pytest.mark.parametrize(
     "old, new, field, problem",
     [

@@ -301,7 +301,7 @@ BAD_CASES = [
         "not a rotation",
     ),
     ("pose_missing", _delete(["cameras", 0, "world_T_camera"]), "cameras[0].world_T_camera", "missing"),
-    ("dist_three", _set(["cameras", 0, "dist"], [0.1, 0.0, 0.0]), "cameras[0].dist", "4 or 5 numbers"),
+    ("dist_three", _set(["cameras", 0, "dist"], [0.1, 0.0, 0.0]), "cameras[0].dist", "4, 5, 8, 12 or 14 numbers"),
     ("dist_inf", _set(["cameras", 0, "dist", 1], math.inf), "cameras[0].dist", "Infinity"),
     ("image_size_negative", _set(["cameras", 0, "image_size"], [1280, -720]), "cameras[0].image_size", "positive"),
     ("image_size_float", _set(["cameras", 0, "image_size"], [1280.5, 720]), "cameras[0].image_size", "integers"),

@@ -32,9 +32,9 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     return T
 
 
-def make_camera(name="cam0", eye=(-15.0, -6.0, 3.0), dist=None) -> Camera:
+def make_camera(name="cam0", eye=(-15.0, -6.0, 3.0), dist=None, model="pinhole") -> Camera:
     # About 9 degrees down: the horizon crosses the top half of the image.
-    return Camera(name, K, look_at(eye, (0.0, 0.0, 0.5)), dist=dist, image_size=(WIDTH, HEIGHT))
+    return Camera(name, K, look_at(eye, (0.0, 0.0, 0.5)), dist=dist, image_size=(WIDTH, HEIGHT), model=model)
 
 
 @pytest.fixture
@@ -115,10 +115,20 @@ def test_draw_view_with_distortion_and_without_ground():
     assert is_sky(sky[100:]).all()
 
 
+def test_draw_view_with_the_other_lens_models():
+    for camera in (make_camera(dist=[-0.3, 0.1, 0.001, -0.001, 0.01, 0.05, -0.01, 0.002, 0.001, 0.0, 0.001, 0.0,
+                                     0.01, -0.01]),
+                   make_camera(model="fisheye", dist=[0.05, -0.01, 0.002, 0.0])):
+        img = viz.draw_view(camera)
+        assert img.shape == (HEIGHT, WIDTH, 3)
+        assert is_ground(img[HEIGHT // 2 :]).mean() > 0.95
+
+
 # -------------------------------------------------------------- draw_overlay
-def test_draw_overlay_marks_projected_keypoints(vehicle):
+@pytest.mark.parametrize("model, dist", [("pinhole", None), ("fisheye", [0.05, -0.01, 0.002, 0.0])])
+def test_draw_overlay_marks_projected_keypoints(vehicle, model, dist):
     result, _ = vehicle
-    camera = make_camera()
+    camera = make_camera(model=model, dist=dist)
     base = viz.draw_view(camera)
     before = base.copy()
     out = viz.draw_overlay(base, camera, keypoints_world=result.keypoints_world, legend=False)

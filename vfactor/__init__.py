@@ -15,6 +15,7 @@ PyTorch is never imported by the core; only a keypoint network will need it.
 
 from vfactor._version import __version__
 from vfactor.box import Box, BoxModel, default_box_model, vehicle_box
+from vfactor.calibration import load_calibration
 from vfactor.camera import Camera
 from vfactor.errors import CalibrationError, InputError, ScenarioError, SceneError
 from vfactor.factors.ground_plane import GroundPlane
@@ -83,6 +84,7 @@ __all__ = [
     "default_shape_prior",
     "hwc_factor",
     "insert_vehicle_values",
+    "load_calibration",
     "load_results",
     "load_scene",
     "observations_from_detections",

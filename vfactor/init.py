@@ -103,11 +103,11 @@ def cross_projection_cost(obs: KeypointObservations, world_T_vehicle: gtsam.Pose
 
 def _pnp(camera, object_p, image_uv, threshold_px):
     found = []
-    K, dist = camera.K, camera.dist
-    obj, img = object_p.astype(np.float64), image_uv.astype(np.float64)
+    img, K, dist, px_per_unit = camera.pnp_inputs(image_uv)  # a fisheye lens: normalised points, identity K
+    obj = object_p.astype(np.float64)
     if len(obj) >= 6:
         ok, rvec, tvec, _ = cv2.solvePnPRansac(
-            obj, img, K, dist, iterationsCount=200, reprojectionError=threshold_px, confidence=0.999,
+            obj, img, K, dist, iterationsCount=200, reprojectionError=threshold_px / px_per_unit, confidence=0.999,
             flags=cv2.SOLVEPNP_EPNP,
         )
         if ok:

@@ -10,8 +10,12 @@ misspelt optional field is never silently ignored.
 Scene file, in short (units: pixels for image quantities, metres and seconds
 otherwise)::
 
-    {"cameras": [{"name", "K", "world_T_camera", "dist"?, "image_size"?}, ...],
+    {"cameras": [camera, ...],
      "frames": [{"t", "detections": [detection, ...], "images"?: {camera: path}}, ...]}
+
+    camera = {"name", "K", "world_T_camera", "model"?, "dist"?, "image_size"?}          (inline)
+           | {"name", "calibration", "calibration_format"?, "chain_camera"?,
+              "world_T_camera"?, "image_size"?}                                    (by file)
 
     detection = {"camera", "vehicle"?, "keypoints"?: 12 x [u, v, confidence],
                  "keypoint_covariances"?: 12 x (null | 2x2), "heatmaps"?: "x.npy",
@@ -25,9 +29,10 @@ network then finds the keypoints, see :mod:`vfactor.net.pipeline`).
 positive-definite 2x2 pixel covariance (px^2), or null where unknown. Optional
 fields may also be given as null, which means "absent".
 
-Paths (``heatmaps``, ``images``) are relative to the scene file's folder (or to
-``base_dir``); in memory they are held as absolute paths, and written back
-relative to the folder of the file being saved.
+Paths (``heatmaps``, ``images``, ``calibration``) are relative to the scene file's
+folder (or to ``base_dir``); in memory they are held as absolute paths, and written
+back relative to the folder of the file being saved. A camera given by a
+calibration file (:mod:`vfactor.calibration`) is written back inline.
 """
 
 from __future__ import annotations
@@ -43,7 +48,8 @@ import gtsam
 import numpy as np
 
 from vfactor.box import Box
-from vfactor.camera import Camera, check_rigid_transform
+from vfactor.calibration import CALIBRATION_FORMATS, detect_format, kalibr_cameras, read_calibration
+from vfactor.camera import DIST_SIZES, LENS_MODELS, Camera, check_rigid_transform
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.errors import CalibrationError, SceneError
 from vfactor.heatmaps import decode_heatmaps
@@ -68,7 +74,10 @@ __all__ = [
 
 _TOP_KEYS = ("cameras", "frames", "ground_plane")
 _REQUIRED_TOP_KEYS = ("cameras", "frames")
-_CAMERA_KEYS = ("name", "K", "dist", "image_size", "world_T_camera")
+_CAMERA_KEYS = ("name", "model", "K", "dist", "image_size", "world_T_camera", "calibration", "calibration_format",
+                "chain_camera")
+#: Inline camera fields a ``calibration`` file replaces (an error beside it).
+_INTRINSIC_KEYS = ("model", "K", "dist")
 _FRAME_KEYS = ("t", "detections", "images")
 _DETECTION_KEYS = ("camera", "vehicle", "keypoints", "keypoint_covariances", "heatmaps", "roi", "class")
 _RESULT_TOP_KEYS = ("frames",)
@@ -97,18 +106,22 @@ _KEYPOINTS_WORLD_TOL = 1e-6
 
 
 # ====================================================================== scenes
-def load_scene(path: str | os.PathLike, allow_outside_paths: bool = False) -> Scene:
+def load_scene(path: str | os.PathLike, allow_outside_paths: bool = False,
+               camera_files: dict[str, str | os.PathLike] | None = None) -> Scene:
     """Loads and validates a scene file (JSON, docs/scene-format.md).
 
-    Relative paths in the file (``heatmaps``, ``images``) are resolved against
-    the file's folder, which becomes ``Scene.base_dir``; they must stay inside
-    it (see :func:`scene_from_dict`). See :func:`scene_from_dict` for what is
-    checked and how heatmap detections are decoded.
+    Relative paths in the file (``heatmaps``, ``images``, ``calibration``) are
+    resolved against the file's folder, which becomes ``Scene.base_dir``; they
+    must stay inside it (see :func:`scene_from_dict`). See
+    :func:`scene_from_dict` for what is checked, how heatmap detections are
+    decoded and how ``camera_files`` replace the scene's calibrations.
 
     Args:
         path: the scene file.
-        allow_outside_paths: accept heatmap and image paths outside the file's
-            folder (``vfactor solve --allow-outside-paths``).
+        allow_outside_paths: accept heatmap, image and calibration paths outside
+            the file's folder (``vfactor solve --allow-outside-paths``).
+        camera_files: camera name -> calibration file that replaces that camera's
+            calibration (``vfactor solve --camera NAME=FILE``); see :func:`scene_from_dict`.
 
     Returns:
         The :class:`~vfactor.observations.Scene`, with cameras and frames in file order.
@@ -120,18 +133,22 @@ def load_scene(path: str | os.PathLike, allow_outside_paths: bool = False) -> Sc
     """
     path = Path(path)
     data = _read_json(path)
-    return scene_from_dict(data, base_dir=Path(os.path.abspath(path)).parent, allow_outside_paths=allow_outside_paths)
+    return scene_from_dict(data, base_dir=Path(os.path.abspath(path)).parent, allow_outside_paths=allow_outside_paths,
+                           camera_files=camera_files)
 
 
-def scene_from_dict(data: dict, base_dir: Path | None = None, allow_outside_paths: bool = False) -> Scene:
+def scene_from_dict(data: dict, base_dir: Path | None = None, allow_outside_paths: bool = False,
+                    camera_files: dict[str, str | os.PathLike] | None = None) -> Scene:
     """Validates a parsed scene file and builds a :class:`~vfactor.observations.Scene`.
 
     Checks, among others: the top level is an object with ``cameras`` (a
     non-empty list) and ``frames`` (a list), optionally ``ground_plane``
     (``{"normal": [nx, ny, nz], "offset": d}``, the road ``n . x = d``, normal
     pointing up); no unknown keys anywhere; camera
-    names unique and every camera valid (``K``, ``world_T_camera``, ``dist`` of
-    4 or 5 numbers, ``image_size``); each detection's camera exists; a
+    names unique and every camera valid (inline: ``K``, ``world_T_camera``,
+    ``model`` ``"pinhole"`` or ``"fisheye"``, ``dist`` of 4, 5, 8, 12 or 14 numbers
+    (pinhole) or 4 (fisheye), ``image_size``; or by a ``calibration`` file, see
+    below); each detection's camera exists; a
     detection has ``keypoints`` (exactly 12 rows ``[u, v, confidence]``,
     confidence in [0, 1], ``u`` and ``v`` finite where confidence > 0 and null
     or finite where it is 0), ``heatmaps`` with ``roi``, or only a ``roi`` in
@@ -143,7 +160,29 @@ def scene_from_dict(data: dict, base_dir: Path | None = None, allow_outside_path
     none; a (camera, vehicle) pair appears once per frame; ``images`` maps
     existing cameras to existing files. Frames need not be in time order.
 
-    Paths: a heatmap or image path resolves inside ``base_dir`` (after
+    Cameras by file: ``{"name", "calibration": path, "calibration_format"?,
+    "chain_camera"?, "world_T_camera"?, "image_size"?}`` reads the camera from a
+    calibration file (:func:`vfactor.calibration.read_calibration`; format detected
+    from the content unless ``calibration_format`` names it; ``chain_camera`` picks
+    the camera of a Kalibr camchain of several). The name is the entry's, never
+    the file's. Beside ``calibration`` an entry gives only what the file lacks:
+    ``model``, ``K`` and ``dist`` are errors; ``world_T_camera`` is required when
+    the file has no extrinsic (ROS, Kalibr) and an error when it has one;
+    ``image_size`` likewise (optional). A problem in the file is a SceneError at
+    ``cameras[i].calibration`` whose message starts with the file and node
+    (``cam0.yaml:camera_matrix: ...``).
+
+    ``camera_files`` (name -> calibration file, paths as given: relative to the
+    working directory, never checked against ``base_dir``): each file's camera
+    replaces the scene camera of that name: its intrinsics, lens and distortion
+    always, its extrinsic when the file has one (else the scene's
+    ``world_T_camera`` is kept), its image size when the file has one (else the
+    scene's is kept). A camchain of several cameras gives the entry named like
+    the scene's camera. A name the scene lacks is a SceneError at
+    ``camera_files.<name>``; a problem in the file too, its message starting
+    with the file and node.
+
+    Paths: a heatmap, image or calibration path resolves inside ``base_dir`` (after
     following symbolic links: a link out of the folder is refused too), unless
     ``allow_outside_paths``; the error names the field.
 
@@ -164,7 +203,8 @@ def scene_from_dict(data: dict, base_dir: Path | None = None, allow_outside_path
         data: the parsed JSON (``json.load``) of a scene file.
         base_dir: folder that relative paths start from; ``None``: the current
             working directory.
-        allow_outside_paths: accept heatmap and image paths outside ``base_dir``.
+        allow_outside_paths: accept heatmap, image and calibration paths outside ``base_dir``.
+        camera_files: camera name -> calibration file replacing that camera's calibration (see above).
 
     Returns:
         The scene; ``Scene.frames`` in the order of ``data["frames"]``.
@@ -181,13 +221,15 @@ def scene_from_dict(data: dict, base_dir: Path | None = None, allow_outside_path
     cameras: dict[str, Camera] = {}
     where: dict[str, int] = {}
     for i, item in enumerate(cameras_data):
-        camera = _camera_from_dict(item, f"cameras[{i}]")
+        camera = _camera_from_dict(item, f"cameras[{i}]", base)
         if camera.name in cameras:
             raise SceneError(
                 f"cameras[{i}].name", f"duplicate camera name {camera.name!r} (also cameras[{where[camera.name]}])"
             )
         cameras[camera.name] = camera
         where[camera.name] = i
+    if camera_files:
+        cameras = _replace_cameras(cameras, camera_files)
     frames = [
         _frame_from_dict(item, f"frames[{i}]", cameras, base) for i, item in enumerate(_list(top["frames"], "frames"))
     ]
@@ -260,14 +302,12 @@ def scene_to_dict(scene: Scene, base_dir: Path | None = None) -> dict:
     return out
 
 
-def _camera_from_dict(data, path: str) -> Camera:
-    cam = _object(data, path, _CAMERA_KEYS, required=("name", "K", "world_T_camera"))
+def _camera_from_dict(data, path: str, base: "_Folder") -> Camera:
+    cam = _object(data, path, _CAMERA_KEYS, required=("name",))
     name = _string(cam["name"], f"{path}.name")
-    K = _matrix(cam["K"], f"{path}.K", (3, 3))
-    world_T_camera = _matrix(cam["world_T_camera"], f"{path}.world_T_camera", (4, 4))
-    dist = cam.get("dist")
-    if dist is not None:
-        dist = _numbers(dist, f"{path}.dist", "4 or 5 numbers [k1, k2, p1, p2(, k3)]", sizes=(4, 5))
+    world_T_camera = None
+    if cam.get("world_T_camera") is not None:
+        world_T_camera = _matrix(cam["world_T_camera"], f"{path}.world_T_camera", (4, 4))
     image_size = cam.get("image_size")
     if image_size is not None:
         if (
@@ -279,11 +319,104 @@ def _camera_from_dict(data, path: str) -> Camera:
                 f"{path}.image_size", f"expected [width, height], two positive integers, got {_kind(image_size)}"
             )
         image_size = (int(image_size[0]), int(image_size[1]))
+    if cam.get("calibration") is not None:
+        return _camera_from_file(cam, path, base, name, world_T_camera, image_size)
+    for key in ("calibration_format", "chain_camera"):
+        if cam.get(key) is not None:
+            raise SceneError(f"{path}.{key}", "given without 'calibration' (the file it describes)")
+    for key in ("K", "world_T_camera"):
+        if cam.get(key) is None:
+            raise SceneError(f"{path}.{key}", "missing (required unless the camera is given by 'calibration')")
+    K = _matrix(cam["K"], f"{path}.K", (3, 3))
+    model = cam.get("model", "pinhole")
+    if model is None:
+        model = "pinhole"
+    if not isinstance(model, str) or model not in LENS_MODELS:
+        raise SceneError(f"{path}.model", f"expected one of {', '.join(LENS_MODELS)}, got {_kind(model)}")
+    dist = cam.get("dist")
+    if dist is not None:
+        what = ("4 numbers [k1, k2, k3, k4] (fisheye model)" if model == "fisheye" else
+                "4, 5, 8, 12 or 14 numbers [k1, k2, p1, p2(, k3(, k4, k5, k6(, s1, s2, s3, s4(, tauX, tauY))))]")
+        dist = _numbers(dist, f"{path}.dist", what, sizes=DIST_SIZES[model])
     try:
-        return Camera(name=name, K=K, world_T_camera=world_T_camera, dist=dist, image_size=image_size)
+        return Camera(name=name, K=K, world_T_camera=world_T_camera, dist=dist, image_size=image_size, model=model)
     except CalibrationError as exc:
         err = exc.within(path)
         raise SceneError(err.field, err.problem) from None
+
+
+def _camera_from_file(cam: dict, path: str, base: "_Folder", name: str, world_T_camera, image_size) -> Camera:
+    """A scene camera given by ``calibration`` (a file), with what the entry supplies beside it."""
+    for key in _INTRINSIC_KEYS:
+        if cam.get(key) is not None:
+            raise SceneError(f"{path}.{key}", "given beside 'calibration': the calibration file gives the camera's "
+                                              "model, K and dist (give the file or the inline fields, not both)")
+    field = f"{path}.calibration"
+    written = cam["calibration"]
+    file = _existing_file(written, field, base, "a calibration file path")
+    fmt = cam.get("calibration_format")
+    if fmt is not None and fmt not in CALIBRATION_FORMATS:
+        raise SceneError(f"{path}.calibration_format", f"expected one of {', '.join(CALIBRATION_FORMATS)}, "
+                                                       f"got {_kind(fmt)}")
+    chain = cam.get("chain_camera")
+    if chain is not None:
+        chain = _string(chain, f"{path}.chain_camera")
+    try:
+        calibration = read_calibration(file, fmt, chain)
+    except CalibrationError as exc:
+        raise _file_error(exc, field, file, written) from None
+    for key, given, has in (("world_T_camera", world_T_camera, calibration.world_T_camera is not None),
+                            ("image_size", image_size, calibration.image_size is not None)):
+        if given is not None and has:
+            node = calibration.nodes.get(key, key)
+            raise SceneError(f"{path}.{key}", f"given beside 'calibration', whose file gives it ({written}:{node}); "
+                                              "give it once")
+    if world_T_camera is None and calibration.world_T_camera is None:
+        raise SceneError(f"{path}.world_T_camera", f"missing: the {calibration.format} calibration file {written!r} "
+                                                   "has no extrinsic; give world_T_camera (4x4, camera -> world) beside it")
+    try:
+        return calibration.camera(name, world_T_camera, image_size)
+    except CalibrationError as exc:
+        if exc.field.startswith(file):
+            raise _file_error(exc, field, file, written) from None
+        err = exc.within(path)
+        raise SceneError(err.field, err.problem) from None
+
+
+def _file_error(exc: CalibrationError, field: str, file: str, written: str) -> SceneError:
+    """A calibration file's error as a SceneError at the scene's field, the message naming the file (as written) and node."""
+    where = exc.field
+    if where.startswith(file):
+        where = str(written) + where[len(file):]
+    return SceneError(field, f"{where}: {exc.problem}" if where else exc.problem)
+
+
+def _replace_cameras(cameras: dict[str, Camera], camera_files) -> dict[str, Camera]:
+    """The scene's cameras with those named in ``camera_files`` read from their calibration files."""
+    if not isinstance(camera_files, dict):
+        raise SceneError("camera_files", f"expected a mapping of camera name to calibration file, got "
+                                         f"{_kind(camera_files)}")
+    out = dict(cameras)
+    for name, file in camera_files.items():
+        field = f"camera_files.{name}"
+        if name not in cameras:
+            raise SceneError(field, f"unknown camera {name!r}; the scene has: {', '.join(cameras)}")
+        if not isinstance(file, (str, os.PathLike)) or not str(file):
+            raise SceneError(field, f"expected a calibration file path, got {_kind(file)}")
+        scene_camera = cameras[name]
+        file = str(file)
+        try:
+            chain = None
+            if detect_format(file) == "kalibr":
+                keys = kalibr_cameras(file)
+                chain = None if len(keys) == 1 else name  # several: the entry named like the scene's camera
+            calibration = read_calibration(file, chain_camera=chain)
+            out[name] = calibration.camera(
+                name, None if calibration.world_T_camera is not None else scene_camera.world_T_camera,
+                None if calibration.image_size is not None else scene_camera.image_size)
+        except CalibrationError as exc:
+            raise _file_error(exc, field, file, file) from None
+    return out
 
 
 @dataclass(frozen=True)

@@ -112,15 +112,30 @@ def _max_valid_r2(camera: Camera, size: tuple[int, int]) -> float:
     w, h = size
     corners = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]], dtype=float)
     r_corner = float(np.sqrt((camera.undistort_pixels(corners) ** 2).sum(1)).max())
-    k1, k2, _, _, k3 = camera.dist
     r = np.linspace(0.0, 3.0 * max(r_corner, 1e-3), 3001)
-    r2 = r * r
-    r_d = r * (1 + r2 * (k1 + r2 * (k2 + r2 * k3)))
+    r_d = _distorted_radius(camera, r)
     turning = np.nonzero(np.diff(r_d) <= 0)[0]
     r_max = 1.5 * r_corner
     if len(turning):
         r_max = min(r_max, r[turning[0]])
     return r_max * r_max
+
+
+def _distorted_radius(camera: Camera, r: np.ndarray) -> np.ndarray:
+    """The lens's radial map: distorted normalised radius of normalised radii ``r`` (tangential,
+    thin-prism and tilt terms left out).
+
+    Pinhole: ``r (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)``; fisheye:
+    ``theta_d(atan r)`` (docs/conventions.md).
+    """
+    d = camera.kernel_lens()[1]
+    r2 = r * r
+    if camera.model == "fisheye":
+        theta = np.arctan(r)
+        t2 = theta * theta
+        return theta * (1 + t2 * (d[0] + t2 * (d[1] + t2 * (d[2] + t2 * d[3]))))
+    k1, k2, k3, k4, k5, k6 = d[0], d[1], d[4], d[5], d[6], d[7]
+    return r * (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
 
 
 def _project_valid(camera: Camera, world_p: np.ndarray, size: tuple[int, int], r2_max: float):

@@ -24,15 +24,25 @@ TRUTH_POSE = gtsam.Pose3(gtsam.Rot3.Ypr(0.6, 0.02, -0.03), np.array([0.8, -0.4, 
 TRUTH_SHAPE = PRESETS["hatchback"].wireframe()
 
 
-def observations(noise_px: float = 0.0, rng=None, anisotropic: bool = False) -> KeypointObservations:
-    cam_idx = np.repeat([0, 1], 12)
-    kp_idx = np.tile(np.arange(12), 2)
-    obs = KeypointObservations(CAMERAS, cam_idx, kp_idx, np.zeros((24, 2)), np.tile(np.eye(2) / 3.0, (24, 1, 1)))
+#: Cameras with the other lens models: 8 and 14 OpenCV coefficients (rational, thin prism, tilt), fisheye.
+LENS_CAMERAS = (
+    Camera("rational", K, look_at([15, 10, 7], [0, 0, 0]), dist=[-0.2, 0.05, 0.001, -0.002, 0.01, 0.08, -0.02, 0.004]),
+    Camera("full", K, look_at([-15, -8, 8], [0, 0, 0]),
+           dist=[-0.2, 0.05, 0.001, -0.002, 0.01, 0.08, -0.02, 0.004, 0.001, -0.0006, 0.002, 0.0004, 0.02, -0.015]),
+    Camera("fisheye", K, look_at([12, -12, 6], [0, 0, 0]), dist=[0.04, -0.012, 0.003, -0.0008], model="fisheye"),
+)
+
+
+def observations(noise_px: float = 0.0, rng=None, anisotropic: bool = False, cameras=CAMERAS) -> KeypointObservations:
+    n = 12 * len(cameras)
+    cam_idx = np.repeat(np.arange(len(cameras)), 12)
+    kp_idx = np.tile(np.arange(12), len(cameras))
+    obs = KeypointObservations(cameras, cam_idx, kp_idx, np.zeros((n, 2)), np.tile(np.eye(2) / 3.0, (n, 1, 1)))
     uv, _, _, _ = project_keypoints(obs, TRUTH_POSE, TRUTH_SHAPE.vehicle_p_keypoints, jacobians=False)
     if noise_px:
         uv = uv + rng.normal(0, noise_px, uv.shape)
-    L = np.tile(np.array([[0.4, 0.1], [0.0, 0.25]]), (24, 1, 1)) if anisotropic else obs.sqrt_information
-    return KeypointObservations(CAMERAS, cam_idx, kp_idx, uv, L)
+    L = np.tile(np.array([[0.4, 0.1], [0.0, 0.25]]), (n, 1, 1)) if anisotropic else obs.sqrt_information
+    return KeypointObservations(cameras, cam_idx, kp_idx, uv, L)
 
 
 def values_at(pose, wireframe):
@@ -46,9 +56,10 @@ def values_at(pose, wireframe):
 class ProjectionContract(FactorContract):
     loss = RobustLoss("none")
     anisotropic = False
+    cameras = CAMERAS
 
     def make_factor(self):
-        obs = observations(2.0, np.random.default_rng(11), self.anisotropic)
+        obs = observations(2.0, np.random.default_rng(11), self.anisotropic, self.cameras)
         return projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss)
 
     def make_values(self, rng):
@@ -60,7 +71,7 @@ class ProjectionContract(FactorContract):
         return values_at(TRUTH_POSE, TRUTH_SHAPE)
 
     def test_zero_at_truth(self):
-        obs = observations()
+        obs = observations(cameras=self.cameras)
         factor = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss)
         assert factor.error(self.make_truth_values()) < 1e-12
 
@@ -83,6 +94,46 @@ class TestProjectionCauchy(ProjectionContract):
 
 class TestProjectionGemanMcClure(ProjectionContract):
     loss = RobustLoss("geman_mcclure", 1.0)
+
+
+class TestProjectionEveryLens(ProjectionContract):
+    """Rational (8), full (14: thin prism, tilt) and fisheye cameras in one factor."""
+
+    cameras = LENS_CAMERAS
+
+
+class TestProjectionEveryLensCauchyAnisotropic(ProjectionContract):
+    cameras = LENS_CAMERAS
+    loss = RobustLoss("cauchy", 1.0)
+    anisotropic = True
+
+
+def test_kernel_matches_numpy_projection_for_every_lens():
+    """The compiled factor's residuals equal the NumPy projection's (project_pinhole) for mixed lenses."""
+    from vfactor.factors.projection import whitened_residuals
+
+    for cameras in (LENS_CAMERAS, CAMERAS + LENS_CAMERAS[2:]):
+        obs = observations(2.0, np.random.default_rng(3), cameras=cameras)
+        values = ProjectionContract().make_values(np.random.default_rng(8))
+        factor = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, RobustLoss("none"))
+        points = np.concatenate([values.atVector(k) for k in KEYS.layer_keys()]).reshape(12, 3)
+        e = whitened_residuals(obs, values.atPose3(KEYS.pose_key()), points)
+        assert np.isclose(factor.error(values), 0.5 * np.sum(e * e), rtol=1e-12)
+
+
+def test_every_lens_matches_opencv_in_the_factor():
+    import cv2
+
+    obs = observations(cameras=LENS_CAMERAS)
+    world = TRUTH_SHAPE.in_world(TRUTH_POSE)
+    for c, camera in enumerate(LENS_CAMERAS):
+        T = camera.camera_T_world
+        rvec, tvec = cv2.Rodrigues(T[:3, :3])[0], T[:3, 3].copy()
+        if camera.model == "fisheye":
+            expected, _ = cv2.fisheye.projectPoints(world.reshape(-1, 1, 3), rvec, tvec, camera.K, camera.dist)
+        else:
+            expected, _ = cv2.projectPoints(world, rvec, tvec, camera.K, camera.dist)
+        assert np.allclose(obs.uv[obs.camera_index == c], expected.reshape(-1, 2), atol=1e-6)
 
 
 def test_matches_opencv_projection():

@@ -134,10 +134,12 @@ def test_occlusion_by_another_object(renderer):
     assert set(np.unique(res2.vehicle_ids)) == {-1, 0, 1}
 
 
-def test_lens_distortion_by_remapping(renderer):
+@pytest.mark.parametrize("model, dist", [("pinhole", [-0.25, 0.08, 0.001, -0.001, 0.0]),
+                                         ("fisheye", [0.05, -0.01, 0.002, 0.0])])
+def test_lens_distortion_by_remapping(renderer, model, dist):
     wf, pose, r = prius_on_road()
     base = camera_around(pose, 90.0, 5.0, 9.0, hfov_deg=60.0)
-    cam = Camera("d", base.K, base.world_T_camera, dist=[-0.25, 0.08, 0.001, -0.001, 0.0], image_size=(640, 480))
+    cam = Camera("d", base.K, base.world_T_camera, dist=dist, image_size=(640, 480), model=model)
     res = renderer.render(cam, [(wf, pose, LOOK, r)], light=FLAT, ground=False)
     cap = (res.image[..., 0] > 120) & (res.image[..., 2] > 120) & (res.image[..., 1] < 80)
     uv = res.annotations[0].uv

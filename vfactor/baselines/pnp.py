@@ -80,7 +80,8 @@ def camera_pnp(obs: KeypointObservations, camera: int, vehicle_p: np.ndarray, re
         obs: the observations (only camera ``camera``'s rows are used).
         camera: index of the camera in ``obs.cameras``.
         vehicle_p: (12, 3) body-frame keypoints, metres.
-        refine: refine SQPnP's pose by ``cv2.solvePnPRefineLM`` (reprojection error).
+        refine: refine SQPnP's pose by ``cv2.solvePnPRefineLM`` (reprojection error; in
+            normalised coordinates for a fisheye lens, :meth:`~vfactor.camera.Camera.pnp_inputs`).
 
     Returns:
         The pose, or ``None`` when the camera sees fewer than 4 keypoints, OpenCV
@@ -91,13 +92,13 @@ def camera_pnp(obs: KeypointObservations, camera: int, vehicle_p: np.ndarray, re
         return None
     cam = obs.cameras[camera]
     obj = np.ascontiguousarray(vehicle_p[obs.keypoint_index[rows]], dtype=np.float64)
-    img = np.ascontiguousarray(obs.uv[rows], dtype=np.float64)
+    img, K, dist, _ = cam.pnp_inputs(obs.uv[rows])  # a fisheye lens: normalised points, identity K
     try:
-        ok, rvec, tvec = cv2.solvePnP(obj, img, cam.K, cam.dist, flags=cv2.SOLVEPNP_SQPNP)
+        ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_SQPNP)
         if not ok:
             return None
         if refine:
-            rvec, tvec = cv2.solvePnPRefineLM(obj, img, cam.K, cam.dist, rvec, tvec)
+            rvec, tvec = cv2.solvePnPRefineLM(obj, img, K, dist, rvec, tvec)
     except cv2.error:
         return None
     camera_T_vehicle = np.eye(4)

@@ -31,7 +31,7 @@ from functools import partial
 import gtsam
 import numpy as np
 
-from vfactor.camera import Camera, project_pinhole
+from vfactor.camera import LENS_FISHEYE, LENS_PLAIN, Camera, project_pinhole
 from vfactor.factors.projection_kernel import projection_kernel
 from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_terms import cross
@@ -93,11 +93,21 @@ class KeypointObservations:
         object.__setattr__(self, "_R_cw", np.array([c.camera_T_world[:3, :3] for c in cams]).reshape(n, 3, 3))
         object.__setattr__(self, "_t_cw", np.array([c.camera_T_world[:3, 3] for c in cams]).reshape(n, 3))
         object.__setattr__(self, "_intrinsics", (K[:, 0, 0], K[:, 1, 1], K[:, 0, 1], K[:, 0, 2], K[:, 1, 2]))
+        # the lens of each camera as the kernel takes it: a code and 14 coefficients (Camera.kernel_lens)
+        lenses = [c.kernel_lens() for c in self.cameras]
+        index = np.asarray(self.camera_index, dtype=np.int64)
+        codes = np.array([code for code, _ in lenses], dtype=np.int64)[index]
+        dist_table = np.array([d for _, d in lenses], dtype=float).reshape(-1, 14)[index]
+        fisheye = codes == LENS_FISHEYE
+        object.__setattr__(self, "_fisheye", fisheye if fisheye.any() else False)
+        # NumPy projection: None without distortion; 5 columns for the common lens (the original formula)
         distorted = any(c.has_distortion for c in self.cameras)
-        object.__setattr__(self, "_dist", np.array([c.dist for c in cams]).reshape(n, 5) if distorted else None)
+        width = 5 if np.all(codes == LENS_PLAIN) else 14
+        object.__setattr__(self, "_dist", np.ascontiguousarray(dist_table[:, :width]) if distorted else None)
         # contiguous tables for the compiled kernel of the projection factor
         object.__setattr__(self, "_intrinsics_table", np.ascontiguousarray(np.stack(self._intrinsics, axis=1)).reshape(n, 5))
-        object.__setattr__(self, "_dist_table", np.array([c.dist for c in cams], dtype=float).reshape(n, 5))
+        object.__setattr__(self, "_lens_table", np.ascontiguousarray(codes).reshape(n))
+        object.__setattr__(self, "_dist_table", dist_table)
 
     def __len__(self):
         return len(self.camera_index)
@@ -177,7 +187,7 @@ def project_keypoints(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, v
     depth = cam_p[:, 2].copy()
     clamped = depth < _MIN_DEPTH
     cam_p[:, 2] = np.maximum(depth, _MIN_DEPTH)
-    uv, J_cam = project_pinhole(cam_p, *obs._intrinsics, obs._dist, jacobians)
+    uv, J_cam = project_pinhole(cam_p, *obs._intrinsics, obs._dist, jacobians, fisheye=obs._fisheye)
     if not jacobians:
         return uv, depth, None, None
     if clamped.any():
@@ -211,7 +221,7 @@ def _error(obs: KeypointObservations, loss: RobustLoss, this: gtsam.CustomFactor
     H_pose = np.empty((2 * n, 6)) if want else _EMPTY
     H_shape = np.zeros((2 * n, 36)) if want else _EMPTY
     projection_kernel(T[:3, :3], T[:3, 3], points, obs.keypoint_index, obs._R_cw, obs._t_cw, obs._intrinsics_table,
-                      obs._dist_table, obs.uv, obs.sqrt_information, obs._window_table, obs._sigma_table,
+                      obs._lens_table, obs._dist_table, obs.uv, obs.sqrt_information, obs._window_table, obs._sigma_table,
                       loss.id, float(loss.threshold), _MIN_DEPTH, want, r, H_pose, H_shape)
     if want:
         H[0] = H_pose

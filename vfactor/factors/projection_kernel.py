@@ -7,7 +7,10 @@ the same residuals and Jacobians in one compiled loop (a few microseconds), so
 only the ~10 us of the ``CustomFactor`` call itself remain (docs/performance.md).
 
 The maths is that of :mod:`vfactor.factors.projection` (docs/factors.md):
-projection with OpenCV distortion as :func:`vfactor.camera.project_pinhole`,
+projection with every lens model as :func:`vfactor.camera.project_pinhole`
+(the common lens, at most ``[k1, k2, p1, p2, k3]``, inline; the rational,
+thin-prism, tilted and fisheye lenses in :func:`_full_lens` and
+:func:`_fisheye_lens`),
 whitening by ``L``, and the robust loss of :mod:`vfactor.factors.robust` as
 ``r = s(n) e``; the tests check it against those NumPy implementations and
 against numerical derivatives.
@@ -25,9 +28,69 @@ from vfactor.factors.truncation import truncated_mean
 
 __all__ = ["projection_kernel"]
 
+#: Lens codes of the ``lens`` table (:meth:`vfactor.camera.Camera.kernel_lens`).
+_PLAIN, _FULL, _FISHEYE = 0, 1, 2
+#: Below this squared normalised radius the fisheye scale is its limit 1 (as in vfactor.camera).
+_FISHEYE_MIN_R2 = 1e-16
+
+
 @njit(cache=True)
-def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, dist, uv, L, window, sigma, loss_id, k,
-                      min_depth, want_jacobians, r_out, H_pose, H_shape):
+def _full_lens(d, x, y):
+    """OpenCV's pinhole distortion with all 14 coefficients: ``(xd, yd, d00, d01, d10, d11)``.
+
+    ``d00 .. d11``: ``d(xd, yd) / d(x, y)`` row by row (vfactor.camera._pinhole_lens).
+    """
+    k1, k2, p1, p2, k3, k4, k5, k6 = d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7]
+    s1, s2, s3, s4 = d[8], d[9], d[10], d[11]
+    r2 = x * x + y * y
+    numerator = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    denominator = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    radial = numerator / denominator
+    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) + r2 * (s1 + r2 * s2)
+    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y + r2 * (s3 + r2 * s4)
+    dradial = (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2) - radial * (k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2))) / denominator
+    gx = 2.0 * (s1 + 2.0 * s2 * r2)
+    gy = 2.0 * (s3 + 2.0 * s4 * r2)
+    d00 = radial + 2.0 * x * x * dradial + 2.0 * p1 * y + 6.0 * p2 * x + gx * x
+    d01 = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y + gx * y
+    d10 = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y + gy * x
+    d11 = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x + gy * y
+    if d[12] == 0.0 and d[13] == 0.0:
+        return xd, yd, d00, d01, d10, d11
+    # tilted sensor (vfactor.camera.tilt_matrix): M = [[R22, 0, -R02], [0, R22, -R12], [0, 0, 1]] R
+    cx, sx, cy, sy = math.cos(d[12]), math.sin(d[12]), math.cos(d[13]), math.sin(d[13])
+    r02, r12, r22 = -sy * cx, sx, cy * cx
+    m00, m01, m02 = r22 * cy - r02 * sy, r22 * sy * sx + r02 * cy * sx, -r22 * sy * cx - r02 * cy * cx
+    m10, m11, m12 = -r12 * sy, r22 * cx + r12 * cy * sx, r22 * sx - r12 * cy * cx
+    m20, m21, m22 = sy, -cy * sx, cy * cx
+    w = m20 * xd + m21 * yd + m22
+    xt = (m00 * xd + m01 * yd + m02) / w
+    yt = (m10 * xd + m11 * yd + m12) / w
+    t00, t01 = (m00 - xt * m20) / w, (m01 - xt * m21) / w
+    t10, t11 = (m10 - yt * m20) / w, (m11 - yt * m21) / w
+    return (xt, yt, t00 * d00 + t01 * d10, t00 * d01 + t01 * d11, t10 * d00 + t11 * d10, t10 * d01 + t11 * d11)
+
+
+@njit(cache=True)
+def _fisheye_lens(d, x, y):
+    """OpenCV's equidistant fisheye model: ``(xd, yd, d00, d01, d10, d11)`` (vfactor.camera._fisheye_lens)."""
+    k1, k2, k3, k4 = d[0], d[1], d[2], d[3]
+    r2 = x * x + y * y
+    if r2 < _FISHEYE_MIN_R2:
+        h = 2.0 * (k1 - 1.0 / 3.0)
+        return x, y, 1.0 + h * x * x, h * x * y, h * x * y, 1.0 + h * y * y
+    r = math.sqrt(r2)
+    theta = math.atan(r)
+    t2 = theta * theta
+    g = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))) / r
+    dtheta_d = 1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)))
+    h = (dtheta_d / (1.0 + r2) - g) / r2
+    return g * x, g * y, g + h * x * x, h * x * y, h * x * y, g + h * y * y
+
+
+@njit(cache=True)
+def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, lens, dist, uv, L, window, sigma, loss_id,
+                      k, min_depth, want_jacobians, r_out, H_pose, H_shape):
     """Fills the robust whitened residuals and, if asked, the Jacobians of every observation.
 
     Args:
@@ -36,7 +99,10 @@ def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, dist
         keypoint_index: (n,) keypoint of each observation.
         R_cw, t_cw: (n, 3, 3), (n, 3) world -> camera of each observation's camera.
         intrinsics: (n, 5) ``fx, fy, skew, cx, cy``.
-        dist: (n, 5) ``k1, k2, p1, p2, k3``.
+        lens: (n,) lens code of each observation's camera (0: at most ``k1, k2, p1, p2, k3``;
+            1: all 14 pinhole coefficients; 2: fisheye), :meth:`vfactor.camera.Camera.kernel_lens`.
+        dist: (n, 14) ``k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4, tauX, tauY``
+            (fisheye: ``k1, k2, k3, k4``, then zeros).
         uv: (n, 2) measured pixels.
         L: (n, 2, 2) square-root information.
         window: (n, 4) ``[u_lo, v_lo, u_hi, v_hi]`` truncation window; NaN rows: none.
@@ -64,11 +130,18 @@ def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, dist
         inv_z = 1.0 / Z
         x, y = c[0] * inv_z, c[1] * inv_z
         fx, fy, skew, cx, cy = intrinsics[i, 0], intrinsics[i, 1], intrinsics[i, 2], intrinsics[i, 3], intrinsics[i, 4]
-        k1, k2, q1, q2, k3 = dist[i, 0], dist[i, 1], dist[i, 2], dist[i, 3], dist[i, 4]
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xd = x * radial + 2.0 * q1 * x * y + q2 * (r2 + 2.0 * x * x)
-        yd = y * radial + q1 * (r2 + 2.0 * y * y) + 2.0 * q2 * x * y
+        code = lens[i]
+        d00, d01, d10, d11 = 1.0, 0.0, 0.0, 1.0
+        if code == _PLAIN:
+            k1, k2, q1, q2, k3 = dist[i, 0], dist[i, 1], dist[i, 2], dist[i, 3], dist[i, 4]
+            r2 = x * x + y * y
+            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            xd = x * radial + 2.0 * q1 * x * y + q2 * (r2 + 2.0 * x * x)
+            yd = y * radial + q1 * (r2 + 2.0 * y * y) + 2.0 * q2 * x * y
+        elif code == _FULL:
+            xd, yd, d00, d01, d10, d11 = _full_lens(dist[i], x, y)
+        else:
+            xd, yd, d00, d01, d10, d11 = _fisheye_lens(dist[i], x, y)
         mu_u = fx * xd + skew * yd + cx
         mu_v = fy * yd + cy
         slope_u, slope_v = 1.0, 1.0
@@ -86,13 +159,15 @@ def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, dist
         if not want_jacobians:
             continue
         # d uv / d camera point
-        dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-        d00 = radial + 2.0 * x * x * dradial + 2.0 * q1 * y + 6.0 * q2 * x
-        d01 = 2.0 * x * y * dradial + 2.0 * q1 * x + 2.0 * q2 * y
-        d11 = radial + 2.0 * y * y * dradial + 6.0 * q1 * y + 2.0 * q2 * x
-        a00 = (fx * d00 + skew * d01) * slope_u
+        if code == _PLAIN:
+            dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+            d00 = radial + 2.0 * x * x * dradial + 2.0 * q1 * y + 6.0 * q2 * x
+            d01 = 2.0 * x * y * dradial + 2.0 * q1 * x + 2.0 * q2 * y
+            d10 = d01
+            d11 = radial + 2.0 * y * y * dradial + 6.0 * q1 * y + 2.0 * q2 * x
+        a00 = (fx * d00 + skew * d10) * slope_u
         a01 = (fx * d01 + skew * d11) * slope_u
-        a10 = fy * d01 * slope_v
+        a10 = fy * d10 * slope_v
         a11 = fy * d11 * slope_v
         J = np.empty((2, 3))
         J[0, 0] = a00 * inv_z

@@ -241,7 +241,8 @@ def crop_camera(camera: Camera, roi, size) -> Camera:
     """The camera whose image is the ``roi`` of ``camera``'s image resized to ``size`` (int or (w, h)).
 
     ``u_crop = sx (u + 0.5 - x0) - 0.5`` with ``sx = w / (x1 - x0)`` (likewise v): the same
-    mapping as ``vfactor.heatmaps.image_to_heatmap``. Distortion is kept (it acts before K).
+    mapping as ``vfactor.heatmaps.image_to_heatmap``. The lens (model and distortion) is kept: every
+    model acts on normalised coordinates, before K.
     """
     w, h = (size, size) if np.isscalar(size) else size
     x0, y0, x1, y1 = (float(v) for v in roi)
@@ -253,7 +254,7 @@ def crop_camera(camera: Camera, roi, size) -> Camera:
         [0.0, 0.0, 1.0],
     ])
     return Camera(name=f"{camera.name}_crop", K=Kc, world_T_camera=camera.world_T_camera, dist=camera.dist,
-                  image_size=(int(w), int(h)))
+                  image_size=(int(w), int(h)), model=camera.model)
 
 
 def random_vehicle(rng: np.random.Generator, split: SplitSpec = TRAIN, max_tries: int = 50):

@@ -783,8 +783,7 @@ class Renderer:
         us = (np.arange(Wc) + 0.5) * W / Wc - 0.5
         vs = (np.arange(Hc) + 0.5) * H / Hc - 0.5
         uu, vv = np.meshgrid(us, vs)
-        xy = cv2.undistortPoints(np.stack([uu, vv], -1).reshape(-1, 1, 2).astype(np.float64), K, camera.dist)
-        xy = xy.reshape(-1, 2)
+        xy = camera.undistort_pixels(np.stack([uu, vv], -1).reshape(-1, 2))
         u_id = K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2]
         v_id = K[1, 1] * xy[:, 1] + K[1, 2]
         pad_l = int(np.ceil(max(0.0, -u_id.min()))) + 2

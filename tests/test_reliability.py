@@ -368,7 +368,17 @@ def test_malformed_calibration_files_raise_a_calibration_error_naming_the_node(t
         Camera.from_opencv_file(path)
     assert info.value.field == (f"{path}:{field}" if field else str(path)) and problem in info.value.problem
     path.write_text(CALIBRATION)
-    assert Camera.from_opencv_file(path).image_size == (1280, 720)
+    assert Camera.from_opencv_file(path, name="cam0").image_size == (1280, 720)
+
+
+def test_a_calibration_file_never_names_the_camera_by_its_file_name(tmp_path):
+    """cam0_calib.yml used to become camera 'cam0_calib', which no detection names."""
+    path = tmp_path / "cam0_calib.yml"
+    path.write_text(CALIBRATION)
+    with pytest.raises(CalibrationError) as info:
+        Camera.from_opencv_file(path)
+    assert info.value.field == f"{path}:camera_name" and "give name=" in info.value.problem
+    assert Camera.from_opencv_file(path, name="cam0").name == "cam0"
 
 
 # ------------------------------------------------------------------ 4. boxes far outside the image

@@ -277,19 +277,20 @@ class Camera:
 
         Args:
             path: the calibration file.
-            name: camera name; defaults to the file's ``camera_name`` node, then to the
-                file's stem (kept for compatibility; :func:`~vfactor.calibration.load_calibration`
-                always takes the name from its caller).
+            name: camera name; defaults to the file's ``camera_name`` node. Never the file's
+                name: ``cam0_calib.yml`` would become a camera no detection names.
 
         Raises:
             CalibrationError: the file is unreadable or a node is missing or invalid;
-                the field names the file and the node.
+                the field names the file and the node; no ``name`` and no ``camera_name`` node.
         """
         from vfactor.calibration import read_calibration
 
         calibration = read_calibration(path, format="opencv")
         if name is None:
-            name = calibration.file_camera_name or Path(path).stem
+            name = calibration.file_camera_name
+            if not name:
+                raise CalibrationError(f"{path}:camera_name", "missing: the file names no camera; give name=")
         return calibration.camera(name)
 
     def to_opencv_file(self, path: str | Path) -> None:

@@ -360,3 +360,34 @@ def test_import_command_writes_a_scene_that_solves_as_the_inline_one(tmp_path, s
     assert "left out 4 detections: 4 score" in capsys.readouterr().err
     assert main(args[:-2] + ["--results", "cam0"]) == 2
     assert "--results: expected CAMERA=FILE, got 'cam0'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("fmt, kps", [("opencv", "carfusion14"), ("ros", "apollocar3d24"), ("kalibr", "apollocar3d66"),
+                                      ("projection", "vfactor12")])
+def test_calibration_files_and_coco_files_solve_from_the_command_line_as_the_inline_scene(tmp_path, sim, fmt, kps,
+                                                                                          capsys):
+    """Issue 13's check: cameras only by calibration files, keypoints only in COCO files, from the command line."""
+    from tests.test_calibration import _camera_files
+    from vfactor.cli import main
+    from vfactor.scene import load_results, save_scene
+
+    save_scene(sim.scene, tmp_path / "inline.json")
+    cameras = {"cameras": [_camera_files(c, tmp_path, c.name)[fmt] for c in sim.scene.cameras.values()]}
+    (tmp_path / "cameras.json").write_text(json.dumps(cameras))
+    paths = write_results(sim.scene, KEYPOINT_SETS[kps], tmp_path)
+    args = ["import", "coco", "--cameras", str(tmp_path / "cameras.json"), "--keypoints", kps,
+            "--out", str(tmp_path / "imported.json"), "--fps", "10", "-q"]
+    assert main(args + [a for name, path in paths.items() for a in ("--results", f"{name}={path}")]) == 0
+    for name in ("inline", "imported"):
+        assert main(["solve", str(tmp_path / f"{name}.json"), "--out", str(tmp_path / f"{name}_result.json"),
+                     "-q"]) == 0
+    got, want = (poses(load_results(tmp_path / f"{n}_result.json")) for n in ("imported", "inline"))
+    np.testing.assert_allclose(got, want, atol=1e-6)
+    # the same cameras given on the command line instead: --camera NAME=FILE replaces a scene's calibration
+    entry = cameras["cameras"][0]
+    assert main(["solve", str(tmp_path / "inline.json"), "--out", str(tmp_path / "by_option.json"), "-q",
+                 "--camera", f"{entry['name']}={tmp_path / entry['calibration']}"]) == 0
+    np.testing.assert_allclose(poses(load_results(tmp_path / "by_option.json")), want, atol=1e-6)
+    assert main(["solve", str(tmp_path / "inline.json"), "--out", str(tmp_path / "x.json"),
+                 "--camera", f"cam9={tmp_path / entry['calibration']}"]) == 2
+    assert "--camera cam9" in capsys.readouterr().err

@@ -281,8 +281,13 @@ def _estimate_options(p: argparse.ArgumentParser) -> None:
                    help="the result's format (docs/output-formats.md): vfactor (default; JSON with poses, wireframes, "
                    "covariances, boxes), openlabel (ASAM OpenLABEL 1.0 JSON), kitti (a folder of label files per "
                    "camera), nuscenes (detection results JSON), csv")
+    p.add_argument("--camera", action="append", metavar="NAME=FILE",
+                   help="take camera NAME's calibration from FILE (OpenCV, ROS camera_info, Kalibr camchain or a 3x4 "
+                   "projection matrix; docs/calibration.md): its intrinsics, and its extrinsic where the file has one "
+                   "(repeatable)")
     p.add_argument("--allow-outside-paths", action="store_true",
-                   help="accept heatmap and image paths outside the scene file's folder (refused by default)")
+                   help="accept heatmap, image and calibration paths outside the scene file's folder (refused by "
+                   "default)")
     p.add_argument("--weights", help="keypoint-network weights for detections given as image boxes "
                    "(default: the shipped weights; needs torch)")
     p.add_argument("--save-detections", metavar="SCENE_OUT",

@@ -8,9 +8,24 @@ from pathlib import Path
 import numpy as np
 
 from vfactor.cli.common import check_out_file, check_outputs, detect, note, progress, report_unsolved
+from vfactor.cli.interop import name_file_pairs
 from vfactor.errors import InputError
 
-__all__ = ["solve", "track", "write_output"]
+__all__ = ["solve", "track", "load_input", "write_output"]
+
+
+def load_input(args):
+    """The scene of ``solve`` and ``track``, with the ``--camera NAME=FILE`` calibrations in it."""
+    from vfactor.scene import load_scene
+
+    try:
+        return load_scene(args.scene, allow_outside_paths=args.allow_outside_paths,
+                          camera_files=name_file_pairs(args.camera, "--camera"))
+    except InputError as exc:
+        if exc.field.startswith("camera_files."):  # name the option the user typed
+            name = exc.field.split(".", 1)[1].split(":", 1)[0]
+            raise type(exc)(f"--camera {name}", exc.problem) from None
+        raise
 
 
 def write_output(args, results, scene) -> None:
@@ -26,11 +41,10 @@ def write_output(args, results, scene) -> None:
 def solve(args) -> int:
     from vfactor.factors.robust import RobustLoss
     from vfactor.graph import GraphConfig
-    from vfactor.scene import load_scene
     from vfactor.solve import SolveOptions, solve_scene
 
     check_outputs(args)
-    scene = detect(load_scene(args.scene, allow_outside_paths=args.allow_outside_paths), args)
+    scene = detect(load_input(args), args)
     options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
     t0 = time.perf_counter()
     results = solve_scene(scene, options, progress=progress("solving", not args.quiet))
@@ -44,7 +58,6 @@ def solve(args) -> int:
 
 
 def track(args) -> int:
-    from vfactor.scene import load_scene
     from vfactor.solve import SolveOptions
     from vfactor.track import TrackOptions, smooth_scene, track_scene
 
@@ -55,7 +68,7 @@ def track(args) -> int:
     check_outputs(args)
     if args.plot:
         check_out_file(args.plot, "--plot", [("scene file", args.scene), ("result file --out", args.out)])
-    scene = detect(load_scene(args.scene, allow_outside_paths=args.allow_outside_paths), args)
+    scene = detect(load_input(args), args)
     options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance)
     t0 = time.perf_counter()
     if args.batch:

@@ -39,6 +39,7 @@ import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -267,8 +268,8 @@ def _cameras(cameras) -> tuple[list[dict], dict | None]:
         part = {"cameras": data["cameras"], "frames": []}
         if data.get("ground_plane") is not None:
             part["ground_plane"] = data["ground_plane"]
-        try:
-            scene = scene_from_dict(part)
+        try:  # calibration files named in it are relative to its folder, as in a scene file
+            scene = scene_from_dict(part, base_dir=Path(os.path.abspath(cameras)).parent)
         except SceneError as exc:
             err = exc.within(where)
             raise SceneError(err.field, err.problem) from None

@@ -317,7 +317,7 @@ BAD_CASES = [
         "unknown_detection_key",
         _set(["frames", 0, "detections", 2, "colour"], "red"),
         "frames[0].detections[2].colour",
-        "unknown key; known keys: camera, vehicle, keypoints",
+        "unknown key; known keys: camera, vehicle, track, keypoints",
     ),
     (
         "unknown_camera",
@@ -339,7 +339,6 @@ BAD_CASES = [
         "frames[1].detections[0].vehicle",
         "missing",
     ),
-    ("unnamed_same_camera", _all_unnamed_two_from_cam0, "frames[1].detections[2]", "must name them"),
     (
         "camera_vehicle_twice",
         _same_camera_vehicle_twice,
@@ -812,3 +811,24 @@ def test_boxes_and_covariance_kinds_round_trip_through_the_result_file(tmp_path)
             load_results(write_json(tmp_path / "bad.json", bad))
         assert info.value.field == f"frames[0].vehicles[0].{field}"
     assert entry["pose_covariance_kind"] == "fixed_lag"
+
+
+def test_frames_of_several_vehicles_without_ids_wait_for_the_association(tmp_path):
+    """No vehicle ids, but two detections of cam0 (or per-camera track ids): the vehicles are to be found."""
+    from vfactor.errors import InputError
+    from vfactor.observations import UNASSIGNED
+
+    data = base_scene(tmp_path)
+    _all_unnamed_two_from_cam0(data)
+    data["frames"][1]["detections"][0]["track"] = "cam0-17"
+    scene = scene_from_dict(data, base_dir=tmp_path)
+    frame = scene.frames[1]
+    assert [d.vehicle for d in frame.detections] == [UNASSIGNED] * len(frame.detections)
+    assert frame.detections[0].track == "cam0-17" and scene.unassigned() == [(1, j) for j in range(len(frame.detections))]
+    with pytest.raises(InputError) as info:
+        scene.require_keypoints()
+    assert info.value.field == "frames[1].detections[0].vehicle" and "associate them first" in info.value.problem
+    save_scene(scene, tmp_path / "again.json")
+    written = json.loads((tmp_path / "again.json").read_text())["frames"][1]["detections"]
+    assert all("vehicle" not in d for d in written) and written[0]["track"] == "cam0-17"
+    assert load_scene(tmp_path / "again.json").unassigned() == scene.unassigned()

@@ -16,11 +16,15 @@ from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.ground_plane import GroundPlane
 
-__all__ = ["DEFAULT_VEHICLE_ID", "Detection", "Frame", "Scene", "resolve_path"]
+__all__ = ["DEFAULT_VEHICLE_ID", "UNASSIGNED", "Detection", "Frame", "Scene", "resolve_path"]
 
 #: Track id given to the vehicle of a detection that names none (allowed when
 #: its frame holds a single vehicle).
 DEFAULT_VEHICLE_ID = "vehicle"
+#: Vehicle id of a detection whose vehicle is not known yet: its frame names no vehicle but holds several
+#: detections of one camera, or per-camera track ids. :func:`vfactor.association.associate_scene` gives such
+#: detections their vehicles (``vfactor solve`` and ``vfactor track`` run it themselves).
+UNASSIGNED = "?"
 
 
 def resolve_path(path: str | Path, base_dir: str | Path | None = None) -> Path:
@@ -55,6 +59,9 @@ class Detection:
             ``"class"``: COCO / YOLO ``car``, ``truck``, ``bus`` or a vfactor
             body type), a hint for the body type, never a hard rule
             (:data:`vfactor.shape_model.CLASS_HINTS`).
+        track: optional per-camera track id (the scene's ``"track"``): the id a camera's own 2D tracker gave
+            this detection, evidence for the association across frames (it may switch; it is never a
+            vehicle id shared between cameras).
     """
 
     camera: str
@@ -66,6 +73,7 @@ class Detection:
     roi: tuple[float, float, float, float] | None = None
     from_image: bool = False
     vehicle_class: str | None = None
+    track: str | None = None
 
     @property
     def seen(self) -> np.ndarray:
@@ -116,6 +124,11 @@ class Scene:
     base_dir: Path | None = None
     ground_plane: GroundPlane | None = None
 
+    def unassigned(self) -> list[tuple[int, int]]:
+        """``(frame index, detection index)`` of every detection whose vehicle is not known yet (:data:`UNASSIGNED`)."""
+        return [(f, j) for f, frame in enumerate(self.frames) for j, det in enumerate(frame.detections)
+                if det.vehicle == UNASSIGNED]
+
     def undetected(self) -> list[tuple[int, int]]:
         """``(frame index, detection index)`` of every detection still waiting for the keypoint network."""
         return [(f, j) for f, frame in enumerate(self.frames) for j, det in enumerate(frame.detections)
@@ -135,4 +148,12 @@ class Scene:
                 f"frames[{f}].detections[{j}].keypoints",
                 f"not detected yet: {len(pending)} detection(s) give only an image box ('roi'); run the keypoint "
                 "network first (vfactor.net.pipeline.detect_scene, which needs the 'net' extra)",
+            )
+        unassigned = self.unassigned()
+        if unassigned:
+            f, j = unassigned[0]
+            raise InputError(
+                f"frames[{f}].detections[{j}].vehicle",
+                f"not known: {len(unassigned)} detection(s) name no vehicle in frames of several vehicles; "
+                "associate them first (vfactor.association.associate_scene; vfactor solve and track do)",
             )

@@ -55,7 +55,7 @@ from vfactor.errors import CalibrationError, SceneError
 from vfactor.heatmaps import decode_heatmaps
 from vfactor.jsonio import NonFinite, OutOfRange, read_json, write_text_atomic
 from vfactor.keypoints import NUM_KEYPOINTS
-from vfactor.observations import DEFAULT_VEHICLE_ID, Detection, Frame, Scene, resolve_path
+from vfactor.observations import DEFAULT_VEHICLE_ID, UNASSIGNED, Detection, Frame, Scene, resolve_path
 from vfactor.result import COVARIANCE_KINDS, FrameResult, Status, VehicleResult
 from vfactor.wireframe import Wireframe
 
@@ -79,7 +79,7 @@ _CAMERA_KEYS = ("name", "model", "K", "dist", "image_size", "world_T_camera", "c
 #: Inline camera fields a ``calibration`` file replaces (an error beside it).
 _INTRINSIC_KEYS = ("model", "K", "dist")
 _FRAME_KEYS = ("t", "detections", "images")
-_DETECTION_KEYS = ("camera", "vehicle", "keypoints", "keypoint_covariances", "heatmaps", "roi", "class")
+_DETECTION_KEYS = ("camera", "vehicle", "track", "keypoints", "keypoint_covariances", "heatmaps", "roi", "class")
 _RESULT_TOP_KEYS = ("frames",)
 _RESULT_FRAME_KEYS = ("t", "vehicles")
 _VEHICLE_KEYS = (
@@ -442,11 +442,17 @@ def _frame_from_dict(data, path: str, cameras: dict[str, Camera], base: _Folder)
         raise SceneError(
             f"{path}.detections[{j}].vehicle",
             "missing: other detections of this frame name their vehicle; 'vehicle' may be omitted only "
-            "when no detection of the frame names one (a frame of a single vehicle)",
+            "when no detection of the frame names one (a frame of a single vehicle, or one to associate)",
         )
+    cameras_seen = [det.camera for det, _ in parsed]
+    if not any(named) and (len(set(cameras_seen)) < len(cameras_seen) or any(d.track for d, _ in parsed)):
+        for det, _ in parsed:  # several vehicles without ids: vfactor.association finds them
+            det.vehicle = UNASSIGNED
     seen: dict[tuple[str, str], int] = {}
     for j, (det, has_vehicle) in enumerate(parsed):
         key = (det.camera, det.vehicle)
+        if det.vehicle == UNASSIGNED:
+            continue
         if key in seen:
             hint = "" if has_vehicle else "; a frame with several vehicles must name them with 'vehicle'"
             raise SceneError(
@@ -480,6 +486,7 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Fol
     has_vehicle = det.get("vehicle") is not None
     vehicle = _string(det["vehicle"], f"{path}.vehicle") if has_vehicle else DEFAULT_VEHICLE_ID
     vehicle_class = _string(det["class"], f"{path}.class") if det.get("class") is not None else None
+    track = _string(det["track"], f"{path}.track") if det.get("track") is not None else None
 
     roi = det.get("roi")
     if roi is not None:
@@ -533,6 +540,7 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Fol
         roi=roi,
         from_image=from_image,
         vehicle_class=vehicle_class,
+        track=track,
     )
     return detection, has_vehicle
 
@@ -610,7 +618,7 @@ def _decode(stack: np.ndarray, roi, field: str):
 
 def _detection_to_dict(det: Detection, path: str, scene_base: Path | None, out_base: Path | None) -> dict:
     if det.from_image:
-        out = {"camera": det.camera, "vehicle": det.vehicle, "roi": [float(b) for b in det.roi]}
+        out = {"camera": det.camera, **_vehicle_fields(det), "roi": [float(b) for b in det.roi]}
         if det.vehicle_class:
             out["class"] = det.vehicle_class
         return out
@@ -635,7 +643,7 @@ def _detection_to_dict(det: Detection, path: str, scene_base: Path | None, out_b
                 f"{path}.keypoints[{k}]", f"expected finite u, v as confidence is {c:g} > 0, got [{u}, {v}]"
             )
         rows.append([u, v, c])
-    out: dict[str, Any] = {"camera": det.camera, "vehicle": det.vehicle, "keypoints": rows}
+    out: dict[str, Any] = {"camera": det.camera, **_vehicle_fields(det), "keypoints": rows}
     if det.covariance is not None:
         cov = np.asarray(det.covariance, dtype=float)
         if cov.shape != (NUM_KEYPOINTS, 2, 2):
@@ -649,6 +657,14 @@ def _detection_to_dict(det: Detection, path: str, scene_base: Path | None, out_b
         out["roi"] = [float(b) for b in det.roi]
     if det.vehicle_class:
         out["class"] = det.vehicle_class
+    return out
+
+
+def _vehicle_fields(det: Detection) -> dict:
+    """A detection's ``vehicle`` (absent while :data:`~vfactor.observations.UNASSIGNED`) and ``track``."""
+    out = {} if det.vehicle == UNASSIGNED else {"vehicle": det.vehicle}
+    if det.track is not None:
+        out["track"] = det.track
     return out
 
 

@@ -106,6 +106,10 @@ class Frame:
     def detections_of(self, vehicle: str) -> list[Detection]:
         return [d for d in self.detections if d.vehicle == vehicle]
 
+    def indices_of(self, vehicle: str) -> list[int]:
+        """The indices in :attr:`detections` of a vehicle's detections."""
+        return [j for j, d in enumerate(self.detections) if d.vehicle == vehicle]
+
 
 @dataclass
 class Scene:

@@ -55,6 +55,10 @@ class VehicleResult:
             (multiplies the detector's sigmas); ``"inlier_weights"``: (n,) robust-loss weight in
             [0, 1] of each observation, in the order of
             :func:`vfactor.graph.observations_from_detections` (near 0: rejected);
+            ``"disagreeing_cameras"``: on a ``failed`` vehicle, the cameras whose keypoints the joint solve
+            rejected while they agree among themselves (docs/reliability.md);
+            ``"detections"``: the indices, in the frame's ``detections``, of the detections the vehicle was
+            solved from (the result file's ``detections``);
             ``"covariance_inflation"``: the factor the one-frame covariances carry
             for an estimated noise scale (docs/factors.md); for tracks,
             ``"covariance"``: which covariance ``pose_covariance`` is,

@@ -97,6 +97,7 @@ _VEHICLE_KEYS = (
     "body_type_probability",
     "box",
     "pose_covariance_kind",
+    "detections",
 )
 _OK_STATUSES = (Status.CONVERGED, Status.MAX_ITERATIONS)
 #: Relative tolerance of the symmetry checks of covariance matrices.
@@ -770,6 +771,8 @@ def _vehicle_to_dict(v: VehicleResult, path: str) -> dict:
     else:
         out.update(world_T_vehicle=None, keypoints_world=None, keypoints_vehicle=None, pose_covariance=None)
     out["status"] = status.value
+    if v.extras.get("detections") is not None:
+        out["detections"] = [int(j) for j in v.extras["detections"]]
     out["iterations"] = int(v.iterations)
     error = float("nan") if v.final_error is None else float(v.final_error)
     out["final_error"] = error if math.isfinite(error) else None
@@ -875,6 +878,12 @@ def _vehicle_from_dict(data, path: str) -> VehicleResult:
             raise SceneError(f"{path}.body_type_probability", f"expected a probability in [0, 1], got "
                                                               f"{body_type_probability}")
     box = box_from_dict(entry["box"], f"{path}.box") if ok and entry.get("box") is not None else None
+    detections = entry.get("detections")
+    if detections is not None:
+        items = _list(detections, f"{path}.detections", "a list of detection indices")
+        if not all(_is_int(j) and j >= 0 for j in items) or len(set(items)) != len(items):
+            raise SceneError(f"{path}.detections", f"expected distinct indices >= 0 into the frame's detections, "
+                                                   f"got {_kind(detections)}")
     kind = entry.get("pose_covariance_kind")
     if kind is not None and (kind not in COVARIANCE_KINDS or pose_covariance is None):
         raise SceneError(f"{path}.pose_covariance_kind", f"expected one of {', '.join(COVARIANCE_KINDS)} beside a "
@@ -892,7 +901,8 @@ def _vehicle_from_dict(data, path: str) -> VehicleResult:
         message=message,
         body_type=body_type,
         body_type_probability=body_type_probability,
-        extras={} if kind is None else {"covariance": kind},
+        extras={**({} if kind is None else {"covariance": kind}),
+                **({} if detections is None else {"detections": [int(j) for j in detections]})},
     )
 
 

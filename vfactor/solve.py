@@ -247,9 +247,9 @@ def solve_observations(
     strict = nominal.scaled(min(float(extras.get("noise_scale", 1.0)), 1.0))
     strict_weights = options.graph.loss.weight(np.linalg.norm(
         whitened_residuals(strict, world_T_vehicle, wireframe.vehicle_p_keypoints), axis=1))
-    problem = _camera_disagreement(strict, strict_weights, mean, options)
+    problem, rejected = _camera_disagreement(strict, strict_weights, mean, options)
     if problem:
-        return VehicleResult(vehicle_id, Status.FAILED, message=problem)
+        return VehicleResult(vehicle_id, Status.FAILED, message=problem, extras={"disagreeing_cameras": rejected})
     joint = None
     if options.covariance:
         try:
@@ -417,8 +417,10 @@ DISAGREEMENT_JOINT_INLIERS = 0.3
 DISAGREEMENT_MARGIN = 0.55
 
 
-def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: Wireframe, options: SolveOptions) -> str:
-    """A message when some camera's keypoints agree among themselves but not with the other cameras, naming it.
+def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: Wireframe,
+                         options: SolveOptions) -> tuple[str, list[str]]:
+    """A message when some camera's keypoints agree among themselves but not with the other cameras, naming it,
+    and the names of those cameras ("" and [] when none).
 
     A camera is at odds when the joint solution rejects its keypoints (fewer
     than :data:`DISAGREEMENT_JOINT_INLIERS` of them have a robust-loss weight
@@ -451,7 +453,7 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
         if float(np.mean(alone > 0.5)) - joint >= DISAGREEMENT_MARGIN - 1e-9:
             rejected.append(camera.name)
     if not rejected:
-        return ""
+        return "", []
     details = []
     for c in range(len(obs.cameras)):
         if (obs.camera_index == c).sum() < options.min_keypoints_in_one_view or own_pose(c) is None:
@@ -464,7 +466,7 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
     text = f"the keypoints of camera(s) {', '.join(repr(n) for n in rejected)} disagree with the other cameras"
     if details:
         text += "; " + "; ".join(details)
-    return text + ": check the cameras' world_T_camera"
+    return text + ": check the cameras' world_T_camera", rejected
 
 
 def solve_vehicle(
@@ -502,6 +504,7 @@ def solve_vehicle(
 def solve_frame(frame: Frame, cameras: dict[str, Camera], options: SolveOptions = SolveOptions(), **kwargs) -> FrameResult:
     """Solves every vehicle of a frame, each on its own.
 
+    Each result's ``extras["detections"]`` holds the indices of its detections in ``frame.detections``.
     A vehicle whose solve raises (an unknown camera, a numerical failure) is
     reported as ``failed`` with the message; the others are still solved.
     """
@@ -511,6 +514,7 @@ def solve_frame(frame: Frame, cameras: dict[str, Camera], options: SolveOptions 
             vehicles.append(solve_vehicle(frame.detections_of(vehicle_id), cameras, options, vehicle_id, **kwargs))
         except (InputError, RuntimeError, np.linalg.LinAlgError) as exc:
             vehicles.append(VehicleResult(vehicle_id, Status.FAILED, message=summarise_error(exc)))
+        vehicles[-1].extras["detections"] = frame.indices_of(vehicle_id)
     return FrameResult(frame.t, vehicles)
 
 

@@ -620,6 +620,9 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
                         "its id does not follow one vehicle there; tracked as new segments")
     frames = [FrameResult(f.t, [checked(final[(i, vid)], _seen_by(f, vid, scene.cameras), options.covariance)
                                 for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
+    for i, f in enumerate(scene.frames):
+        for result in (*frames[i].vehicles, *online[i].vehicles):
+            result.extras["detections"] = f.indices_of(result.id)
     log.info("tracked %d vehicles over %d frames (%s): %d of %d poses solved", len(solved), len(frames),
              "smoothed" if options.lag is None else f"fixed lag {options.lag:g} s",
              sum(v.ok for fr in frames for v in fr.vehicles), sum(len(fr.vehicles) for fr in frames))
@@ -733,8 +736,12 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
             results[(i, vid)].extras["noise_scale"] = scale
             if marginals:
                 results[(i, vid)].extras["covariance"] = "smoothed"
-    return [FrameResult(f.t, [checked(results[(i, vid)], _seen_by(f, vid, scene.cameras), options.covariance)
+    out = [FrameResult(f.t, [checked(results[(i, vid)], _seen_by(f, vid, scene.cameras), options.covariance)
                               for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
+    for f, frame in zip(scene.frames, out):
+        for result in frame.vehicles:
+            result.extras["detections"] = f.indices_of(result.id)
+    return out
 
 
 def _box(world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, body_type: str | None):

@@ -276,7 +276,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _estimate_options(p: argparse.ArgumentParser) -> None:
-    """The options ``solve`` and ``track`` share: output format, paths, the keypoint network."""
+    """The options ``solve`` and ``track`` share: output format, cameras, association, paths, the keypoint network."""
+    p.add_argument("--associate", action="store_true",
+                   help="find the vehicles from geometry even where the detections name them (ids not trusted); "
+                   "without it, only frames that name no vehicle but hold several per camera are associated "
+                   "(docs/association.md)")
     p.add_argument("--format", default="vfactor", choices=("vfactor", "openlabel", "kitti", "nuscenes", "csv"),
                    help="the result's format (docs/output-formats.md): vfactor (default; JSON with poses, wireframes, "
                    "covariances, boxes), openlabel (ASAM OpenLABEL 1.0 JSON), kitti (a folder of label files per "

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
-from vfactor.cli.common import check_out_file, check_outputs, detect, note, progress, report_unsolved
+from vfactor.cli.common import check_out_file, check_outputs, detect, note, output, progress, report_unsolved
 from vfactor.cli.interop import name_file_pairs
 from vfactor.errors import InputError
 
-__all__ = ["solve", "track", "load_input", "write_output"]
+__all__ = ["solve", "track", "load_input", "associate", "write_output"]
 
 
 def load_input(args):
@@ -26,6 +26,25 @@ def load_input(args):
             name = exc.field.split(".", 1)[1].split(":", 1)[0]
             raise type(exc)(f"--camera {name}", exc.problem) from None
         raise
+
+
+def associate(scene, args):
+    """The scene with its vehicles found (vfactor.association) where the detections name none, or everywhere
+    with ``--associate``; the scene as it is otherwise."""
+    todo = len(scene.unassigned()) if not args.associate else sum(len(f.detections) for f in scene.frames)
+    if not todo:
+        return scene
+    from vfactor.association import associate_scene
+
+    t0 = time.perf_counter()
+    found = associate_scene(scene, force=args.associate, progress=progress("associating", not args.quiet))
+    for message in found.messages:
+        note(message)
+    single = sum(len(ids) for ids in found.single_view)
+    vehicles = sum(len(groups) for groups in found.groups)
+    output(args)(f"associated {todo} detections into {vehicles} vehicles over the frames ({single} seen by one "
+                 f"camera only), {len(found.vehicle_ids)} ids ({time.perf_counter() - t0:.2f} s)")
+    return found.scene
 
 
 def write_output(args, results, scene) -> None:
@@ -44,7 +63,7 @@ def solve(args) -> int:
     from vfactor.solve import SolveOptions, solve_scene
 
     check_outputs(args)
-    scene = detect(load_input(args), args)
+    scene = associate(detect(load_input(args), args), args)
     options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
     t0 = time.perf_counter()
     results = solve_scene(scene, options, progress=progress("solving", not args.quiet))
@@ -68,7 +87,7 @@ def track(args) -> int:
     check_outputs(args)
     if args.plot:
         check_out_file(args.plot, "--plot", [("scene file", args.scene), ("result file --out", args.out)])
-    scene = detect(load_input(args), args)
+    scene = associate(detect(load_input(args), args), args)
     options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance)
     t0 = time.perf_counter()
     if args.batch:

@@ -1,0 +1,149 @@
+"""Association without shared ids: detections grouped into vehicles across cameras, linked across frames."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+
+import numpy as np
+import pytest
+
+from vfactor.association import AssociationOptions, TrackLinker, associate_frame, associate_scene
+from vfactor.cli import main
+from vfactor.errors import InputError
+from vfactor.observations import UNASSIGNED, Detection, Frame
+from vfactor.scene import load_results, save_scene
+from vfactor.sim import load_scenario, simulate
+
+
+def anonymous(scene):
+    """The scene with every detection's vehicle unknown, and the true ids aside."""
+    truth = [[d.vehicle for d in f.detections] for f in scene.frames]
+    frames = [Frame(f.t, [dataclasses.replace(d, vehicle=UNASSIGNED) for d in f.detections], f.images)
+              for f in scene.frames]
+    return dataclasses.replace(scene, frames=frames), truth
+
+
+def pair_counts(frames, truth):
+    """(correct pairs, wrong pairs, missed pairs) over pairs of detections of different cameras."""
+    tp = fp = fn = 0
+    for frame, ids in zip(frames, truth):
+        got = [d.vehicle for d in frame.detections]
+        for i, j in itertools.combinations(range(len(ids)), 2):
+            if frame.detections[i].camera == frame.detections[j].camera:
+                continue
+            tp += ids[i] == ids[j] and got[i] == got[j]
+            fp += ids[i] != ids[j] and got[i] == got[j]
+            fn += ids[i] == ids[j] and got[i] != got[j]
+    return tp, fp, fn
+
+
+@pytest.fixture(scope="module")
+def multi():
+    return simulate(load_scenario("intersection_multi"), seed=2, num_frames=3)
+
+
+def test_three_vehicles_three_cameras_are_grouped_as_they_are(multi):
+    scene, truth = anonymous(multi.scene)
+    found = associate_scene(scene)
+    tp, fp, fn = pair_counts(found.scene.frames, truth)
+    assert fp == 0 and fn == 0 and tp == 27
+    assert not found.scene.unassigned()
+    for f, groups in enumerate(found.groups):
+        assert sorted(j for g in groups.values() for j in g) == list(range(len(scene.frames[f].detections)))
+        for vid, g in groups.items():
+            assert len({truth[f][j] for j in g}) == 1 and len({scene.frames[f].detections[j].camera for j in g}) == len(g)
+
+
+def test_a_vehicle_seen_by_one_camera_is_its_own_vehicle_and_a_far_detection_joins_nothing(multi):
+    frame = multi.scene.frames[0]
+    kept = [d for d in frame.detections if not (d.vehicle == "v2" and d.camera != "cam0")]
+    groups = associate_frame(Frame(frame.t, kept), multi.scene.cameras)
+    by_truth = sorted(sorted(kept[j].vehicle for j in g) for g in groups.groups)
+    assert by_truth == [["v1"] * 3, ["v2"], ["v3"] * 3]
+    alone = groups.groups[[kept[g[0]].vehicle for g in groups.groups].index("v2")]
+    assert groups.results[groups.groups.index(alone)].ok  # a single view is still solved
+
+
+def test_a_false_detection_is_not_merged_into_a_vehicle(multi):
+    """A library van's keypoints where no vehicle is, in cam1: it stays apart."""
+    import gtsam
+
+    from vfactor.vehicle_library import library_ids, library_vehicle
+
+    frame = multi.scene.frames[1]
+    camera = multi.scene.cameras["cam1"]
+    van = library_vehicle(library_ids("van")[0])
+    pose = gtsam.Pose3(gtsam.Rot3.Yaw(0.7), np.array([2.5, -3.0, van.wheel_radius]))
+    uv, depth = camera.project(van.wireframe.in_world(pose))
+    seen = (depth > 0) & camera.in_image(uv)
+    ghost = Detection("cam1", UNASSIGNED, np.where(seen[:, None], uv, np.nan), np.where(seen, 0.9, 0.0))
+    dets = frame.detections + [ghost]
+    groups = associate_frame(Frame(frame.t, dets), multi.scene.cameras)
+    assert [len(dets) - 1] in groups.groups
+    assert sorted(sorted(dets[j].vehicle for j in g) for g in groups.groups if len(dets) - 1 not in g) == [
+        ["v1"] * 3, ["v2"] * 3, ["v3"] * 3]
+
+
+def test_linking_keeps_ids_through_a_miss_and_uses_camera_tracks():
+    linker = TrackLinker(AssociationOptions())
+    lanes = [np.array([0.0, 0.0]), np.array([0.0, 3.5])]
+    ids0 = linker.link(0.0, lanes, [{("cam0", "7")}, {("cam0", "8")}])
+    ids1 = linker.link(0.1, [lanes[1] + [1.0, 0], lanes[0] + [1.0, 0]], [set(), set()])
+    assert ids1 == ids0[::-1]
+    ids2 = linker.link(0.2, [lanes[0] + [2.0, 0]], [set()])  # lane 1 missed for a frame
+    ids3 = linker.link(0.3, [lanes[0] + [3.0, 0], lanes[1] + [3.0, 0]], [set(), set()])
+    assert ids2 == [ids0[0]] and ids3 == ids0
+    far = linker.link(5.0, [np.array([100.0, 0.0])], [set()])  # after max_missed: a new track
+    assert far[0] not in ids0
+    # a camera track id helps where the geometry alone is ambiguous
+    both = TrackLinker(AssociationOptions())
+    a = both.link(0.0, [np.array([0.0, 0.0])], [{("cam1", "3")}])
+    b = both.link(0.1, [np.array([1.8, 0.0]), np.array([-1.7, 0.0])], [set(), {("cam1", "3")}])
+    assert b[1] == a[0]
+
+
+def test_ids_made_never_clash_with_the_scene_s(multi):
+    linker = TrackLinker(AssociationOptions(), taken={"t1", "t2"})
+    assert linker.link(0.0, [np.zeros(2), np.ones(2) * 10], [set(), set()]) == ["t3", "t4"]
+
+
+def test_bad_options_are_named():
+    with pytest.raises(InputError) as info:
+        AssociationOptions(gate_cost=-1.0)
+    assert info.value.field == "AssociationOptions.gate_cost"
+
+
+def test_solve_and_track_associate_scenes_without_ids(tmp_path, multi, capsys):
+    scene, truth = anonymous(multi.scene)
+    for frame in scene.frames:  # the cameras' own track ids, as a 2D tracker would give them
+        for d in frame.detections:
+            d.track = None
+    path = tmp_path / "scene.json"
+    save_scene(scene, path)
+    data = json.loads(path.read_text())
+    assert all("vehicle" not in d for f in data["frames"] for d in f["detections"])
+    for command in ("solve", "track"):
+        out = tmp_path / f"{command}.json"
+        assert main([command, str(path), "--out", str(out), "--no-covariance"]) == 0
+        assert "associated 27 detections into 9 vehicles" in capsys.readouterr().out
+        results = load_results(out)
+        for f, frame in enumerate(results):
+            for v in frame.vehicles:
+                assert v.ok and len({truth[f][j] for j in v.extras["detections"]}) == 1
+        json.loads(out.read_text())  # written
+
+
+def test_associate_option_checks_given_ids(tmp_path, capsys):
+    """intersection_multi re-draws its vehicles each frame under v1-v3: with --associate the ids are made anew."""
+    sim = simulate(load_scenario("intersection_multi"), seed=0, num_frames=3)
+    path = tmp_path / "scene.json"
+    save_scene(sim.scene, path)
+    assert main(["track", str(path), "--out", str(tmp_path / "r.json"), "--associate", "--no-covariance", "-q"]) == 0
+    results = load_results(tmp_path / "r.json")
+    ids = {v.id for f in results for v in f.vehicles}
+    assert ids.isdisjoint({"v1", "v2", "v3"}) and len(ids) >= 3
+    for f, frame in enumerate(results):
+        for v in frame.vehicles:
+            assert len({sim.scene.frames[f].detections[j].vehicle for j in v.extras["detections"]}) == 1

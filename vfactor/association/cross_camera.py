@@ -1,0 +1,328 @@
+"""Which detections of one frame show the same vehicle: cross-camera association from geometry.
+
+The cameras are calibrated and the keypoints semantic, so two detections of
+one vehicle in two cameras can be solved together: one pose and one shape
+that explain both. Two detections of different vehicles cannot: the joint
+solve rejects one camera's keypoints, which the solver's camera-disagreement
+check reports (:func:`vfactor.solve.solve_observations`; 0 false alarms in
+10,001 consistent vehicles, docs/reliability.md). The association is built on
+that test:
+
+1. every detection is solved alone (one view: a pose whose depth the mean
+   shape fixes to about a tenth of the distance);
+2. every pair of detections of different cameras whose single-view positions
+   may be one vehicle's (each near the other's viewing ray,
+   :attr:`AssociationOptions.gate_distance`) is solved jointly;
+   the pair is *compatible* when that solve is sane, no camera disagrees, and
+   neither detection's keypoints fit the joint vehicle much worse than they
+   fit their own: the rise of the robust reprojection cost of each
+   detection's keypoints (Cauchy, at the detector's sigmas, per seen
+   keypoint) from its single-view solve (0 for one too weak to solve) to the
+   joint solve is at most :attr:`AssociationOptions.gate_cost` for both. This
+   is a likelihood ratio per camera: one vehicle explains both views about
+   as well as each explains its own, two vehicles cannot;
+3. compatible pairs are merged greedily, smallest rise first, into groups of
+   at most one detection per camera whose every pair is compatible;
+4. each group of three or more detections is solved once more as a whole, and
+   a camera that disagrees there is split off into a vehicle of its own;
+5. each detection still alone (or too weak to be solved alone) is tried once
+   more with each group that projects near it, solved together with it: it
+   joins when the group's detections fit the joint vehicle about as well as
+   their own (:func:`_attach_leftovers`).
+
+A detection that joins no group is a vehicle seen by one camera only.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vfactor.camera import Camera
+from vfactor.errors import InputError
+from vfactor.factors.projection import whitened_residuals
+from vfactor.graph import observations_from_detections
+from vfactor.observations import Detection, Frame
+from vfactor.result import VehicleResult
+from vfactor.solve import SolveOptions, solve_observations
+
+__all__ = ["AssociationOptions", "FrameGroups", "associate_frame"]
+
+
+@dataclass(frozen=True)
+class AssociationOptions:
+    """Settings of the association (docs/association.md).
+
+    Attributes:
+        gate_distance: metres, on the road plane, of the pre-gate of a pair (:func:`_may_meet`): each
+            single-view position must lie within half of it (plus 5 % of the depth) of the other's viewing ray
+            and within it (plus 30 % of the depth) along that ray: a single view's depth is uncertain by metres
+            (3 m at 20 m seen on intersection_multi, more than 8 m on library_tracks_2cam).
+        link_distance: metres between a track's predicted position and a frame's vehicle beyond which they are
+            not linked (plus ``max_speed`` times the step for a track of one position, whose speed is unknown,
+            and ``max_acceleration`` times the step squared otherwise).
+        max_speed: m/s a track of one position may have had.
+        max_acceleration: m/s^2 of change of velocity a track may show between its frames.
+        max_missed: seconds a track is kept (predicted on) without detections before it ends; a vehicle that
+            comes back within them keeps its id.
+        track_bonus: metres taken off a link's cost when the vehicle holds a camera track id (``track``) the
+            track held before: a camera's own 2D tracker as evidence, never as a rule.
+        gate_cost: the largest rise, per seen keypoint, of the robust reprojection cost of a detection's
+            keypoints from its single-view solve to a pair's joint solve, for two detections of at least
+            ``strong_keypoints`` keypoints each. Set on intersection_multi, tracks_3veh, tracks_3cam and
+            library_tracks (seed 0; 792 pairs within the distance gate): the same vehicle's pairs rose by at
+            most 0.55 per keypoint, different vehicles' pairs that the joint solve did not refuse by at least 0.8.
+        gate_cost_weak: the same gate where the weaker detection has ``min_keypoints`` to ``strong_keypoints``
+            - 1 keypoints (its single-view solve fits its few keypoints closely, so any joint solve raises their
+            cost more): same vehicles rose up to 1.5 (6-7 keypoints) and 5.4 (4-5), different vehicles by at
+            least 2.9 and 2.1; also the gate of a weaker detection's attachment (below).
+        strong_keypoints: keypoints a detection needs for ``gate_cost``.
+        min_keypoints: keypoints a detection needs to be solved alone and tested in pairs; one with fewer
+            (1-3 keypoints, which fit any vehicle near them) is tried only against groups, in the second pass
+            (:func:`_attach_leftovers`).
+        leftover_rise: in the second pass, the largest rise per keypoint of a group's detections' cost when a
+            leftover detection joins it (true joins seen: up to 0.84; tuning scenes as for ``gate_cost``).
+        leftover_cost: in the second pass, the largest cost per keypoint of the leftover detection's own
+            keypoints in the joint solve (true joins seen: up to 5.4).
+        solve: settings of the single-view and joint solves (no covariances).
+    """
+
+    gate_distance: float = 8.0
+    gate_cost: float = 0.7
+    gate_cost_weak: float = 2.2
+    strong_keypoints: int = 8
+    min_keypoints: int = 4
+    leftover_rise: float = 1.0
+    leftover_cost: float = 6.0
+    link_distance: float = 2.0
+    max_speed: float = 20.0
+    max_acceleration: float = 8.0
+    max_missed: float = 1.0
+    track_bonus: float = 1.0
+    solve: SolveOptions = field(default_factory=lambda: SolveOptions(covariance=False))
+
+    def __post_init__(self):
+        for name in ("gate_distance", "gate_cost", "gate_cost_weak", "strong_keypoints", "min_keypoints",
+                     "leftover_rise", "leftover_cost", "link_distance", "max_speed", "max_acceleration", "max_missed", "track_bonus"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise InputError(f"AssociationOptions.{name}", f"expected a finite number >= 0, got {value!r}")
+
+
+@dataclass
+class FrameGroups:
+    """The vehicles of one frame found by :func:`associate_frame`.
+
+    Attributes:
+        groups: per vehicle, the indices of its detections in the frame's ``detections`` (one per camera at
+            most), in the order of their first detection.
+        results: per group, its joint solve (no covariance; ``ok`` False where it failed).
+        pairs: (i, j) with i < j -> (compatible, score) of every pair solved jointly.
+        messages: cameras split off a group because they disagreed with the others.
+    """
+
+    groups: list[list[int]]
+    results: list[VehicleResult]
+    pairs: dict = field(default_factory=dict)
+    messages: list[str] = field(default_factory=list)
+
+
+def _solve(detections: list[Detection], cameras: dict[str, Camera], options: AssociationOptions,
+           name: str) -> VehicleResult:
+    """A solve of some detections as one vehicle; any failure is a result that is not ``ok``."""
+    from vfactor.result import Status
+    from vfactor.sanity import summarise_error
+
+    try:
+        obs = observations_from_detections(detections, cameras, options.solve.graph)
+        return solve_observations(obs, options.solve, name)
+    except (InputError, RuntimeError, np.linalg.LinAlgError) as exc:
+        return VehicleResult(name, Status.FAILED, message=summarise_error(exc))
+
+
+def associate_frame(frame: Frame, cameras: dict[str, Camera], options: AssociationOptions = AssociationOptions(),
+                    indices: list[int] | None = None) -> FrameGroups:
+    """Groups the detections of one frame into vehicles, across cameras (see the module's docstring).
+
+    Args:
+        frame: the frame.
+        cameras: camera name -> camera.
+        options: the association's settings.
+        indices: the detections to group (indices into ``frame.detections``); default: all.
+
+    Returns:
+        The groups, each group's joint solve, the pairs tested and notes.
+    """
+    det = frame.detections
+    indices = list(range(len(det))) if indices is None else list(indices)
+    seen = {i: int(det[i].seen.sum()) for i in indices}
+    weak = [i for i in indices if seen[i] < options.min_keypoints]
+    strong = [i for i in indices if seen[i] >= options.min_keypoints]
+    alone = {i: _solve([det[i]], cameras, options, f"d{i}") for i in strong}
+    own = {i: _observations(det[i], cameras, options) for i in indices}
+    baseline = {i: _cost(own[i], alone[i], options) if alone[i].ok else 0.0 for i in strong}
+    position = {i: r.world_T_vehicle.translation()[:2] for i, r in alone.items() if r.ok}
+
+    pairs: dict[tuple[int, int], tuple[bool, float]] = {}
+    joint: dict[tuple[int, int], VehicleResult] = {}
+    for i, j in itertools.combinations(strong, 2):
+        if det[i].camera == det[j].camera:
+            continue
+        if i in position and j in position and not _may_meet(
+                position[i], cameras[det[i].camera], position[j], cameras[det[j].camera], options):
+            continue
+        if i not in position and j not in position:
+            continue  # neither says where it is: no test
+        result = _solve([det[i], det[j]], cameras, options, f"d{i}+d{j}")
+        joint[(i, j)] = result
+        gate = options.gate_cost if min(seen[i], seen[j]) >= options.strong_keypoints else options.gate_cost_weak
+        rise = max((_cost(own[k], result, options) - baseline[k]) / seen[k] for k in (i, j)) \
+            if result.ok else math.inf
+        pairs[(i, j)] = (rise <= gate, rise / gate)  # scored against its gate: strong and weak pairs comparable
+
+    # greedy merging, best pair first, keeping one detection per camera and every pair compatible
+    group_of = {i: i for i in strong}
+    members = {i: [i] for i in strong}
+    for (i, j), (ok, _) in sorted(pairs.items(), key=lambda item: item[1][1]):
+        if not ok:
+            continue
+        a, b = group_of[i], group_of[j]
+        if a == b:
+            continue
+        if {det[k].camera for k in members[a]} & {det[k].camera for k in members[b]}:
+            continue
+        if not all(pairs.get((min(p, q), max(p, q)), (False, 0))[0] for p in members[a] for q in members[b]):
+            continue
+        members[a] = sorted(members[a] + members[b])
+        for k in members.pop(b):
+            group_of[k] = a
+
+    groups, results, messages = [], [], []
+    pending = sorted(members.values(), key=lambda g: g[0])
+    while pending:
+        group = pending.pop(0)
+        if len(group) == 1:
+            result = alone[group[0]]
+        elif len(group) == 2:
+            result = joint[(group[0], group[1])]
+        else:
+            result = _solve([det[k] for k in group], cameras, options, "+".join(f"d{k}" for k in group))
+            blamed = _blamed_cameras(result)
+            if blamed:
+                kept = [k for k in group if det[k].camera not in blamed]
+                split = [k for k in group if det[k].camera in blamed]
+                messages.append(f"detections {split} (camera(s) {', '.join(sorted(blamed))}) disagree with the "
+                                f"rest of their group {group}: a vehicle of their own")
+                pending = sorted(pending + [kept] + [[k] for k in split], key=lambda g: g[0])
+                continue
+        groups.append(group)
+        results.append(result)
+    _attach_leftovers(det, weak, own, groups, results, cameras, options)
+    order = sorted(range(len(groups)), key=lambda g: groups[g][0])
+    return FrameGroups([groups[g] for g in order], [results[g] for g in order], pairs, messages)
+
+
+def _attach_leftovers(det: list[Detection], weak: list[int], own: dict, groups: list[list[int]],
+                      results: list[VehicleResult], cameras: dict[str, Camera], options: AssociationOptions) -> None:
+    """A second pass for the detections left alone: too weak to be solved alone (under ``min_keypoints``), or
+    whose pairs failed a gate (a weak view's single-view pose is metres off, so pair tests miss).
+
+    Each is tried with every group that has no detection of its camera and whose vehicle projects near its
+    keypoints in its camera (within the projected keypoints' box grown by half its size): the group and the
+    detection are solved together, and the detection joins when that solve is sane, the group's own detections
+    fit it about as well as they fit the group (each detection's cost rises by at most ``leftover_rise`` per
+    keypoint: they are seen well, so a vehicle elsewhere would move them), and the detection's keypoints cost at
+    most ``leftover_cost`` each. Of several groups that pass, the one whose detections' cost rises least; a
+    detection that joins none stays a vehicle of its own (one too weak to solve is reported ``degenerate``).
+    """
+    from vfactor.result import Status
+
+    leftovers = sorted(set(weak) | {g[0] for g in groups if len(g) == 1})
+    for k in leftovers:
+        if own[k] is None:
+            continue
+        home = next((g for g, group in enumerate(groups) if group == [k]), None)
+        camera = cameras[det[k].camera]
+        uv = det[k].keypoints[det[k].seen]
+        best = None
+        for g, (group, result) in enumerate(zip(groups, results)):
+            if g == home or not group or not result.ok or any(det[m].camera == det[k].camera for m in group):
+                continue
+            predicted, depth = camera.project(result.keypoints_world)
+            predicted = predicted[depth > 0]
+            if len(predicted) == 0:
+                continue
+            lo, hi = predicted.min(0), predicted.max(0)
+            grow = 0.5 * (hi - lo)
+            if not np.all((uv >= lo - grow) & (uv <= hi + grow)):
+                continue
+            together = _solve([det[m] for m in group] + [det[k]], cameras, options, f"g{g}+d{k}")
+            if not together.ok:
+                continue
+            rises = [(_cost(own[m], together, options) - _cost(own[m], result, options)) / max(int(det[m].seen.sum()), 1)
+                     for m in group]
+            mine = _cost(own[k], together, options) / max(int(det[k].seen.sum()), 1)
+            if max(rises) <= options.leftover_rise and mine <= options.leftover_cost:
+                score = sum(rises)
+                if best is None or score < best[0]:
+                    best = (score, g, together)
+        if best is not None:
+            _, g, together = best
+            groups[g] = sorted(groups[g] + [k])
+            results[g] = together
+            if home is not None:
+                groups[home], results[home] = [], None
+        elif home is None:
+            groups.append([k])
+            results.append(VehicleResult(f"d{k}", Status.DEGENERATE,
+                                         message="too few keypoints to associate or to solve alone"))
+    keep = [g for g, group in enumerate(groups) if group]
+    groups[:] = [groups[g] for g in keep]
+    results[:] = [results[g] for g in keep]
+
+
+def _may_meet(p_i: np.ndarray, camera_i: Camera, p_j: np.ndarray, camera_j: Camera,
+              options: AssociationOptions) -> bool:
+    """Whether two single-view positions (world x, y, metres) may be one vehicle's: each lies near the other's
+    viewing ray on the road, the direction in which a single view is uncertain.
+
+    For each view: the other position's distance from the ray (camera centre through the position) is at most
+    ``gate_distance / 2 + 0.05 depth``, and its distance along the ray differs from the position's by at most
+    ``gate_distance + 0.3 depth`` (``depth``: the position's distance from the camera on the road).
+    """
+    for p, camera, q in ((p_i, camera_i, p_j), (p_j, camera_j, p_i)):
+        ray = p - camera.center[:2]
+        depth = float(np.linalg.norm(ray))
+        if depth < 1e-6:
+            continue
+        u = ray / depth
+        w = q - camera.center[:2]
+        along = float(w @ u)
+        lateral = float(np.linalg.norm(w - along * u))
+        if lateral > 0.5 * options.gate_distance + 0.05 * depth or abs(along - depth) > options.gate_distance + 0.3 * depth:
+            return False
+    return True
+
+
+def _observations(detection: Detection, cameras: dict[str, Camera], options: AssociationOptions):
+    """One detection's keypoint observations at the detector's sigmas (None when it has none usable)."""
+    try:
+        return observations_from_detections([detection], cameras, options.solve.graph)
+    except InputError:
+        return None
+
+
+def _cost(obs, result: VehicleResult, options: AssociationOptions) -> float:
+    """The robust reprojection cost of ``obs`` (one detection, nominal sigmas) on a solved vehicle."""
+    if obs is None or len(obs) == 0:
+        return 0.0
+    e = whitened_residuals(obs, result.world_T_vehicle, result.wireframe.vehicle_p_keypoints)
+    return float(np.sum(options.solve.graph.loss.rho(np.linalg.norm(e, axis=1))))
+
+
+def _blamed_cameras(result: VehicleResult) -> set[str]:
+    """The cameras a failed joint solve says disagree with the others (none for other failures)."""
+    return set() if result.ok else set(result.extras.get("disagreeing_cameras", ()))

@@ -18,6 +18,7 @@ SIM_NAMES = {
     "ARMS", "TURNS", "Path", "SpeedProfile", "drive_profile", "Trajectory", "TrajectoryStates", "IntersectionRoute",
     "intersection_path",
     "save_truth", "load_truth", "truth_to_dict", "truth_from_dict", "write_simulation",
+    "anonymise", "AnonymousScene", "TrackSwitch", "write_anonymised", "load_truth_ids",
 }
 METRICS_NAMES = {
     "rotation_error_deg", "translation_error_cm", "keypoint_errors_cm", "pose_errors", "summarise", "evaluate",

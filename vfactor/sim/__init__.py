@@ -14,6 +14,12 @@ Tracks (vehicles driving routes through the intersection, entering and leaving t
     sim = simulate("tracks_3veh")
     sim.truth[f]["v2"].speed, sim.truth[f]["v2"].yaw_rate     # per-frame true motion state
     sim.trajectories["v2"].states(times)                      # continuous-time truth
+
+Association (no vehicle ids; per-camera tracks, misses, false detections)::
+
+    anon = anonymise(simulate("association_4cam"), seed=0, track_switch_rate=0.02, false_rate=0.1, miss_rate=0.05)
+    anon.scene       # every detection's vehicle is vfactor.observations.UNASSIGNED
+    anon.truth_ids   # per frame, per detection: the true vehicle id (None: a false detection)
 """
 
 from vfactor.sim.noise import NoiseModel, NoisyKeypoints, box_diagonal, corrupt_keypoints
@@ -72,6 +78,7 @@ from vfactor.sim.vehicles import (
     within_hwc_bounds,
 )
 from vfactor.sim.visibility import HUB_PUSH, VehicleBody, occluded_keypoints, self_occluded
+from vfactor.sim.anonymise import AnonymousScene, TrackSwitch, anonymise, load_truth_ids, write_anonymised
 
 __all__ = [
     # rig
@@ -142,4 +149,10 @@ __all__ = [
     "truth_to_dict",
     "truth_from_dict",
     "write_simulation",
+    # association test scenes
+    "anonymise",
+    "AnonymousScene",
+    "TrackSwitch",
+    "write_anonymised",
+    "load_truth_ids",
 ]

@@ -1,0 +1,72 @@
+"""Benchmark: the association's cost per frame against solving the same frame with the true ids.
+
+Scenes: the packaged ``intersection_multi`` rig (three pole cameras at the
+corners of an intersection) with 1, 10 and 30 vehicles drawn at once in a box
+of road around its centre (more vehicles, a larger box: about 30 m^2 of road
+per vehicle), paper-like noise. Per frame the run times
+``associate_frame`` (every detection's vehicle unknown) and ``solve_frame``
+with the true ids (what the user pays without association), in the same run,
+and prints their medians and the ratio, with the pairwise precision and
+recall of the grouping.
+
+Run: ``python benchmarks/association_time.py [--frames 5] [--counts 1,10,30]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import itertools
+import math
+import time
+
+import numpy as np
+
+from vfactor.association import associate_frame
+from vfactor.observations import UNASSIGNED, Frame
+from vfactor.sim import load_scenario, simulate
+from vfactor.solve import SolveOptions, solve_frame
+
+
+def scene_with(count: int, frames: int, seed: int):
+    base = load_scenario("intersection_multi")
+    half = max(5.0, math.sqrt(30.0 * count) / 2)
+    scenario = dataclasses.replace(base, vehicles_per_frame=count, region=((-half, half), (-half, half)),
+                                   require_visible="any", min_gap=0.5)
+    return simulate(scenario, seed=seed, num_frames=frames)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--frames", type=int, default=5)
+    parser.add_argument("--counts", default="1,10,30")
+    parser.add_argument("--seed", type=int, default=100)
+    args = parser.parse_args()
+    print(f"| vehicles | detections per frame | association (s/frame) | solve with true ids (s/frame) | ratio | "
+          f"pair precision | pair recall |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for count in (int(c) for c in args.counts.split(",")):
+        sim = scene_with(count, args.frames, args.seed)
+        t_assoc, t_solve, tp, fp, fn, dets = [], [], 0, 0, 0, []
+        for frame in sim.scene.frames:
+            truth = [d.vehicle for d in frame.detections]
+            anonymous = Frame(frame.t, [dataclasses.replace(d, vehicle=UNASSIGNED) for d in frame.detections])
+            t0 = time.perf_counter()
+            found = associate_frame(anonymous, sim.scene.cameras)
+            t_assoc.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            solve_frame(frame, sim.scene.cameras, SolveOptions())
+            t_solve.append(time.perf_counter() - t0)
+            group = {j: g for g, members in enumerate(found.groups) for j in members}
+            for i, j in itertools.combinations(range(len(truth)), 2):
+                if frame.detections[i].camera != frame.detections[j].camera:
+                    same, together = truth[i] == truth[j], group[i] == group[j]
+                    tp, fp, fn = tp + (same and together), fp + (together and not same), fn + (same and not together)
+            dets.append(len(truth))
+        a, s = float(np.median(t_assoc)), float(np.median(t_solve))
+        print(f"| {count} | {np.mean(dets):.0f} | {a:.2f} | {s:.2f} | {a / s:.2f}x | {tp / max(tp + fp, 1):.3f} | "
+              f"{tp / max(tp + fn, 1):.3f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

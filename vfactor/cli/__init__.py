@@ -251,15 +251,19 @@ def build_parser() -> argparse.ArgumentParser:
         "published, the single-view deformable method, PnP and stereo, plus plots of the error against the noise "
         "and against the number of cameras (--figures). "
         "images: render the camera images of a simulated scenario, find the keypoints with the keypoint network in "
-        "the vehicles' boxes and run the methods on them (needs torch and moderngl).",
+        "the vehicles' boxes and run the methods on them (needs torch and moderngl). "
+        "association: remove the vehicle ids of simulated scenes of many vehicles (camera track ids with switches, "
+        "missed and false detections), find the vehicles again, track them, and score it (pairs across cameras, "
+        "CLEAR-MOT, pose errors) beside the same scenes tracked with the true ids (needs motmetrics).",
     )
-    p.add_argument("experiment", nargs="?", default="frames", choices=("frames", "tracks", "paper", "images"),
-                   help="frames (one-frame accuracy), tracks (tracking), paper (the paper's tables) or images "
-                   "(rendered images -> keypoint network -> graph); default: frames")
+    p.add_argument("experiment", nargs="?", default="frames", choices=("frames", "tracks", "paper", "images",
+                                                                       "association"),
+                   help="frames (one-frame accuracy), tracks (tracking), paper (the paper's tables), images "
+                   "(rendered images -> keypoint network -> graph) or association (no ids); default: frames")
     p.add_argument("--figures", help="paper: folder for the plots (the Markdown links them as figures/NAME.png)")
     p.add_argument("--sweep-frames", type=int, default=30, help="paper: vehicles per point of the plots (default: 30)")
     p.add_argument("--scenario", help="scenario (default: library_2cam for frames, tracks_3veh for tracks, "
-                   "accuracy_2cam for images)")
+                   "accuracy_2cam for images, association_4cam and association_3cam for association)")
     p.add_argument("--levels", default="clean,paper,hard",
                    help="frames: noise levels, comma-separated, of clean, paper, hard (default: all three)")
     p.add_argument("--frames", type=int, help="number of scenes or frames (default: the scenario's)")

@@ -29,14 +29,16 @@ def evaluate(args) -> int:
         sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws, args.lag)
     elif args.experiment == "images":
         sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed)
+    elif args.experiment == "association":
+        sections = _eval_association(args.scenario, frames, args.seed, args.seeds)
     else:
         if args.scenario:
             raise InputError("--scenario", "the paper comparison uses its own scenario (paper_webots)")
         from vfactor.paper_comparison import paper_report
 
         sections = [paper_report(frames, args.seed, args.figures, check_positive(args.sweep_frames, "--sweep-frames"))]
-    default = {"frames": "library_2cam", "tracks": "tracks_3veh", "paper": None, "images": "accuracy_2cam"}[
-        args.experiment]
+    default = {"frames": "library_2cam", "tracks": "tracks_3veh", "paper": None, "images": "accuracy_2cam",
+               "association": None}[args.experiment]
     command = "vfactor eval" + (f" {args.experiment}" if args.experiment != "frames" else "") + \
         (f" --scenario {args.scenario}" if args.scenario and args.scenario != default else "") + \
         (f" --frames {args.frames}" if args.frames else "") + (f" --seed {args.seed}" if args.seed else "") + \
@@ -89,6 +91,21 @@ def _eval_images(scenario_name: str, frames, seed: int) -> list[str]:
     except ImportError as exc:
         raise missing_extra("images", exc, "net,render") from None
     return [images_report(evaluate_images(scenario_name, frames, seed, progress=progress("rendering")))]
+
+
+def _eval_association(scenario_name, frames, seed: int, seeds: int) -> list[str]:
+    try:
+        import motmetrics  # noqa: F401 - CLEAR-MOT's counts
+    except ImportError as exc:
+        raise InputError("association", f"this needs motmetrics ({exc}); install with pip install -c constraints.txt "
+                                        "motmetrics") from None
+    from vfactor.association.evaluate import DEFAULT_NOISE, association_report, evaluate_association
+
+    scenarios = [scenario_name] if scenario_name else ["association_4cam", "association_3cam"]
+    runs = [run for name in scenarios
+            for run in evaluate_association(name, range(seed, seed + seeds), frames, progress=progress("associating"))]
+    noise = ", ".join(f"{k} {v:g}" for k, v in DEFAULT_NOISE.items())
+    return [f"### Association without ids ({noise}), beside the true ids\n\n{association_report(runs)}\n"]
 
 
 def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int = 0, lag: float = 0.5) -> list[str]:

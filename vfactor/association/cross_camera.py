@@ -131,14 +131,15 @@ class FrameGroups:
 
 
 def _solve(detections: list[Detection], cameras: dict[str, Camera], options: AssociationOptions,
-           name: str) -> VehicleResult:
+           name: str, initial: VehicleResult | None = None) -> VehicleResult:
     """A solve of some detections as one vehicle; any failure is a result that is not ``ok``."""
     from vfactor.result import Status
     from vfactor.sanity import summarise_error
 
     try:
         obs = observations_from_detections(detections, cameras, options.solve.graph)
-        return solve_observations(obs, options.solve, name)
+        start = (initial.world_T_vehicle, initial.wireframe) if initial is not None and initial.ok else None
+        return solve_observations(obs, options.solve, name, initial=start)
     except (InputError, RuntimeError, np.linalg.LinAlgError) as exc:
         return VehicleResult(name, Status.FAILED, message=summarise_error(exc))
 
@@ -176,7 +177,8 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
             continue
         if i not in position and j not in position:
             continue  # neither says where it is: no test
-        result = _solve([det[i], det[j]], cameras, options, f"d{i}+d{j}")
+        better = i if seen[i] >= seen[j] else j
+        result = _solve([det[i], det[j]], cameras, options, f"d{i}+d{j}", initial=alone[better])
         joint[(i, j)] = result
         gate = options.gate_cost if min(seen[i], seen[j]) >= options.strong_keypoints else options.gate_cost_weak
         rise = max((_cost(own[k], result, options) - baseline[k]) / seen[k] for k in (i, j)) \

@@ -42,8 +42,8 @@ def main() -> None:
     parser.add_argument("--counts", default="1,10,30")
     parser.add_argument("--seed", type=int, default=100)
     args = parser.parse_args()
-    print(f"| vehicles | detections per frame | association (s/frame) | solve with true ids (s/frame) | ratio | "
-          f"pair precision | pair recall |")
+    print("| vehicles | detections per frame | association (s/frame) | solve with true ids (s/frame) | ratio | "
+          "pair precision | pair recall |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
     for count in (int(c) for c in args.counts.split(",")):
         sim = scene_with(count, args.frames, args.seed)

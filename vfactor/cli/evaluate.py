@@ -94,11 +94,10 @@ def _eval_images(scenario_name: str, frames, seed: int) -> list[str]:
 
 
 def _eval_association(scenario_name, frames, seed: int, seeds: int) -> list[str]:
-    try:
-        import motmetrics  # noqa: F401 - CLEAR-MOT's counts
-    except ImportError as exc:
-        raise InputError("association", f"this needs motmetrics ({exc}); install with pip install -c constraints.txt "
-                                        "motmetrics") from None
+    import importlib.util
+
+    if importlib.util.find_spec("motmetrics") is None:  # CLEAR-MOT's counts
+        raise InputError("association", "this needs motmetrics; install with pip install -c constraints.txt motmetrics")
     from vfactor.association.evaluate import DEFAULT_NOISE, association_report, evaluate_association
 
     scenarios = [scenario_name] if scenario_name else ["association_4cam", "association_3cam"]

@@ -16,6 +16,8 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Callable
 
+import numpy as np
+
 from vfactor.association.cross_camera import AssociationOptions, FrameGroups, associate_frame
 from vfactor.association.linking import Track, TrackLinker
 from vfactor.observations import UNASSIGNED, Frame, Scene
@@ -30,17 +32,32 @@ class Association:
     """What :func:`associate_scene` found.
 
     Attributes:
-        scene: the scene with every associated detection's ``vehicle`` set (the detections in their order).
+        scene: the scene with every associated detection's ``vehicle`` set, without the detections left out.
         groups: per frame (scene order), vehicle id -> the indices of its detections in the frame's
-            ``detections``; empty for frames that were left as they were (their ids given).
+            ``detections`` of the scene given; empty for frames that were left as they were (their ids given).
         single_view: per frame, the vehicle ids seen by one camera only.
-        messages: notes (cameras split off a group, frames out of time order).
+        kept: per frame, the index in the scene given of each detection of :attr:`scene`'s frame.
+        left_out: (frame, detection index in the scene given, why) of every detection left out: those of a
+            track never seen by two cameras at once and not moving steadily (constant velocity within
+            ``AssociationOptions.max_track_residual``) over ``min_track_frames`` frames: a detector's flicker,
+            as false detections are; and those too weak to associate.
+        messages: notes (cameras split off a group).
     """
 
     scene: Scene
     groups: list[dict[str, list[int]]]
     single_view: list[list[str]]
+    kept: list[list[int]] = field(default_factory=list)
+    left_out: list[tuple[int, int, str]] = field(default_factory=list)
     messages: list[str] = field(default_factory=list)
+
+    def restore_indices(self, results) -> None:
+        """Makes each result's ``extras["detections"]`` (indices into :attr:`scene`'s frames) indices into the
+        scene given, in place: results of ``solve_scene(association.scene)`` or ``track_scene(...).frames``."""
+        for f, frame in enumerate(results):
+            for v in frame.vehicles:
+                if v.extras.get("detections") is not None:
+                    v.extras["detections"] = [self.kept[f][j] for j in v.extras["detections"]]
 
     @property
     def vehicle_ids(self) -> list[str]:
@@ -76,22 +93,79 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
     groups: list[dict[str, list[int]]] = [{} for _ in frames]
     single: list[list[str]] = [[] for _ in frames]
     messages: list[str] = []
+    weak: set[tuple[int, int]] = set()
+    followed: dict[tuple[str, str], str] = {}  # (camera, camera track id) -> the vehicle it last showed
+    path: dict[str, list[tuple[float, np.ndarray, int]]] = {}  # vehicle id -> (t, world x-y, n) of its solved frames
     order = frame_order(scene)
     for n, f in enumerate(order):
         frame = frames[f]
         todo = [j for j, d in enumerate(frame.detections) if force or d.vehicle == UNASSIGNED]
         if todo:
-            found = associate_frame(frame, scene.cameras, options, todo)
+            hints = {j: followed[(frame.detections[j].camera, frame.detections[j].track)] for j in todo
+                     if (frame.detections[j].camera, frame.detections[j].track) in followed}
+            found = associate_frame(frame, scene.cameras, options, todo, hints=hints)
             messages += [f"frames[{f}]: {m}" for m in found.messages]
             positions = [r.world_T_vehicle.translation()[:2] if r.ok else None for r in found.results]
             camera_tracks = [{(frame.detections[j].camera, frame.detections[j].track) for j in g
                               if frame.detections[j].track is not None} for g in found.groups]
             ids = linker.link(frame.t, positions, camera_tracks)
+            for vid, xy in zip(ids, positions):
+                if xy is not None:
+                    path.setdefault(vid, []).append((frame.t, xy, n))
             vehicle_of = {j: vid for vid, g in zip(ids, found.groups) for j in g}
+            weak |= {(f, g[0]) for g, r in zip(found.groups, found.results) if len(g) == 1 and not r.ok}
             frames[f] = Frame(frame.t, [dataclasses.replace(d, vehicle=vehicle_of[j]) if j in vehicle_of else d
                                         for j, d in enumerate(frame.detections)], frame.images)
             groups[f] = {vid: list(g) for vid, g in zip(ids, found.groups)}
             single[f] = [vid for vid, g in zip(ids, found.groups) if len(g) == 1]
+            for vid, g in groups[f].items():
+                for j in g:
+                    if frame.detections[j].track is not None:
+                        followed[(frame.detections[j].camera, frame.detections[j].track)] = vid
         if progress is not None:
             progress(n + 1, len(order))
-    return Association(dataclasses.replace(scene, frames=frames), groups, single, messages)
+    return _confirmed(scene, frames, groups, single, weak, path, messages, options)
+
+
+def _steady(points: list[tuple[float, np.ndarray, int]], options: AssociationOptions) -> bool:
+    """Whether a track is seen steadily: in at least ``min_track_frames`` frames, in at least ``min_hit_ratio`` of
+    the frames from its first to its last, its positions within ``max_track_residual`` metres (RMS) of their
+    least-squares constant-velocity line in time."""
+    if len(points) < options.min_track_frames:
+        return False
+    span = points[-1][2] - points[0][2] + 1
+    if len(points) < options.min_hit_ratio * span:
+        return False
+    times = np.array([t for t, _, _ in points])
+    xy = np.array([p for _, p, _ in points])
+    design = np.stack([np.ones_like(times), times - times.mean()], axis=1)
+    coefficients, *_ = np.linalg.lstsq(design, xy, rcond=None)
+    residual = xy - design @ coefficients
+    return float(np.sqrt(np.mean(np.sum(residual ** 2, axis=1)))) <= options.max_track_residual
+
+
+def _confirmed(scene: Scene, frames: list[Frame], groups, single, weak, path, messages, options) -> Association:
+    """The association without the detections of unconfirmed tracks: never seen by two cameras at once, and not
+    moving steadily over ``min_track_frames`` frames (a detector's flicker, or false detections chained)."""
+    most_cameras: dict[str, int] = {}
+    for frame_groups in groups:
+        for vid, g in frame_groups.items():
+            most_cameras[vid] = max(most_cameras.get(vid, 0), len(g))
+    unconfirmed = {vid for vid in most_cameras if most_cameras[vid] < 2 and not _steady(path.get(vid, []), options)}
+    left_out, kept, out_frames = [], [], []
+    for f, frame in enumerate(frames):
+        keep = []
+        for j, d in enumerate(frame.detections):
+            if (f, j) in weak:
+                left_out.append((f, j, "too few keypoints to associate or to solve alone"))
+            elif any(j in g for vid, g in groups[f].items() if vid in unconfirmed):
+                left_out.append((f, j, f"a track never seen by two cameras at once and not moving steadily over "
+                                       f"{options.min_track_frames} frames (a flicker of the detector, as a false "
+                                       "detection is)"))
+            else:
+                keep.append(j)
+        kept.append(keep)
+        out_frames.append(Frame(frame.t, [frame.detections[j] for j in keep], frame.images))
+        groups[f] = {vid: g for vid, g in groups[f].items() if all(j in keep for j in g)}
+        single[f] = [vid for vid in single[f] if vid in groups[f]]
+    return Association(dataclasses.replace(scene, frames=out_frames), groups, single, kept, left_out, messages)

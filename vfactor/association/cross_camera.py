@@ -64,7 +64,7 @@ class AssociationOptions:
         link_distance: metres between a track's predicted position and a frame's vehicle beyond which they are
             not linked (plus ``max_speed`` times the step for a track of one position, whose speed is unknown,
             and ``max_acceleration`` times the step squared otherwise).
-        max_speed: m/s a track of one position may have had.
+        max_speed: m/s a track of one position may have had (54 km/h: urban traffic at intersections).
         max_acceleration: m/s^2 of change of velocity a track may show between its frames.
         max_missed: seconds a track is kept (predicted on) without detections before it ends; a vehicle that
             comes back within them keeps its id.
@@ -87,6 +87,14 @@ class AssociationOptions:
             leftover detection joins it (true joins seen: up to 0.84; tuning scenes as for ``gate_cost``).
         leftover_cost: in the second pass, the largest cost per keypoint of the leftover detection's own
             keypoints in the joint solve (true joins seen: up to 5.4).
+        hint_relax: how much wider both second-pass gates are for a group the cameras' own track ids point to.
+        min_track_frames: a track never seen by two cameras at once is kept only when it moves steadily over at
+            least this many frames: its positions within ``max_track_residual`` metres (RMS) of a constant
+            velocity (:func:`vfactor.association.associate_scene`); otherwise it is a detector's flicker, as false
+            detections are, chained by the linking or not.
+        max_track_residual: see ``min_track_frames``.
+        min_hit_ratio: a track never seen by two cameras at once must also be seen in this share of the frames
+            from its first to its last (false detections chained by the linking come and go).
         solve: settings of the single-view and joint solves (no covariances).
     """
 
@@ -97,8 +105,12 @@ class AssociationOptions:
     min_keypoints: int = 4
     leftover_rise: float = 1.0
     leftover_cost: float = 6.0
+    hint_relax: float = 2.0
+    min_track_frames: int = 3
+    max_track_residual: float = 1.5
+    min_hit_ratio: float = 0.6
     link_distance: float = 2.0
-    max_speed: float = 20.0
+    max_speed: float = 15.0
     max_acceleration: float = 8.0
     max_missed: float = 1.0
     track_bonus: float = 1.0
@@ -106,7 +118,9 @@ class AssociationOptions:
 
     def __post_init__(self):
         for name in ("gate_distance", "gate_cost", "gate_cost_weak", "strong_keypoints", "min_keypoints",
-                     "leftover_rise", "leftover_cost", "link_distance", "max_speed", "max_acceleration", "max_missed", "track_bonus"):
+                     "leftover_rise", "leftover_cost", "hint_relax", "min_track_frames", "max_track_residual", "min_hit_ratio",
+                     "link_distance", "max_speed",
+                     "max_acceleration", "max_missed", "track_bonus"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise InputError(f"AssociationOptions.{name}", f"expected a finite number >= 0, got {value!r}")
@@ -145,7 +159,7 @@ def _solve(detections: list[Detection], cameras: dict[str, Camera], options: Ass
 
 
 def associate_frame(frame: Frame, cameras: dict[str, Camera], options: AssociationOptions = AssociationOptions(),
-                    indices: list[int] | None = None) -> FrameGroups:
+                    indices: list[int] | None = None, hints: dict[int, str] | None = None) -> FrameGroups:
     """Groups the detections of one frame into vehicles, across cameras (see the module's docstring).
 
     Args:
@@ -153,6 +167,9 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
         cameras: camera name -> camera.
         options: the association's settings.
         indices: the detections to group (indices into ``frame.detections``); default: all.
+        hints: detection index -> the vehicle its camera's own track (``Detection.track``) showed last: a
+            detection left alone is tried with a group holding a detection of the same hint with gates
+            ``hint_relax`` times wider, the cameras' trackers agreeing that they follow one vehicle.
 
     Returns:
         The groups, each group's joint solve, the pairs tested and notes.
@@ -222,13 +239,14 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
                 continue
         groups.append(group)
         results.append(result)
-    _attach_leftovers(det, weak, own, groups, results, cameras, options)
+    _attach_leftovers(det, weak, own, groups, results, cameras, options, hints or {})
     order = sorted(range(len(groups)), key=lambda g: groups[g][0])
     return FrameGroups([groups[g] for g in order], [results[g] for g in order], pairs, messages)
 
 
 def _attach_leftovers(det: list[Detection], weak: list[int], own: dict, groups: list[list[int]],
-                      results: list[VehicleResult], cameras: dict[str, Camera], options: AssociationOptions) -> None:
+                      results: list[VehicleResult], cameras: dict[str, Camera], options: AssociationOptions,
+                      hints: dict[int, str]) -> None:
     """A second pass for the detections left alone: too weak to be solved alone (under ``min_keypoints``), or
     whose pairs failed a gate (a weak view's single-view pose is metres off, so pair tests miss).
 
@@ -239,6 +257,8 @@ def _attach_leftovers(det: list[Detection], weak: list[int], own: dict, groups: 
     keypoint: they are seen well, so a vehicle elsewhere would move them), and the detection's keypoints cost at
     most ``leftover_cost`` each. Of several groups that pass, the one whose detections' cost rises least; a
     detection that joins none stays a vehicle of its own (one too weak to solve is reported ``degenerate``).
+    A group holding a detection of the leftover's hint (the same vehicle by the cameras' own trackers) is
+    tried wherever it projects, with both gates ``hint_relax`` times wider.
     """
     from vfactor.result import Status
 
@@ -253,21 +273,24 @@ def _attach_leftovers(det: list[Detection], weak: list[int], own: dict, groups: 
         for g, (group, result) in enumerate(zip(groups, results)):
             if g == home or not group or not result.ok or any(det[m].camera == det[k].camera for m in group):
                 continue
-            predicted, depth = camera.project(result.keypoints_world)
-            predicted = predicted[depth > 0]
-            if len(predicted) == 0:
-                continue
-            lo, hi = predicted.min(0), predicted.max(0)
-            grow = 0.5 * (hi - lo)
-            if not np.all((uv >= lo - grow) & (uv <= hi + grow)):
-                continue
+            hinted = k in hints and any(hints.get(m) == hints[k] for m in group)
+            relax = options.hint_relax if hinted else 1.0
+            if not hinted:
+                predicted, depth = camera.project(result.keypoints_world)
+                predicted = predicted[depth > 0]
+                if len(predicted) == 0:
+                    continue
+                lo, hi = predicted.min(0), predicted.max(0)
+                grow = 0.5 * (hi - lo)
+                if not np.all((uv >= lo - grow) & (uv <= hi + grow)):
+                    continue
             together = _solve([det[m] for m in group] + [det[k]], cameras, options, f"g{g}+d{k}")
             if not together.ok:
                 continue
             rises = [(_cost(own[m], together, options) - _cost(own[m], result, options)) / max(int(det[m].seen.sum()), 1)
                      for m in group]
             mine = _cost(own[k], together, options) / max(int(det[k].seen.sum()), 1)
-            if max(rises) <= options.leftover_rise and mine <= options.leftover_cost:
+            if max(rises) <= relax * options.leftover_rise and mine <= relax * options.leftover_cost:
                 score = sum(rises)
                 if best is None or score < best[0]:
                     best = (score, g, together)

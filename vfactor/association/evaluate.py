@@ -89,6 +89,7 @@ def evaluate_association(scenario: str, seeds, num_frames: int | None = None, no
         seconds = (time.perf_counter() - t0) / max(len(anon.scene.frames), 1)
         cameras = [[d.camera for d in f.detections] for f in anon.scene.frames]
         tracked = track_scene(found.scene, TrackOptions(covariance=False)).frames
+        found.restore_indices(tracked)
         pairs = cross_camera_pairs(anon.truth_ids, assigned_ids_from_results(tracked, [len(c) for c in cameras]),
                                    cameras)
         with_ids = track_scene(_with_true_ids(anon.scene, anon.truth_ids), TrackOptions(covariance=False)).frames

@@ -30,10 +30,11 @@ def load_input(args):
 
 def associate(scene, args):
     """The scene with its vehicles found (vfactor.association) where the detections name none, or everywhere
-    with ``--associate``; the scene as it is otherwise."""
+    with ``--associate``, and the :class:`~vfactor.association.Association`; the scene as it is and None
+    otherwise."""
     todo = len(scene.unassigned()) if not args.associate else sum(len(f.detections) for f in scene.frames)
     if not todo:
-        return scene
+        return scene, None
     from vfactor.association import associate_scene
 
     t0 = time.perf_counter()
@@ -44,7 +45,13 @@ def associate(scene, args):
     vehicles = sum(len(groups) for groups in found.groups)
     output(args)(f"associated {todo} detections into {vehicles} vehicles over the frames ({single} seen by one "
                  f"camera only), {len(found.vehicle_ids)} ids ({time.perf_counter() - t0:.2f} s)")
-    return found.scene
+    if found.left_out:
+        reasons: dict[str, list[str]] = {}
+        for f, j, why in found.left_out:
+            reasons.setdefault(why, []).append(f"frames[{f}].detections[{j}]")
+        for why, where in reasons.items():
+            note(f"left out {len(where)} detections: {why}: " + ", ".join(where[:5]) + (", ..." if len(where) > 5 else ""))
+    return found.scene, found
 
 
 def write_output(args, results, scene) -> None:
@@ -63,10 +70,13 @@ def solve(args) -> int:
     from vfactor.solve import SolveOptions, solve_scene
 
     check_outputs(args)
-    scene = associate(detect(load_input(args), args), args)
+    given = detect(load_input(args), args)
+    scene, association = associate(given, args)
     options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
     t0 = time.perf_counter()
     results = solve_scene(scene, options, progress=progress("solving", not args.quiet))
+    if association is not None:
+        association.restore_indices(results)
     write_output(args, results, scene)
     vehicles = [v for fr in results for v in fr.vehicles]
     solved = sum(v.ok for v in vehicles)
@@ -87,7 +97,8 @@ def track(args) -> int:
     check_outputs(args)
     if args.plot:
         check_out_file(args.plot, "--plot", [("scene file", args.scene), ("result file --out", args.out)])
-    scene = associate(detect(load_input(args), args), args)
+    given = detect(load_input(args), args)
+    scene, association = associate(given, args)
     options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance)
     t0 = time.perf_counter()
     if args.batch:
@@ -95,6 +106,8 @@ def track(args) -> int:
     else:
         run = track_scene(scene, options, progress=progress("tracking", not args.quiet))
         results, messages = (run.online if args.online else run.frames), run.messages
+    if association is not None:
+        association.restore_indices(results)
     write_output(args, results, scene)
     for message in messages:
         note(message)

@@ -147,3 +147,31 @@ def test_associate_option_checks_given_ids(tmp_path, capsys):
     for f, frame in enumerate(results):
         for v in frame.vehicles:
             assert len({sim.scene.frames[f].detections[j].vehicle for j in v.extras["detections"]}) == 1
+
+
+def test_a_flicker_is_left_out_and_said_so_and_results_point_at_the_detections_given(multi):
+    """A van's keypoints in one camera for one frame only (a false detection): left out, not a vehicle."""
+    import gtsam
+
+    from vfactor.solve import SolveOptions, solve_scene
+    from vfactor.vehicle_library import library_ids, library_vehicle
+
+    scene, truth = anonymous(multi.scene)
+    camera = scene.cameras["cam1"]
+    van = library_vehicle(library_ids("van")[0])
+    pose = gtsam.Pose3(gtsam.Rot3.Yaw(0.7), np.array([2.5, -3.0, van.wheel_radius]))
+    uv, depth = camera.project(van.wireframe.in_world(pose))
+    seen = (depth > 0) & camera.in_image(uv)
+    ghost = Detection("cam1", UNASSIGNED, np.where(seen[:, None], uv, np.nan), np.where(seen, 0.9, 0.0))
+    scene.frames[1].detections.insert(0, ghost)
+    truth[1].insert(0, None)
+    found = associate_scene(scene)
+    assert [(f, j) for f, j, _ in found.left_out] == [(1, 0)]
+    assert "a flicker of the detector" in found.left_out[0][2]
+    assert len(found.scene.frames[1].detections) == len(scene.frames[1].detections) - 1
+    results = solve_scene(found.scene, SolveOptions(covariance=False))
+    found.restore_indices(results)
+    for f, frame in enumerate(results):
+        for v in frame.vehicles:
+            assert None not in {truth[f][j] for j in v.extras["detections"]}
+            assert len({truth[f][j] for j in v.extras["detections"]}) == 1

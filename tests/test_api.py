@@ -15,7 +15,7 @@ PUBLIC = {
     "insert_vehicle_values", "load_results", "load_scene", "observations_from_detections", "save_results",
     "save_scene", "solve_frame", "solve_observations", "solve_scene", "solve_vehicle", "GroundPlane", "MotionModel",
     "TrackOptions", "TrackRun", "Tracker", "smooth_scene", "track_scene", "BODY_TYPES", "ShapeModel", "TrackShape",
-    "default_shape_model", "track_shape",
+    "default_shape_model", "track_shape", "load_calibration", "Association", "AssociationOptions", "associate_scene",
 }
 
 

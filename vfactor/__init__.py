@@ -14,6 +14,7 @@ PyTorch is never imported by the core; only a keypoint network will need it.
 """
 
 from vfactor._version import __version__
+from vfactor.association import Association, AssociationOptions, associate_scene
 from vfactor.box import Box, BoxModel, default_box_model, vehicle_box
 from vfactor.calibration import load_calibration
 from vfactor.camera import Camera
@@ -85,6 +86,9 @@ __all__ = [
     "hwc_factor",
     "insert_vehicle_values",
     "load_calibration",
+    "Association",
+    "AssociationOptions",
+    "associate_scene",
     "load_results",
     "load_scene",
     "observations_from_detections",

@@ -108,7 +108,7 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
             positions = [r.world_T_vehicle.translation()[:2] if r.ok else None for r in found.results]
             camera_tracks = [{(frame.detections[j].camera, frame.detections[j].track) for j in g
                               if frame.detections[j].track is not None} for g in found.groups]
-            ids = linker.link(frame.t, positions, camera_tracks)
+            ids = linker.link(frame.t, positions, camera_tracks, [len(g) == 1 for g in found.groups])
             for vid, xy in zip(ids, positions):
                 if xy is not None:
                     path.setdefault(vid, []).append((frame.t, xy, n))

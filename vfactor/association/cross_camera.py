@@ -70,6 +70,9 @@ class AssociationOptions:
             comes back within them keeps its id.
         track_bonus: metres taken off a link's cost when the vehicle holds a camera track id (``track``) the
             track held before: a camera's own 2D tracker as evidence, never as a rule.
+        single_view_weight: weight of a position seen by one camera only in a track's velocity fit (1 for
+            several cameras): a single view's depth is metres off.
+        tentative_missed: seconds a track of fewer than ``min_track_frames`` positions waits for its vehicle.
         gate_cost: the largest rise, per seen keypoint, of the robust reprojection cost of a detection's
             keypoints from its single-view solve to a pair's joint solve, for two detections of at least
             ``strong_keypoints`` keypoints each. Set on intersection_multi, tracks_3veh, tracks_3cam and
@@ -114,13 +117,15 @@ class AssociationOptions:
     max_acceleration: float = 8.0
     max_missed: float = 1.0
     track_bonus: float = 1.0
+    single_view_weight: float = 0.1
+    tentative_missed: float = 0.3
     solve: SolveOptions = field(default_factory=lambda: SolveOptions(covariance=False))
 
     def __post_init__(self):
         for name in ("gate_distance", "gate_cost", "gate_cost_weak", "strong_keypoints", "min_keypoints",
                      "leftover_rise", "leftover_cost", "hint_relax", "min_track_frames", "max_track_residual", "min_hit_ratio",
                      "link_distance", "max_speed",
-                     "max_acceleration", "max_missed", "track_bonus"):
+                     "max_acceleration", "max_missed", "track_bonus", "single_view_weight", "tentative_missed"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise InputError(f"AssociationOptions.{name}", f"expected a finite number >= 0, got {value!r}")

@@ -1,8 +1,10 @@
 """Vehicles of consecutive frames linked into tracks: a gated optimal assignment on predicted positions.
 
-Each track predicts where its vehicle is at the next frame's time (constant
-velocity from its last two positions on the road plane; a track of one
-position may have moved up to ``max_speed`` times the step). A frame's
+Each track predicts where its vehicle is at the next frame's time: constant
+velocity fitted by weighted least squares to its last five positions on the
+road plane, a position seen by one camera only weighing ``single_view_weight``
+(its depth is metres off, which would otherwise skew the velocity); a track
+of one position may have moved up to ``max_speed`` times the step. A frame's
 vehicles are assigned to the live tracks by the Hungarian method
 (:func:`scipy.optimize.linear_sum_assignment`) on the distance between
 prediction and position, minus ``track_bonus`` where the vehicle holds a
@@ -24,6 +26,7 @@ from vfactor.association.cross_camera import AssociationOptions
 __all__ = ["Track", "TrackLinker"]
 
 _FAR = 1e9  # cost of a link outside the gate
+_FIT_POSITIONS = 5  # positions of a track its velocity is fitted to
 
 
 @dataclass
@@ -33,14 +36,19 @@ class Track:
     id: str
     times: list[float] = field(default_factory=list)
     positions: list[np.ndarray] = field(default_factory=list)  # (2,) world x, y, metres
+    weights: list[float] = field(default_factory=list)  # of each position in the velocity fit
     camera_tracks: set = field(default_factory=set)  # (camera, camera track id) pairs seen last
 
     def predict(self, t: float) -> np.ndarray:
-        """The position at ``t`` seconds under constant velocity from the last two positions."""
-        if len(self.positions) < 2 or self.times[-1] <= self.times[-2]:
+        """The position at ``t`` seconds: constant velocity fitted to the last five positions (weighted)."""
+        n = min(len(self.positions), _FIT_POSITIONS)
+        times = np.array(self.times[-n:]) - self.times[-1]
+        if n < 2 or np.ptp(times) <= 0:
             return self.positions[-1]
-        velocity = (self.positions[-1] - self.positions[-2]) / (self.times[-1] - self.times[-2])
-        return self.positions[-1] + velocity * (t - self.times[-1])
+        w = np.sqrt(np.array(self.weights[-n:]))
+        design = np.stack([np.ones(n), times], axis=1) * w[:, None]
+        coefficients, *_ = np.linalg.lstsq(design, np.array(self.positions[-n:]) * w[:, None], rcond=None)
+        return coefficients[0] + coefficients[1] * (t - self.times[-1])
 
     def gate(self, t: float, options: AssociationOptions) -> float:
         """The largest distance (metres) from :meth:`predict` at which a vehicle may continue the track."""
@@ -73,7 +81,8 @@ class TrackLinker:
                 self._taken.add(name)
                 return name
 
-    def link(self, t: float, positions: list[np.ndarray | None], camera_tracks: list[set]) -> list[str]:
+    def link(self, t: float, positions: list[np.ndarray | None], camera_tracks: list[set],
+             single_view: list[bool] | None = None) -> list[str]:
         """The track id of each of a frame's vehicles.
 
         Args:
@@ -81,11 +90,14 @@ class TrackLinker:
             positions: per vehicle its (2,) world x, y (metres), or None where it was not solved (it then starts
                 a track of its own and continues none).
             camera_tracks: per vehicle the (camera, camera track id) pairs of its detections.
+            single_view: per vehicle, whether one camera only saw it (its position weighs
+                ``single_view_weight`` in its track's velocity fit); default: none.
 
         Returns:
             Per vehicle the id of the track it continues or starts.
         """
-        live = [k for k in self.tracks if t - k.times[-1] <= self.options.max_missed + 1e-9]
+        single_view = single_view or [False] * len(positions)
+        live = [k for k in self.tracks if t - k.times[-1] <= self._reach(k) + 1e-9]
         cost = np.full((len(live), len(positions)), _FAR)
         for a, track in enumerate(live):
             predicted, gate = track.predict(t), track.gate(t, self.options)
@@ -104,6 +116,7 @@ class TrackLinker:
                     ids[b] = live[a].id
                     live[a].times.append(t)
                     live[a].positions.append(np.asarray(positions[b], dtype=float))
+                    live[a].weights.append(self.options.single_view_weight if single_view[b] else 1.0)
                     live[a].camera_tracks = set(camera_tracks[b])
         for b, p in enumerate(positions):
             if ids[b] is None:
@@ -111,9 +124,18 @@ class TrackLinker:
                 if p is not None:
                     track.times.append(t)
                     track.positions.append(np.asarray(p, dtype=float))
+                    track.weights.append(self.options.single_view_weight if single_view[b] else 1.0)
                     track.camera_tracks = set(camera_tracks[b])
                     self.tracks.append(track)
                 ids[b] = track.id
-        self.tracks = [k for k in self.tracks if t - k.times[-1] <= self.options.max_missed + 1e-9 or k.id in ids]
+        self.tracks = [k for k in self.tracks if t - k.times[-1] <= self._reach(k) + 1e-9 or k.id in ids]
         return ids
+
+    def _reach(self, track: Track) -> float:
+        """Seconds a track waits for its vehicle: ``max_missed``, or ``tentative_missed`` while it has fewer than
+        ``min_track_frames`` positions (a track just born, or a false detection's, must not lie in wait with a
+        gate grown wide)."""
+        if len(track.positions) < self.options.min_track_frames:
+            return min(self.options.tentative_missed, self.options.max_missed)
+        return self.options.max_missed
 

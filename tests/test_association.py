@@ -175,3 +175,14 @@ def test_a_flicker_is_left_out_and_said_so_and_results_point_at_the_detections_g
         for v in frame.vehicles:
             assert None not in {truth[f][j] for j in v.extras["detections"]}
             assert len({truth[f][j] for j in v.extras["detections"]}) == 1
+
+
+def test_a_single_view_position_weighs_little_in_a_track_s_velocity():
+    """A track seen by two cameras moving at 10 m/s along x; one frame seen by one camera, 1.8 m off in depth:
+    the next prediction stays near the true line (a two-point velocity would put it 3.5 m astray)."""
+    linker = TrackLinker(AssociationOptions())
+    for k in range(4):
+        (vid,) = linker.link(0.1 * k, [np.array([1.0 * k, 0.0])], [set()], [False])
+    assert linker.link(0.4, [np.array([4.0 + 1.2, 1.35])], [set()], [True]) == [vid]  # within the gate: 1.8 m off
+    predicted = linker.tracks[0].predict(0.5)
+    assert np.linalg.norm(predicted - [5.0, 0.0]) < 1.0, predicted

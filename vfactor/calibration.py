@@ -32,6 +32,7 @@ import numpy as np
 
 from vfactor.camera import Camera, _check_dist, _check_K, check_rigid_transform
 from vfactor.errors import CalibrationError
+from vfactor.jsonio import describe as _kind, is_int as _is_int, is_number as _is_number
 
 __all__ = [
     "CALIBRATION_FORMATS",
@@ -704,29 +705,10 @@ def _plain_numbers(text: str) -> list[list[float]] | None:
     return rows or None
 
 
-def _is_int(value) -> bool:
-    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
-def _is_number(value) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
 
 
-def _kind(value) -> str:
-    """A short description of a found value for error messages."""
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if _is_number(value):
-        return repr(value)
-    if isinstance(value, str):
-        return f"the string {value if len(value) <= 40 else value[:37] + '...'!r}"
-    if isinstance(value, (list, tuple)):
-        return f"a list of {len(value)}"
-    if isinstance(value, dict):
-        return "a mapping"
-    return f"a {type(value).__name__}"
 
 
 def _list(value, field: str) -> list:
@@ -741,7 +723,8 @@ def _numbers(values, field: str, what: str = "") -> np.ndarray:
     out = np.empty(len(values))
     for k, item in enumerate(values):
         if not _is_number(item) or not math.isfinite(float(item)):
-            raise CalibrationError(field, f"{prefix}expected finite numbers, got {_kind(item)} at [{k}]")
+            found = repr(float(item)) if _is_number(item) else _kind(item)  # YAML's .nan / .inf read as Python's
+            raise CalibrationError(field, f"{prefix}expected finite numbers, got {found} at [{k}]")
         out[k] = float(item)
     return out
 

@@ -23,13 +23,19 @@ a full disk never leaves a half-written result (docs/reliability.md).
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 from vfactor.errors import InputError, SceneError
 
 __all__ = [
+    "describe",
+    "is_int",
+    "is_number",
     "MAX_DEPTH",
     "MAX_INT_DIGITS",
     "NonFinite",
@@ -202,3 +208,39 @@ def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def describe(value) -> str:
+    """A short description of a value found in user input, for error messages (``the string 'x'``, ``a list of
+    3``, ``NaN``, ``an object``, ...): the one wording of scene, result, calibration and COCO files."""
+    if value is None:
+        return "null"
+    if isinstance(value, (NonFinite, OutOfRange)):
+        return repr(value)
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        f = float(value)
+        if math.isnan(f):
+            return "NaN"
+        if math.isinf(f):
+            return "Infinity" if f > 0 else "-Infinity"
+        return repr(value.item() if isinstance(value, np.generic) else value)
+    if isinstance(value, str):
+        text = value if len(value) <= 40 else value[:37] + "..."
+        return f"the string {text!r}"
+    if isinstance(value, (list, tuple)):
+        return f"a list of {len(value)}"
+    if isinstance(value, dict):
+        return "an object"
+    return f"a {type(value).__name__}"
+
+
+def is_number(value) -> bool:
+    """A number (int or float, NumPy's too), not a bool."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+def is_int(value) -> bool:
+    """An integer (NumPy's too), not a bool."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))

@@ -53,7 +53,7 @@ from vfactor.camera import DIST_SIZES, LENS_MODELS, Camera, check_rigid_transfor
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.errors import CalibrationError, SceneError
 from vfactor.heatmaps import decode_heatmaps
-from vfactor.jsonio import NonFinite, OutOfRange, read_json, write_text_atomic
+from vfactor.jsonio import describe as _kind, is_int as _is_int, is_number as _is_number, read_json, write_text_atomic
 from vfactor.keypoints import NUM_KEYPOINTS
 from vfactor.observations import DEFAULT_VEHICLE_ID, UNASSIGNED, Detection, Frame, Scene, resolve_path
 from vfactor.result import COVARIANCE_KINDS, FrameResult, Status, VehicleResult
@@ -1005,37 +1005,10 @@ def _has_dict(value) -> bool:
 
 
 # ========================================================= validation helpers
-def _kind(value) -> str:
-    """A short description of a found value for error messages."""
-    if value is None:
-        return "null"
-    if isinstance(value, (NonFinite, OutOfRange)):
-        return repr(value)
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, float, np.integer, np.floating)):
-        f = float(value)
-        if math.isnan(f):
-            return "NaN"
-        if math.isinf(f):
-            return "Infinity" if f > 0 else "-Infinity"
-        return repr(value.item() if isinstance(value, np.generic) else value)
-    if isinstance(value, str):
-        text = value if len(value) <= 40 else value[:37] + "..."
-        return f"the string {text!r}"
-    if isinstance(value, (list, tuple)):
-        return f"a list of {len(value)}"
-    if isinstance(value, dict):
-        return "an object"
-    return f"a {type(value).__name__}"
 
 
-def _is_number(value) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
 
 
-def _is_int(value) -> bool:
-    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
 def _join(path: str, key: str) -> str:

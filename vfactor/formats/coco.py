@@ -47,9 +47,9 @@ import numpy as np
 from vfactor.camera import Camera
 from vfactor.errors import InputError, SceneError
 from vfactor.formats.keypoint_sets import KEYPOINT_SETS, KeypointSet, keypoint_set as _keypoint_set
-from vfactor.jsonio import read_json
+from vfactor.jsonio import describe as _kind, is_number as _is_number, read_json
 from vfactor.observations import Scene
-from vfactor.scene import _is_number, _kind, save_scene, scene_from_dict  # the scene reader's value checks and wording
+from vfactor.scene import save_scene, scene_from_dict
 
 __all__ = [
     "KEYPOINT_SETS",

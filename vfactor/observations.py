@@ -138,26 +138,25 @@ class Scene:
         return [(f, j) for f, frame in enumerate(self.frames) for j, det in enumerate(frame.detections)
                 if det.from_image]
 
-    def require_keypoints(self) -> None:
-        """Raises :class:`~vfactor.errors.InputError` naming the first detection without keypoints yet.
+    def require_detected(self) -> None:
+        """Raises :class:`~vfactor.errors.InputError` naming the first detection still waiting for the keypoint
+        network (an image box only, ``from_image``): :func:`vfactor.net.pipeline.detect_scene` first
+        (``vfactor solve`` and ``vfactor track`` run it themselves)."""
+        _require(self.undetected(), "keypoints", "not detected yet: {n} detection(s) give only an image box ('roi'); "
+                 "run the keypoint network first (vfactor.net.pipeline.detect_scene, which needs the 'net' extra)")
 
-        A detection given as an image box only (``from_image``) needs the keypoint
-        network first: :func:`vfactor.net.pipeline.detect_scene` (``vfactor solve``
-        and ``vfactor track`` run it themselves).
-        """
-        pending = self.undetected()
-        if pending:
-            f, j = pending[0]
-            raise InputError(
-                f"frames[{f}].detections[{j}].keypoints",
-                f"not detected yet: {len(pending)} detection(s) give only an image box ('roi'); run the keypoint "
-                "network first (vfactor.net.pipeline.detect_scene, which needs the 'net' extra)",
-            )
-        unassigned = self.unassigned()
-        if unassigned:
-            f, j = unassigned[0]
-            raise InputError(
-                f"frames[{f}].detections[{j}].vehicle",
-                f"not known: {len(unassigned)} detection(s) name no vehicle in frames of several vehicles; "
-                "associate them first (vfactor.association.associate_scene; vfactor solve and track do)",
-            )
+    def require_keypoints(self) -> None:
+        """Raises :class:`~vfactor.errors.InputError` naming the first detection the solvers cannot take: one
+        without keypoints yet (:meth:`require_detected`), or one whose vehicle is not known yet
+        (:data:`UNASSIGNED`: :func:`vfactor.association.associate_scene` first; ``vfactor solve`` and ``vfactor
+        track`` run it themselves)."""
+        self.require_detected()
+        _require(self.unassigned(), "vehicle", "not known: {n} detection(s) name no vehicle in frames of several "
+                 "vehicles; associate them first (vfactor.association.associate_scene; vfactor solve and track do)")
+
+
+def _require(pending: list[tuple[int, int]], field: str, problem: str) -> None:
+    """Raises an InputError at the first of ``pending`` (frame, detection) naming ``field``; ``{n}``: how many."""
+    if pending:
+        f, j = pending[0]
+        raise InputError(f"frames[{f}].detections[{j}].{field}", problem.format(n=len(pending)))

@@ -19,7 +19,7 @@ from typing import Callable
 import numpy as np
 
 from vfactor.association.cross_camera import AssociationOptions, FrameGroups, associate_frame
-from vfactor.association.linking import Track, TrackLinker
+from vfactor.association.linking import Track, TrackLinker, constant_velocity
 from vfactor.observations import UNASSIGNED, Frame, Scene
 from vfactor.track import frame_order
 
@@ -35,7 +35,6 @@ class Association:
         scene: the scene with every associated detection's ``vehicle`` set, without the detections left out.
         groups: per frame (scene order), vehicle id -> the indices of its detections in the frame's
             ``detections`` of the scene given; empty for frames that were left as they were (their ids given).
-        single_view: per frame, the vehicle ids seen by one camera only.
         kept: per frame, the index in the scene given of each detection of :attr:`scene`'s frame.
         left_out: (frame, detection index in the scene given, why) of every detection left out: those of a
             track never seen by two cameras at once and not moving steadily (constant velocity within
@@ -46,7 +45,6 @@ class Association:
 
     scene: Scene
     groups: list[dict[str, list[int]]]
-    single_view: list[list[str]]
     kept: list[list[int]] = field(default_factory=list)
     left_out: list[tuple[int, int, str]] = field(default_factory=list)
     messages: list[str] = field(default_factory=list)
@@ -58,6 +56,11 @@ class Association:
             for v in frame.vehicles:
                 if v.extras.get("detections") is not None:
                     v.extras["detections"] = [self.kept[f][j] for j in v.extras["detections"]]
+
+    @property
+    def single_view(self) -> list[list[str]]:
+        """Per frame, the vehicle ids seen by one camera only."""
+        return [[vid for vid, g in frame.items() if len(g) == 1] for frame in self.groups]
 
     @property
     def vehicle_ids(self) -> list[str]:
@@ -84,14 +87,11 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
     Raises:
         InputError: a detection still waits for the keypoint network (it has no keypoints to associate by).
     """
-    pending = scene.undetected()
-    if pending:
-        scene.require_keypoints()  # names the first detection that still waits for the keypoint network
+    scene.require_detected()
     taken = set() if force else {d.vehicle for f in scene.frames for d in f.detections if d.vehicle != UNASSIGNED}
     linker = TrackLinker(options, taken=taken)
     frames = list(scene.frames)
     groups: list[dict[str, list[int]]] = [{} for _ in frames]
-    single: list[list[str]] = [[] for _ in frames]
     messages: list[str] = []
     weak: set[tuple[int, int]] = set()
     followed: dict[tuple[str, str], str] = {}  # (camera, camera track id) -> the vehicle it last showed
@@ -117,14 +117,13 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
             frames[f] = Frame(frame.t, [dataclasses.replace(d, vehicle=vehicle_of[j]) if j in vehicle_of else d
                                         for j, d in enumerate(frame.detections)], frame.images)
             groups[f] = {vid: list(g) for vid, g in zip(ids, found.groups)}
-            single[f] = [vid for vid, g in zip(ids, found.groups) if len(g) == 1]
             for vid, g in groups[f].items():
                 for j in g:
                     if frame.detections[j].track is not None:
                         followed[(frame.detections[j].camera, frame.detections[j].track)] = vid
         if progress is not None:
             progress(n + 1, len(order))
-    return _confirmed(scene, frames, groups, single, weak, path, messages, options)
+    return _confirmed(scene, frames, groups, weak, path, messages, options)
 
 
 def _steady(points: list[tuple[float, np.ndarray, int]], options: AssociationOptions) -> bool:
@@ -138,13 +137,12 @@ def _steady(points: list[tuple[float, np.ndarray, int]], options: AssociationOpt
         return False
     times = np.array([t for t, _, _ in points])
     xy = np.array([p for _, p, _ in points])
-    design = np.stack([np.ones_like(times), times - times.mean()], axis=1)
-    coefficients, *_ = np.linalg.lstsq(design, xy, rcond=None)
-    residual = xy - design @ coefficients
+    position, velocity = constant_velocity(times, xy)
+    residual = xy - (position + np.outer(times - times[-1], velocity))
     return float(np.sqrt(np.mean(np.sum(residual ** 2, axis=1)))) <= options.max_track_residual
 
 
-def _confirmed(scene: Scene, frames: list[Frame], groups, single, weak, path, messages, options) -> Association:
+def _confirmed(scene: Scene, frames: list[Frame], groups, weak, path, messages, options) -> Association:
     """The association without the detections of unconfirmed tracks: never seen by two cameras at once, and not
     moving steadily over ``min_track_frames`` frames (a detector's flicker, or false detections chained)."""
     most_cameras: dict[str, int] = {}
@@ -167,5 +165,4 @@ def _confirmed(scene: Scene, frames: list[Frame], groups, single, weak, path, me
         kept.append(keep)
         out_frames.append(Frame(frame.t, [frame.detections[j] for j in keep], frame.images))
         groups[f] = {vid: g for vid, g in groups[f].items() if all(j in keep for j in g)}
-        single[f] = [vid for vid in single[f] if vid in groups[f]]
-    return Association(dataclasses.replace(scene, frames=out_frames), groups, single, kept, left_out, messages)
+    return Association(dataclasses.replace(scene, frames=out_frames), groups, kept, left_out, messages)

@@ -23,10 +23,27 @@ from scipy.optimize import linear_sum_assignment
 
 from vfactor.association.cross_camera import AssociationOptions
 
-__all__ = ["Track", "TrackLinker"]
+__all__ = ["Track", "TrackLinker", "constant_velocity"]
 
 _FAR = 1e9  # cost of a link outside the gate
 _FIT_POSITIONS = 5  # positions of a track its velocity is fitted to
+
+
+def constant_velocity(times: np.ndarray, xy: np.ndarray, weights: np.ndarray | None = None):
+    """Weighted least-squares constant velocity through positions: (position at the last time, velocity).
+
+    Args:
+        times: (n,) seconds, not all equal.
+        xy: (n, 2) world x, y, metres.
+        weights: (n,) weights of the positions (default: equal).
+
+    Returns:
+        (2,) position at ``times[-1]`` (metres) and (2,) velocity (m/s) of the fitted line.
+    """
+    w = np.sqrt(np.ones(len(times)) if weights is None else np.asarray(weights, dtype=float))
+    design = np.stack([np.ones(len(times)), np.asarray(times, dtype=float) - times[-1]], axis=1) * w[:, None]
+    coefficients, *_ = np.linalg.lstsq(design, np.asarray(xy, dtype=float) * w[:, None], rcond=None)
+    return coefficients[0], coefficients[1]
 
 
 @dataclass
@@ -42,13 +59,11 @@ class Track:
     def predict(self, t: float) -> np.ndarray:
         """The position at ``t`` seconds: constant velocity fitted to the last five positions (weighted)."""
         n = min(len(self.positions), _FIT_POSITIONS)
-        times = np.array(self.times[-n:]) - self.times[-1]
-        if n < 2 or np.ptp(times) <= 0:
+        if n < 2 or self.times[-1] <= self.times[-n]:
             return self.positions[-1]
-        w = np.sqrt(np.array(self.weights[-n:]))
-        design = np.stack([np.ones(n), times], axis=1) * w[:, None]
-        coefficients, *_ = np.linalg.lstsq(design, np.array(self.positions[-n:]) * w[:, None], rcond=None)
-        return coefficients[0] + coefficients[1] * (t - self.times[-1])
+        position, velocity = constant_velocity(np.array(self.times[-n:]), np.array(self.positions[-n:]),
+                                               np.array(self.weights[-n:]))
+        return position + velocity * (t - self.times[-1])
 
     def gate(self, t: float, options: AssociationOptions) -> float:
         """The largest distance (metres) from :meth:`predict` at which a vehicle may continue the track."""

@@ -450,16 +450,15 @@ def _frame_from_dict(data, path: str, cameras: dict[str, Camera], base: _Folder)
         for det, _ in parsed:  # several vehicles without ids: vfactor.association finds them
             det.vehicle = UNASSIGNED
     seen: dict[tuple[str, str], int] = {}
-    for j, (det, has_vehicle) in enumerate(parsed):
+    for j, (det, _) in enumerate(parsed):
         key = (det.camera, det.vehicle)
-        if det.vehicle == UNASSIGNED:
+        if det.vehicle == UNASSIGNED:  # (several unnamed detections of one camera are associated, never an error)
             continue
         if key in seen:
-            hint = "" if has_vehicle else "; a frame with several vehicles must name them with 'vehicle'"
             raise SceneError(
                 f"{path}.detections[{j}]",
                 f"camera {det.camera!r} already has a detection of vehicle {det.vehicle!r} in this frame "
-                f"(detections[{seen[key]}]){hint}",
+                f"(detections[{seen[key]}])",
             )
         seen[key] = j
     return Frame(t=t, detections=[det for det, _ in parsed], images=images)

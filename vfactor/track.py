@@ -261,6 +261,7 @@ class Tracker:
             track = self._tracks.get(vid)
             if failed and track is not None:  # restart this track from its next solvable frame
                 track.restart()
+            vehicles[-1].extras["detections"] = frame.indices_of(vid)
         return FrameResult(frame.t, vehicles)
 
     def estimates(self, covariance: bool = False) -> dict[tuple[int, str], VehicleResult]:
@@ -618,15 +619,24 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
         where = ", ".join(f"frames[{f}]" for f, _, _ in jumps[:5]) + (", ..." if len(jumps) > 5 else "")
         messages.append(f"vehicle '{vid}': {len(jumps)} jumps beyond the motion model ({where}; first: {jumps[0][2]}): "
                         "its id does not follow one vehicle there; tracked as new segments")
-    frames = [FrameResult(f.t, [checked(final[(i, vid)], _seen_by(f, vid, scene.cameras), options.covariance)
-                                for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
-    for i, f in enumerate(scene.frames):
-        for result in (*frames[i].vehicles, *online[i].vehicles):
-            result.extras["detections"] = f.indices_of(result.id)
+    frames = _frame_results(scene, final, options.covariance)
     log.info("tracked %d vehicles over %d frames (%s): %d of %d poses solved", len(solved), len(frames),
              "smoothed" if options.lag is None else f"fixed lag {options.lag:g} s",
              sum(v.ok for fr in frames for v in fr.vehicles), sum(len(fr.vehicles) for fr in frames))
     return TrackRun(frames=frames, online=[online[i] for i in range(len(scene.frames))], messages=messages)
+
+
+def _frame_results(scene: Scene, results: dict, covariance: bool) -> list[FrameResult]:
+    """The final results of every frame, in the scene's order, from (frame index, id) -> result: each
+    sanity-checked against the cameras that saw it (:func:`vfactor.sanity.checked`) and with its
+    ``extras["detections"]``."""
+    out = []
+    for i, f in enumerate(scene.frames):
+        vehicles = [checked(results[(i, vid)], _seen_by(f, vid, scene.cameras), covariance) for vid in f.vehicle_ids()]
+        for v in vehicles:
+            v.extras["detections"] = f.indices_of(v.id)
+        out.append(FrameResult(f.t, vehicles))
+    return out
 
 
 def _refresh(final: dict, estimates: dict, kind: str) -> None:
@@ -736,12 +746,7 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
             results[(i, vid)].extras["noise_scale"] = scale
             if marginals:
                 results[(i, vid)].extras["covariance"] = "smoothed"
-    out = [FrameResult(f.t, [checked(results[(i, vid)], _seen_by(f, vid, scene.cameras), options.covariance)
-                              for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
-    for f, frame in zip(scene.frames, out):
-        for result in frame.vehicles:
-            result.extras["detections"] = f.indices_of(result.id)
-    return out
+    return _frame_results(scene, results, options.covariance)
 
 
 def _box(world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, body_type: str | None):

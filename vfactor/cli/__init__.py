@@ -123,10 +123,7 @@ def build_parser() -> argparse.ArgumentParser:
         "keypoint network first (needs torch). Scene format: docs/scene-format.md (vfactor schema prints its "
         "JSON Schema).",
     )
-    p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md)")
-    p.add_argument("--out", required=True, help="result file to write (written atomically; a folder for --format kitti)")
     _estimate_options(p)
-    p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
     p.add_argument("--loss", default="cauchy", choices=("none", "huber", "cauchy", "geman_mcclure"),
                    help="robust loss per keypoint (default: cauchy)")
 
@@ -138,14 +135,11 @@ def build_parser() -> argparse.ArgumentParser:
         "'vfactor solve' (final, smoothed estimates; --online for the estimates as each frame arrived). Frames out "
         "of time order are tracked in time order and reported. Scene format: docs/scene-format.md.",
     )
-    p.add_argument("scene", help="scene file (JSON) with track ids in the detections' 'vehicle'")
-    p.add_argument("--out", required=True, help="result file to write (written atomically; a folder for --format kitti)")
     _estimate_options(p)
     p.add_argument("--lag", type=float, help="fixed lag in seconds: bounded memory and time per frame for long streams")
     p.add_argument("--batch", action="store_true", help="offline batch smoothing (Levenberg-Marquardt over each whole track)")
     p.add_argument("--online", action="store_true", help="write the estimates as each frame arrived (filtered)")
     p.add_argument("--plot", help="also write a PNG of the trajectories with covariance ellipses")
-    p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
 
     for name, text in NET_COMMANDS.items():
         p = sub.add_parser(name, help=text, add_help=False)
@@ -280,7 +274,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _estimate_options(p: argparse.ArgumentParser) -> None:
-    """The options ``solve`` and ``track`` share: output format, cameras, association, paths, the keypoint network."""
+    """The arguments ``solve`` and ``track`` share: the scene, the result and its format, cameras, association,
+    covariances, paths, the keypoint network."""
+    p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md; vfactor schema prints its JSON Schema)")
+    p.add_argument("--out", required=True, help="result file to write (written atomically; a folder for --format kitti)")
+    p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
     p.add_argument("--associate", action="store_true",
                    help="find the vehicles from geometry even where the detections name them (ids not trusted); "
                    "without it, only frames that name no vehicle but hold several per camera are associated "

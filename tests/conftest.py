@@ -26,6 +26,30 @@ def look_at(eye, target) -> np.ndarray:
 K = [[900.0, 0.0, 640.0], [0.0, 900.0, 360.0], [0.0, 0.0, 1.0]]
 
 
+def opencv_pixels(camera: Camera, world: np.ndarray) -> np.ndarray:
+    """(N, 2) pixels of world points by OpenCV's own projection of the camera's lens model (the reference)."""
+    import cv2
+
+    T = camera.camera_T_world
+    rvec, tvec = cv2.Rodrigues(T[:3, :3])[0], T[:3, 3].copy()
+    if camera.model == "fisheye":
+        uv, _ = cv2.fisheye.projectPoints(np.asarray(world, float).reshape(-1, 1, 3), rvec, tvec, camera.K, camera.dist)
+    else:
+        uv, _ = cv2.projectPoints(np.asarray(world, float), rvec, tvec, camera.K, camera.dist)
+    return uv.reshape(-1, 2)
+
+
+def assert_projection_jacobian(camera: Camera, camera_p: np.ndarray, h: float = 1e-6) -> None:
+    """``Camera.project_camera_points``' Jacobian against central differences at camera points (N, 3)."""
+    _, J = camera.project_camera_points(camera_p)
+    for axis in range(3):
+        step = np.zeros(3)
+        step[axis] = h
+        plus, _ = camera.project_camera_points(camera_p + step, jacobian=False)
+        minus, _ = camera.project_camera_points(camera_p - step, jacobian=False)
+        assert np.allclose(J[:, :, axis], (plus - minus) / (2 * h), rtol=1e-6, atol=1e-5)
+
+
 @pytest.fixture
 def cameras() -> dict[str, Camera]:
     """Two pole cameras (7-8 m) on opposite corners, each seeing its own side of the vehicle."""

@@ -9,7 +9,7 @@ import pytest
 from vfactor.camera import Camera
 from vfactor.errors import CalibrationError
 
-from .conftest import K, look_at
+from .conftest import K, assert_projection_jacobian, look_at, opencv_pixels
 
 DIST = [-0.1, 0.03, 0.001, -0.002, 0.005]
 
@@ -33,15 +33,7 @@ def test_projection_matches_opencv():
 @pytest.mark.parametrize("dist", [None, DIST])
 def test_projection_jacobian_matches_numerical(dist):
     camera = make_camera(dist=dist)
-    camera_p = np.random.default_rng(1).uniform([-2, -1, 5], [2, 1, 20], (10, 3))
-    _, J = camera.project_camera_points(camera_p)
-    h = 1e-6
-    for axis in range(3):
-        step = np.zeros(3)
-        step[axis] = h
-        plus, _ = camera.project_camera_points(camera_p + step, jacobian=False)
-        minus, _ = camera.project_camera_points(camera_p - step, jacobian=False)
-        assert np.allclose(J[:, :, axis], (plus - minus) / (2 * h), rtol=1e-6, atol=1e-5)
+    assert_projection_jacobian(camera, np.random.default_rng(1).uniform([-2, -1, 5], [2, 1, 20], (10, 3)))
 
 
 def test_target_projects_to_principal_point():
@@ -136,16 +128,6 @@ LENSES = [
 LENS_IDS = [f"{m}{len(d)}" + ("_zero" if not any(d) else "") for m, d in LENSES]
 
 
-def opencv_pixels(camera, world):
-    T = camera.camera_T_world
-    rvec, tvec = cv2.Rodrigues(T[:3, :3])[0], T[:3, 3].copy()
-    if camera.model == "fisheye":
-        uv, _ = cv2.fisheye.projectPoints(world.reshape(-1, 1, 3), rvec, tvec, camera.K, camera.dist)
-    else:
-        uv, _ = cv2.projectPoints(world, rvec, tvec, camera.K, camera.dist)
-    return uv.reshape(-1, 2)
-
-
 @pytest.mark.parametrize("model, dist", LENSES, ids=LENS_IDS)
 def test_every_lens_model_matches_opencv(model, dist):
     camera = make_camera(model=model, dist=dist)
@@ -161,14 +143,7 @@ def test_every_lens_model_jacobian_matches_numerical(model, dist):
     camera_p = np.random.default_rng(3).uniform([-3, -2, 3], [3, 2, 12], (20, 3))
     camera_p[0] = [0.0, 0.0, 5.0]  # on the optical axis (the fisheye scale's limit)
     camera_p[1] = [1e-9, -2e-9, 4.0]
-    _, J = camera.project_camera_points(camera_p)
-    h = 1e-6
-    for axis in range(3):
-        step = np.zeros(3)
-        step[axis] = h
-        plus, _ = camera.project_camera_points(camera_p + step, jacobian=False)
-        minus, _ = camera.project_camera_points(camera_p - step, jacobian=False)
-        assert np.allclose(J[:, :, axis], (plus - minus) / (2 * h), rtol=1e-6, atol=1e-5)
+    assert_projection_jacobian(camera, camera_p)
 
 
 @pytest.mark.parametrize("model, dist", LENSES, ids=LENS_IDS)

@@ -122,18 +122,12 @@ def test_kernel_matches_numpy_projection_for_every_lens():
 
 
 def test_every_lens_matches_opencv_in_the_factor():
-    import cv2
+    from tests.conftest import opencv_pixels
 
     obs = observations(cameras=LENS_CAMERAS)
     world = TRUTH_SHAPE.in_world(TRUTH_POSE)
     for c, camera in enumerate(LENS_CAMERAS):
-        T = camera.camera_T_world
-        rvec, tvec = cv2.Rodrigues(T[:3, :3])[0], T[:3, 3].copy()
-        if camera.model == "fisheye":
-            expected, _ = cv2.fisheye.projectPoints(world.reshape(-1, 1, 3), rvec, tvec, camera.K, camera.dist)
-        else:
-            expected, _ = cv2.projectPoints(world, rvec, tvec, camera.K, camera.dist)
-        assert np.allclose(obs.uv[obs.camera_index == c], expected.reshape(-1, 2), atol=1e-6)
+        assert np.allclose(obs.uv[obs.camera_index == c], opencv_pixels(camera, world), atol=1e-6)
 
 
 def test_matches_opencv_projection():

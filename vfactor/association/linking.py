@@ -19,7 +19,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from vfactor.association.cross_camera import AssociationOptions
 
@@ -125,6 +124,8 @@ class TrackLinker:
                     cost[a, b] = distance - (self.options.track_bonus if shared else 0.0)
         ids: list[str | None] = [None] * len(positions)
         if live and positions:
+            from scipy.optimize import linear_sum_assignment  # scipy.optimize costs ~0.3 s to import: only when used
+
             rows, cols = linear_sum_assignment(cost)
             for a, b in zip(rows, cols):
                 if cost[a, b] < _FAR:

@@ -737,8 +737,10 @@ def _yaml_size(value, field: str) -> int:
 
 
 def _one_line(exc) -> str:
-    """An exception's (or OpenCV error's) message without its source location, one line, at most 200 characters."""
-    text = getattr(exc, "err", None) or str(exc)
-    return " ".join(str(text).split())[:200] or "parse error"
+    """An exception's (or OpenCV error's, ``err``: without its source location) message through
+    :func:`vfactor.sanity.one_line`, at most 200 characters."""
+    from vfactor.sanity import one_line
+
+    return one_line(getattr(exc, "err", None) or str(exc), limit=200) or "parse error"
 
 

@@ -26,7 +26,7 @@ from vfactor.metrics import pose_errors
 from vfactor.observations import Frame
 from vfactor.track import TrackOptions, track_scene
 
-__all__ = ["AssociationRun", "DEFAULT_NOISE", "evaluate_association", "association_report"]
+__all__ = ["AssociationRun", "DEFAULT_NOISE", "evaluate_association", "association_report", "body_type_report"]
 
 #: The anonymiser's settings of the evaluation: a switch of two camera track ids in 2 % of a camera's frames,
 #: 5 % of the detections missed, 0.3 false detections per camera and frame.
@@ -39,6 +39,7 @@ class AssociationRun:
 
     scenario: str
     seed: int
+    cameras: int
     frames: int
     detections: int
     false_detections: int
@@ -57,20 +58,25 @@ def _with_true_ids(scene, truth_ids):
 
 
 def _matched_errors(results, truth, max_distance: float) -> dict:
-    """Mean pose errors of the tracked vehicles within ``max_distance`` (m, x-y) of a true vehicle (nearest)."""
-    rotation, translation = [], []
+    """Pose errors of the tracked vehicles within ``max_distance`` (m, x-y) of a true vehicle (the nearest):
+    their means, and per body type of the true vehicle (``"by_body_type"``: type -> lists of errors)."""
+    from vfactor.evaluation import body_type_of
+
+    by_type: dict[str, dict[str, list[float]]] = {}
     for frame, true in zip(results, truth):
         for v in frame.vehicles:
             if not v.ok or not true:
                 continue
             p = v.world_T_vehicle.translation()[:2]
-            vid, t = min(true.items(), key=lambda item: np.linalg.norm(item[1].world_T_vehicle.translation()[:2] - p))
+            _, t = min(true.items(), key=lambda item: np.linalg.norm(item[1].world_T_vehicle.translation()[:2] - p))
             if np.linalg.norm(t.world_T_vehicle.translation()[:2] - p) <= max_distance:
                 e = pose_errors(v.world_T_vehicle, v.keypoints_world, t.world_T_vehicle, t.keypoints_world)
-                rotation.append(e["rotation_deg"])
-                translation.append(e["translation_cm"])
-    return {"rotation_deg": float(np.mean(rotation)) if rotation else float("nan"),
-            "translation_cm": float(np.mean(translation)) if translation else float("nan"), "count": len(rotation)}
+                errors = by_type.setdefault(body_type_of(t.preset), {"rotation_deg": [], "translation_cm": []})
+                errors["rotation_deg"].append(e["rotation_deg"])
+                errors["translation_cm"].append(e["translation_cm"])
+    every = {key: [x for errors in by_type.values() for x in errors[key]] for key in ("rotation_deg", "translation_cm")}
+    return {key: float(np.mean(every[key])) if every[key] else float("nan") for key in every} | {
+        "count": len(every["rotation_deg"]), "by_body_type": by_type}
 
 
 def evaluate_association(scenario: str, seeds, num_frames: int | None = None, noise: dict | None = None,
@@ -95,13 +101,36 @@ def evaluate_association(scenario: str, seeds, num_frames: int | None = None, no
         with_ids = track_scene(_with_true_ids(anon.scene, anon.truth_ids), TrackOptions(covariance=False)).frames
         truth = truth_positions(sim.truth)
         runs.append(AssociationRun(
-            scenario, seed, len(anon.scene.frames), sum(len(c) for c in cameras),
+            scenario, seed, len(sim.scene.cameras), len(anon.scene.frames), sum(len(c) for c in cameras),
             sum(v is None for ids in anon.truth_ids for v in ids), pairs,
             clear_mot(truth, positions_from_results(tracked), max_distance),
             clear_mot(truth, positions_from_results(with_ids), max_distance),
             _matched_errors(tracked, sim.truth, max_distance), _matched_errors(with_ids, sim.truth, max_distance),
             seconds))
     return runs
+
+
+def body_type_report(runs: list[AssociationRun]) -> str:
+    """A Markdown table of the pose errors per body type and camera count, pooled over the runs, beside the true
+    ids."""
+    pooled: dict[tuple[str, int], dict] = {}
+    for r in runs:
+        for source, errors in (("associated", r.errors), ("true ids", r.errors_true_ids)):
+            for body_type, e in errors["by_body_type"].items():
+                entry = pooled.setdefault((body_type, r.cameras), {}).setdefault(source, {"rotation_deg": [],
+                                                                                        "translation_cm": []})
+                for key in entry:
+                    entry[key] += e[key]
+    lines = ["| body type | cameras | vehicle-frames | rotation (deg) | translation (cm) | rotation, true ids | "
+             "translation, true ids | translation ratio |", "|" + " --- |" * 8]
+    for (body_type, cameras), entry in sorted(pooled.items()):
+        a, b = entry.get("associated"), entry.get("true ids")
+        if not a or not b:
+            continue
+        ta, tb = np.mean(a["translation_cm"]), np.mean(b["translation_cm"])
+        lines.append(f"| {body_type} | {cameras} | {len(a['rotation_deg'])} | {np.mean(a['rotation_deg']):.2f} | "
+                     f"{ta:.1f} | {np.mean(b['rotation_deg']):.2f} | {tb:.1f} | {ta / tb:.2f}x |")
+    return "\n".join(lines)
 
 
 def association_report(runs: list[AssociationRun]) -> str:

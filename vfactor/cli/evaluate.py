@@ -98,13 +98,15 @@ def _eval_association(scenario_name, frames, seed: int, seeds: int) -> list[str]
 
     if importlib.util.find_spec("motmetrics") is None:  # CLEAR-MOT's counts
         raise InputError("association", "this needs motmetrics; install with pip install -c constraints.txt motmetrics")
-    from vfactor.association.evaluate import DEFAULT_NOISE, association_report, evaluate_association
+    from vfactor.association.evaluate import DEFAULT_NOISE, association_report, body_type_report, evaluate_association
 
     scenarios = [scenario_name] if scenario_name else ["association_4cam", "association_3cam"]
     runs = [run for name in scenarios
             for run in evaluate_association(name, range(seed, seed + seeds), frames, progress=progress("associating"))]
     noise = ", ".join(f"{k} {v:g}" for k, v in DEFAULT_NOISE.items())
-    return [f"### Association without ids ({noise}), beside the true ids\n\n{association_report(runs)}\n"]
+    return [f"### Association without ids ({noise}), beside the true ids\n\n{association_report(runs)}\n",
+            f"Pose errors per body type and camera count (vehicles tracked within 2 m of a true one):\n\n"
+            f"{body_type_report(runs)}\n"]
 
 
 def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int = 0, lag: float = 0.5) -> list[str]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from dataclasses import dataclass, field
+from collections.abc import Iterator
 from typing import Callable
 
 import gtsam
@@ -46,7 +47,7 @@ from vfactor.wireframe import Wireframe
 
 log = logging.getLogger(__name__)
 
-__all__ = ["SolveOptions", "solve_vehicle", "solve_observations", "solve_frame", "solve_scene", "pose_shape_covariance",
+__all__ = ["SolveOptions", "solve_vehicle", "solve_observations", "solve_frame", "solve_scene", "iter_solve_scene", "pose_shape_covariance",
            "keypoint_covariances"]
 
 
@@ -508,40 +509,82 @@ def solve_frame(frame: Frame, cameras: dict[str, Camera], options: SolveOptions 
     A vehicle whose solve raises (an unknown camera, a numerical failure) is
     reported as ``failed`` with the message; the others are still solved.
     """
-    vehicles = []
-    for vehicle_id in frame.vehicle_ids():
-        try:
-            vehicles.append(solve_vehicle(frame.detections_of(vehicle_id), cameras, options, vehicle_id, **kwargs))
-        except (InputError, RuntimeError, np.linalg.LinAlgError) as exc:
-            vehicles.append(VehicleResult(vehicle_id, Status.FAILED, message=summarise_error(exc)))
-        vehicles[-1].extras["detections"] = frame.indices_of(vehicle_id)
-    return FrameResult(frame.t, vehicles)
+    return FrameResult(frame.t, [_solve_unit(_unit(frame, vid, cameras, options, kwargs)) for vid in frame.vehicle_ids()])
+
+
+def _unit(frame: Frame, vehicle_id: str, cameras: dict[str, Camera], options: SolveOptions, kwargs: dict) -> tuple:
+    """The unit of work of the one-frame solve (:mod:`vfactor.parallel`): one vehicle in one frame."""
+    return frame.detections_of(vehicle_id), frame.indices_of(vehicle_id), cameras, options, vehicle_id, kwargs
+
+
+def _solve_unit(unit: tuple) -> VehicleResult:
+    """Solves one :func:`_unit`; a solve that raises (an unknown camera, a numerical failure) is a ``failed``
+    result with the message."""
+    detections, indices, cameras, options, vehicle_id, kwargs = unit
+    try:
+        result = solve_vehicle(detections, cameras, options, vehicle_id, **kwargs)
+    except (InputError, RuntimeError, np.linalg.LinAlgError) as exc:
+        result = VehicleResult(vehicle_id, Status.FAILED, message=summarise_error(exc))
+    result.extras["detections"] = indices
+    return result
+
+
+def iter_solve_scene(scene: Scene, options: SolveOptions = SolveOptions(), progress: Callable[[int, int], None] | None = None,
+                     engine=None, **kwargs) -> Iterator[FrameResult]:
+    """:func:`solve_scene` one frame at a time: yields each frame's result, in the scene's order, as soon as it
+    and every frame before it are solved (what ``vfactor solve`` writes as it goes).
+
+    Args:
+        engine: where the vehicles are solved (:mod:`vfactor.parallel`; default: in this process, one after
+            another). The results do not depend on it.
+        progress: called as ``progress(done, total)`` with the vehicles solved so far.
+
+    Raises:
+        InputError: a detection still waits for the keypoint network or for association
+            (:meth:`~vfactor.observations.Scene.require_keypoints`).
+    """
+    from vfactor.parallel import InProcess
+
+    scene.require_keypoints()
+    options = options.for_scene(scene)
+    engine = engine or InProcess()
+    counts = [len(frame.vehicle_ids()) for frame in scene.frames]
+    units = (_unit(frame, vid, scene.cameras, options, kwargs) for frame in scene.frames for vid in frame.vehicle_ids())
+    results = engine.map(_solve_unit, units, progress=progress, total=sum(counts))
+    solved = vehicles = 0
+    for i, (frame, count) in enumerate(zip(scene.frames, counts)):
+        out = FrameResult(frame.t, [next(results) for _ in range(count)])
+        for v in out.vehicles:
+            log.debug("frame %d (t = %g s) vehicle %r: %s after %d iterations, body type %s, noise scale %.2f%s", i,
+                      frame.t, v.id, v.status.value, v.iterations, v.body_type, v.extras.get("noise_scale", float("nan")),
+                      f": {v.message}" if v.message else "")
+        solved, vehicles = solved + sum(v.ok for v in out.vehicles), vehicles + count
+        yield out
+    log.info("solved %d of %d vehicles in %d frames, %d cameras", solved, vehicles, len(scene.frames), len(scene.cameras))
 
 
 def solve_scene(
-    scene: Scene, options: SolveOptions = SolveOptions(), progress: Callable[[int, int], None] | None = None, **kwargs
+    scene: Scene, options: SolveOptions = SolveOptions(), progress: Callable[[int, int], None] | None = None,
+    engine=None, **kwargs
 ) -> list[FrameResult]:
-    """Solves every frame of a scene on its own (``vfactor solve``).
+    """Solves every frame of a scene, every vehicle on its own (``vfactor solve``).
 
     When the scene gives a road plane and ``options.ground_plane`` is None, the
     scene's plane is used (the ground-plane factor on every vehicle).
 
+    Args:
+        scene: the scene.
+        options: solver settings.
+        progress: called as ``progress(done, total)`` with the vehicles solved so far.
+        engine: where the vehicles are solved: a :class:`vfactor.parallel.DaskEngine` spreads them over a Dask
+            cluster; default: in this process. The results are the same.
+        **kwargs: passed to :func:`solve_vehicle` (``prior``, ``bounds``).
+
+    Returns:
+        One :class:`~vfactor.result.FrameResult` per frame, in the scene's order.
+
     Raises:
-        InputError: a detection still waits for the keypoint network
+        InputError: a detection still waits for the keypoint network or for association
             (:meth:`~vfactor.observations.Scene.require_keypoints`).
     """
-    scene.require_keypoints()
-    options = options.for_scene(scene)
-    out = []
-    for i, frame in enumerate(scene.frames):
-        out.append(solve_frame(frame, scene.cameras, options, **kwargs))
-        for v in out[-1].vehicles:
-            log.debug("frame %d (t = %g s) vehicle %r: %s after %d iterations, body type %s, noise scale %.2f%s", i,
-                      frame.t, v.id, v.status.value, v.iterations, v.body_type, v.extras.get("noise_scale", float("nan")),
-                      f": {v.message}" if v.message else "")
-        if progress is not None:
-            progress(i + 1, len(scene.frames))
-    solved = sum(v.ok for fr in out for v in fr.vehicles)
-    log.info("solved %d of %d vehicles in %d frames, %d cameras", solved, sum(len(fr.vehicles) for fr in out), len(out),
-             len(scene.cameras))
-    return out
+    return list(iter_solve_scene(scene, options, progress, engine, **kwargs))

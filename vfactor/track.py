@@ -579,16 +579,29 @@ class TrackRun:
 
 
 def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
-                progress: Callable[[int, int], None] | None = None, **kwargs) -> TrackRun:
+                progress: Callable[[int, int], None] | None = None, engine=None, **kwargs) -> TrackRun:
     """Tracks every vehicle through a scene (``vfactor track``).
 
     Frames are processed in time order (out-of-order frames are reported in
-    ``messages``); results come back in the scene's order.
+    ``messages``); results come back in the scene's order. Each track is its own
+    unit of work (one :class:`Tracker` per track id over the frames that see it):
+    tracks share nothing, so the results are those of one Tracker over every
+    frame, and an ``engine`` can spread the tracks over processes or machines.
+
+    Args:
+        scene: the scene.
+        options: tracking settings.
+        progress: called as ``progress(done, total)`` with the tracks finished so far.
+        engine: where the tracks run (:mod:`vfactor.parallel`; default: in this process). The results do not
+            depend on it.
+        **kwargs: passed to :class:`Tracker` (``prior``, ``bounds``, ``keys``).
 
     Raises:
         InputError: a detection still waits for the keypoint network
-            (:meth:`~vfactor.observations.Scene.require_keypoints`).
+            (:meth:`~vfactor.observations.Scene.require_keypoints`), or two frames have the same time.
     """
+    from vfactor.parallel import InProcess
+
     scene.require_keypoints()
     messages = []
     order = frame_order(scene)
@@ -596,34 +609,64 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
         moved = [i for pos, i in enumerate(order) if i != pos]
         messages.append(f"frames are not in time order (e.g. frames[{moved[0]}]); tracked in time order")
     options = dataclasses.replace(options, solve=options.solve.for_scene(scene))
-    tracker = Tracker(scene.cameras, options, **kwargs)
-    online: dict[int, FrameResult] = {}
+    units = _track_units(scene, order, (scene.cameras, options, kwargs))
+    online_of: dict[tuple[int, str], VehicleResult] = {}
     final: dict[tuple[int, str], VehicleResult] = {}
-    for n, i in enumerate(order):
-        online[i] = tracker.add_frame(scene.frames[i], i)
-        for v in online[i].vehicles:
-            final[(i, v.id)] = v
-        if options.lag is not None:  # a pose's final estimate and covariance are its last ones inside the window
-            _refresh(final, tracker.estimates(covariance=options.covariance), "fixed_lag")
-        if progress is not None:
-            progress(n + 1, len(order))
-    tracker.finish()
-    _refresh(final, tracker.estimates(covariance=options.covariance), "smoothed" if options.lag is None else "fixed_lag")
+    jumps_of: dict[str, list] = {}
+    for (vid, _, _), (online, track_final, jumps) in zip(units, (engine or InProcess()).map(
+            _track_unit, units, progress=progress)):
+        online_of.update(((i, vid), v) for i, v in online.items())
+        final.update(((i, vid), v) for i, v in track_final.items())
+        if jumps:
+            jumps_of[vid] = jumps
     solved: dict[str, int] = {}
     for (_, vid), v in final.items():
         solved[vid] = solved.get(vid, 0) + int(v.ok)
     for vid, count in solved.items():
         if count == 1:
             messages.append(f"vehicle '{vid}' was solved in one frame only: no motion information")
-    for vid, jumps in tracker.jumps.items():
+    for vid, jumps in jumps_of.items():
         where = ", ".join(f"frames[{f}]" for f, _, _ in jumps[:5]) + (", ..." if len(jumps) > 5 else "")
         messages.append(f"vehicle '{vid}': {len(jumps)} jumps beyond the motion model ({where}; first: {jumps[0][2]}): "
                         "its id does not follow one vehicle there; tracked as new segments")
     frames = _frame_results(scene, final, options.covariance)
+    online = []
+    for i, f in enumerate(scene.frames):
+        vehicles = [online_of[(i, vid)] for vid in f.vehicle_ids()]
+        for v in vehicles:
+            v.extras["detections"] = f.indices_of(v.id)
+        online.append(FrameResult(f.t, vehicles))
     log.info("tracked %d vehicles over %d frames (%s): %d of %d poses solved", len(solved), len(frames),
              "smoothed" if options.lag is None else f"fixed lag {options.lag:g} s",
              sum(v.ok for fr in frames for v in fr.vehicles), sum(len(fr.vehicles) for fr in frames))
-    return TrackRun(frames=frames, online=[online[i] for i in range(len(scene.frames))], messages=messages)
+    return TrackRun(frames=frames, online=online, messages=messages)
+
+
+def _track_units(scene: Scene, order: list[int], shared: tuple) -> list[tuple]:
+    """The units of work of tracking and batch smoothing: per track id, in order of first appearance (in time
+    order), ``(id, index, (shared, [(frame index, the frame with that track's detections only), ...]))``."""
+    per_track: dict[str, list] = {}
+    for i in order:
+        frame = scene.frames[i]
+        for vid in frame.vehicle_ids():
+            per_track.setdefault(vid, []).append((i, Frame(frame.t, frame.detections_of(vid), frame.images)))
+    return [(vid, index, (shared, items)) for index, (vid, items) in enumerate(per_track.items())]
+
+
+def _track_unit(unit: tuple) -> tuple[dict, dict, list]:
+    """Tracks one track (a :func:`_track_units` unit) with its own :class:`Tracker`: its online results and
+    final results by frame index, and its jumps."""
+    vid, _, ((cameras, options, kwargs), items) = unit
+    tracker = Tracker(cameras, options, **kwargs)
+    online: dict[int, VehicleResult] = {}
+    final: dict[tuple[int, str], VehicleResult] = {}
+    for i, frame in items:
+        online[i] = final[(i, vid)] = tracker.add_frame(frame, i).vehicles[0]
+        if options.lag is not None:  # a pose's final estimate and covariance are its last ones inside the window
+            _refresh(final, tracker.estimates(covariance=options.covariance), "fixed_lag")
+    tracker.finish()
+    _refresh(final, tracker.estimates(covariance=options.covariance), "smoothed" if options.lag is None else "fixed_lag")
+    return online, {i: v for (i, _), v in final.items()}, tracker.jumps.get(vid, [])
 
 
 def _frame_results(scene: Scene, results: dict, covariance: bool) -> list[FrameResult]:
@@ -664,7 +707,8 @@ def _solve_alone(obs: KeypointObservations, options: SolveOptions, vid: str, pri
 
 
 def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: ShapePrior | ShapeModel | None = None,
-                 bounds: HwcBounds | None = None) -> list[FrameResult]:
+                 bounds: HwcBounds | None = None, progress: Callable[[int, int], None] | None = None,
+                 engine=None) -> list[FrameResult]:
     """Batch smoothing: every track's whole graph solved at once by Levenberg-Marquardt.
 
     Each track starts from its one-frame solves (each frame's pose, the previous
@@ -675,78 +719,88 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
     together (their shape informations add up: they share one shape), and its
     noise scale is the median of theirs.
 
+    Each track is its own unit of work (:func:`track_scene`): ``engine``
+    (:mod:`vfactor.parallel`) can spread them, with the same results;
+    ``progress(done, total)`` counts the tracks.
+
     Raises:
         InputError: a detection still waits for the keypoint network.
     """
+    from vfactor.parallel import InProcess
+
     scene.require_keypoints()
-    model, prior, bounds = resolve_shape_prior(prior, bounds)
     order = frame_order(scene)
     options = dataclasses.replace(options, solve=options.solve.for_scene(scene), lag=None)
+    units = _track_units(scene, order, (scene.cameras, options, prior, bounds))
+    results: dict[tuple[int, str], VehicleResult] = {}
+    for (vid, _, _), track_results in zip(units, (engine or InProcess()).map(_smooth_unit, units, progress=progress)):
+        results.update(((i, vid), v) for i, v in track_results.items())
+    return _frame_results(scene, results, options.covariance)
+
+
+def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
+    """Batch smoothing of one track (a :func:`_track_units` unit): its results by frame index."""
+    vid, index, ((cameras, options, prior, bounds), frames) = unit
+    model, prior, bounds = resolve_shape_prior(prior, bounds)
     keys = KeyScheme()
     config = options.solve.graph
-    per_track: dict[str, list] = {}
-    for i in order:
-        frame = scene.frames[i]
-        for vid in frame.vehicle_ids():
-            obs = observations_from_detections(frame.detections_of(vid), scene.cameras, config)
-            per_track.setdefault(vid, []).append((i, frame.t, obs))
-    results: dict[tuple[int, str], VehicleResult] = {}
-    for index, (vid, items) in enumerate(per_track.items()):
-        alone = dataclasses.replace(options.solve, shape_information=True)
-        firsts = [_solve_alone(obs, alone, vid, model or prior, bounds) if len(obs) else None for _, _, obs in items]
-        shape = track_shape(firsts, model, prior)
-        track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability
-        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        add_shape_factors(graph, keys, index, config, track_prior, bounds)
-        posed, best, segments = [], -1, {}
-        for (i, t, obs), first in zip(items, firsts):
-            obs = obs.scaled(scale)
-            if first is None or not first.ok:
-                if not posed:
-                    results[(i, vid)] = first or VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen")
-                    continue
-                guess = values.atPose3(posed[-1][2])
-            else:
-                guess = first.world_T_vehicle
-                if len(obs) > best:
-                    best = len(obs)
-                    insert_vehicle_values(values, keys, None, first.wireframe, index)
-            key = keys.pose_key(index, i)
-            if posed and t - posed[-1][1] > options.max_gap:
-                segments[i] = _segment_message(t - posed[-1][1], options.max_gap)
-            add_observation_factor(graph, keys, obs, index, i, config)
-            _add_pose_factors(graph, posed, key, t, options)
-            values.insert(key, guess)
-            posed.append((i, t, key))
-        if not posed:
-            continue
-        try:
-            optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.solve.lm_params())
+    items = [(i, frame.t, observations_from_detections(frame.detections, cameras, config)) for i, frame in frames]
+    results: dict[int, VehicleResult] = {}
+    alone = dataclasses.replace(options.solve, shape_information=True)
+    firsts = [_solve_alone(obs, alone, vid, model or prior, bounds) if len(obs) else None for _, _, obs in items]
+    shape = track_shape(firsts, model, prior)
+    track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    add_shape_factors(graph, keys, index, config, track_prior, bounds)
+    posed, best, segments = [], -1, {}
+    for (i, t, obs), first in zip(items, firsts):
+        obs = obs.scaled(scale)
+        if first is None or not first.ok:
+            if not posed:
+                results[i] = first or VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen")
+                continue
+            guess = values.atPose3(posed[-1][2])
+        else:
+            guess = first.world_T_vehicle
+            if len(obs) > best:
+                best = len(obs)
+                insert_vehicle_values(values, keys, None, first.wireframe, index)
+        key = keys.pose_key(index, i)
+        if posed and t - posed[-1][1] > options.max_gap:
+            segments[i] = _segment_message(t - posed[-1][1], options.max_gap)
+        add_observation_factor(graph, keys, obs, index, i, config)
+        _add_pose_factors(graph, posed, key, t, options)
+        values.insert(key, guess)
+        posed.append((i, t, key))
+    if not posed:
+        return results
+    try:
+        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.solve.lm_params())
+        estimate = optimizer.optimize()
+        terms = hwc_terms(config, bounds)
+        shape = wireframe_from_values(estimate, keys, index)
+        if config.hwc == "lazy" and hwc_violation(shape, terms) > config.hwc_tolerance:
+            graph.add(hwc_factor(keys, index, terms=terms))
+            optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.solve.lm_params())
             estimate = optimizer.optimize()
-            terms = hwc_terms(config, bounds)
-            shape = wireframe_from_values(estimate, keys, index)
-            if config.hwc == "lazy" and hwc_violation(shape, terms) > config.hwc_tolerance:
-                graph.add(hwc_factor(keys, index, terms=terms))
-                optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.solve.lm_params())
-                estimate = optimizer.optimize()
-            marginals = gtsam.Marginals(graph, estimate) if options.covariance else None
-        except RuntimeError as exc:
-            for i, _, _ in posed:
-                results[(i, vid)] = VehicleResult(vid, Status.FAILED, message=f"batch smoothing failed: {summarise_error(exc)}")
-            continue
-        wireframe = wireframe_from_values(estimate, keys, index)
-        hit = optimizer.iterations() >= options.solve.max_iterations
-        for i, _, key in posed:
-            pose = estimate.atPose3(key)
-            results[(i, vid)] = VehicleResult(
-                vid, Status.MAX_ITERATIONS if hit else Status.CONVERGED, world_T_vehicle=pose,
-                wireframe=wireframe, pose_covariance=marginals.marginalCovariance(key) if marginals else None,
-                iterations=optimizer.iterations(), final_error=graph.error(estimate), message=segments.get(i, ""),
-                body_type=body_type, body_type_probability=probability, box=_box(pose, wireframe, body_type))
-            results[(i, vid)].extras["noise_scale"] = scale
-            if marginals:
-                results[(i, vid)].extras["covariance"] = "smoothed"
-    return _frame_results(scene, results, options.covariance)
+        marginals = gtsam.Marginals(graph, estimate) if options.covariance else None
+    except RuntimeError as exc:
+        for i, _, _ in posed:
+            results[i] = VehicleResult(vid, Status.FAILED, message=f"batch smoothing failed: {summarise_error(exc)}")
+        return results
+    wireframe = wireframe_from_values(estimate, keys, index)
+    hit = optimizer.iterations() >= options.solve.max_iterations
+    for i, _, key in posed:
+        pose = estimate.atPose3(key)
+        results[i] = VehicleResult(
+            vid, Status.MAX_ITERATIONS if hit else Status.CONVERGED, world_T_vehicle=pose,
+            wireframe=wireframe, pose_covariance=marginals.marginalCovariance(key) if marginals else None,
+            iterations=optimizer.iterations(), final_error=graph.error(estimate), message=segments.get(i, ""),
+            body_type=body_type, body_type_probability=probability, box=_box(pose, wireframe, body_type))
+        results[i].extras["noise_scale"] = scale
+        if marginals:
+            results[i].extras["covariance"] = "smoothed"
+    return results
 
 
 def _box(world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, body_type: str | None):

@@ -26,6 +26,7 @@ import json
 import math
 import os
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -175,12 +176,15 @@ def read_json(path: str | os.PathLike, error: type[InputError] = SceneError):
     return parse_json(text, where, error)
 
 
-def write_text_atomic(path: str | os.PathLike, text: str) -> None:
+def write_text_atomic(path: str | os.PathLike, text: str | Iterable[str]) -> None:
     """Writes ``text`` (UTF-8) to ``path`` atomically: readers see the old file or the whole new one.
 
     A temporary file in the same folder is written, flushed and ``fsync``-ed,
     then moved onto ``path`` with ``os.replace``; on any failure it is removed
     and ``path`` is left as it was. The folder is created when missing.
+    ``text`` may be an iterable of pieces, written as they come (a result file
+    written while its frames are still being solved); an exception raised by
+    the iterable leaves ``path`` as it was.
 
     Raises:
         OSError: the folder cannot be created or written, or the disk is full.
@@ -191,7 +195,8 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
+            for piece in ([text] if isinstance(text, str) else text):
+                f.write(piece)
             f.flush()
             os.fsync(f.fileno())
         os.chmod(tmp, 0o666 & ~_umask())

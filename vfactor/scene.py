@@ -40,6 +40,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -62,12 +63,14 @@ from vfactor.wireframe import Wireframe
 __all__ = [
     "load_scene",
     "scene_from_dict",
+    "frame_from_dict",
     "save_scene",
     "scene_to_dict",
     "load_results",
     "results_from_dict",
     "save_results",
     "results_to_dict",
+    "frame_result_to_dict",
     "box_to_dict",
     "box_from_dict",
 ]
@@ -235,6 +238,18 @@ def scene_from_dict(data: dict, base_dir: Path | None = None, allow_outside_path
         _frame_from_dict(item, f"frames[{i}]", cameras, base) for i, item in enumerate(_list(top["frames"], "frames"))
     ]
     return Scene(cameras=cameras, frames=frames, base_dir=base.path, ground_plane=_ground_plane(top.get("ground_plane")))
+
+
+def frame_from_dict(data: dict, scene: Scene, path: str = "frame", allow_outside_paths: bool = False) -> Frame:
+    """One frame of a scene file's ``frames`` (a line of a stream, :mod:`vfactor.stream`), checked as
+    :func:`scene_from_dict` checks frames, against ``scene``'s cameras; relative paths start from ``scene.base_dir``.
+
+    Raises:
+        SceneError: an invalid field; ``field`` is its path under ``path`` (e.g. ``frame.detections[0].camera``).
+    """
+    base = _Folder(Path(os.path.abspath(scene.base_dir if scene.base_dir is not None else os.getcwd())),
+                   allow_outside_paths)
+    return _frame_from_dict(data, path, scene.cameras, base)
 
 
 def _ground_plane(value) -> GroundPlane | None:
@@ -669,14 +684,39 @@ def _vehicle_fields(det: Detection) -> dict:
 
 
 # ===================================================================== results
-def save_results(path: str | os.PathLike, frames: list[FrameResult]) -> None:
-    """Writes a result file (JSON, docs/scene-format.md and :func:`results_to_dict`).
+def save_results(path: str | os.PathLike, frames: Iterable[FrameResult]) -> None:
+    """Writes a result file (JSON, docs/scene-format.md and :func:`results_to_dict`), atomically.
+
+    ``frames`` may be an iterator (:func:`vfactor.solve.iter_solve_scene`): each
+    frame is written as it comes, and the file appears when the last is in.
 
     Raises:
         SceneError: a result that the file cannot hold (e.g. a converged
-            vehicle without a pose); ``field`` is its path in the file.
+            vehicle without a pose); ``field`` is its path in the file. The file is then not written.
     """
-    _write_json(Path(path), results_to_dict(frames))
+    write_text_atomic(Path(path), _result_pieces(frames))
+
+
+def _result_pieces(frames: Iterable[FrameResult]) -> Iterator[str]:
+    """The text of :func:`_dumps` ``(results_to_dict(frames))``, one frame at a time."""
+    yield '{\n  "frames": ['
+    count = 0
+    for i, frame in enumerate(frames):
+        yield ("," if i else "") + "\n    " + _dumps(_frame_to_dict(frame, i), 2)
+        count += 1
+    yield ("\n  ]" if count else "]") + "\n}\n"
+
+
+def _frame_to_dict(frame: FrameResult, i: int) -> dict:
+    t = float(frame.t)
+    if not math.isfinite(t):
+        raise SceneError(f"frames[{i}].t", f"expected a finite number of seconds, got {t}")
+    return {"t": t, "vehicles": [_vehicle_to_dict(v, f"frames[{i}].vehicles[{j}]") for j, v in enumerate(frame.vehicles)]}
+
+
+def frame_result_to_dict(frame: FrameResult, index: int = 0) -> dict:
+    """One frame of :func:`results_to_dict` (``{"t", "vehicles"}``; ``index`` names it in errors)."""
+    return _frame_to_dict(frame, index)
 
 
 def results_to_dict(frames: list[FrameResult]) -> dict:
@@ -697,14 +737,7 @@ def results_to_dict(frames: list[FrameResult]) -> dict:
     Raises:
         SceneError: a converged / max_iterations vehicle without a pose or wireframe.
     """
-    out = []
-    for i, frame in enumerate(frames):
-        t = float(frame.t)
-        if not math.isfinite(t):
-            raise SceneError(f"frames[{i}].t", f"expected a finite number of seconds, got {t}")
-        vehicles = [_vehicle_to_dict(v, f"frames[{i}].vehicles[{j}]") for j, v in enumerate(frame.vehicles)]
-        out.append({"t": t, "vehicles": vehicles})
-    return {"frames": out}
+    return {"frames": [_frame_to_dict(frame, i) for i, frame in enumerate(frames)]}
 
 
 def load_results(path: str | os.PathLike) -> list[FrameResult]:

@@ -217,6 +217,7 @@ class Tracker:
         self.keys = keys
         self._terms = hwc_terms(options.solve.graph, self.bounds)
         self._tracks: dict[str, _TrackState] = {}
+        self._next_index = 0  # the key scheme's vehicle index of the next new track
         self._frame_counter = 0
         self._last_t: float | None = None
 
@@ -284,10 +285,21 @@ class Tracker:
                         result.extras["covariance"] = "smoothed"  # from every frame the smoother holds
         return out
 
+    def forget(self, t: float) -> list[str]:
+        """Drops every track not seen after ``t - options.max_gap`` (seconds): it would start a new segment, from
+        a new smoother, anyway. A stream (:mod:`vfactor.stream`) calls it to hold its memory bounded however many
+        vehicles come and go; a forgotten id seen again starts a new track. Returns the ids dropped."""
+        gone = [vid for vid, track in self._tracks.items()
+                if (track.poses[-1][1] if track.poses else -math.inf) < t - self.options.max_gap]
+        for vid in gone:
+            del self._tracks[vid]
+        return gone
+
     # ----------------------------------------------------------------- private
     def _track(self, vid: str) -> _TrackState:
         if vid not in self._tracks:
-            self._tracks[vid] = _TrackState(vid, len(self._tracks))
+            self._tracks[vid] = _TrackState(vid, self._next_index)
+            self._next_index += 1
         return self._tracks[vid]
 
     def _new_smoother(self) -> gtsam.IncrementalFixedLagSmoother:

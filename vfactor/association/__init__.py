@@ -49,10 +49,11 @@ class Association:
     left_out: list[tuple[int, int, str]] = field(default_factory=list)
     messages: list[str] = field(default_factory=list)
 
-    def restore_indices(self, results) -> None:
+    def restore_indices(self, results, first: int = 0) -> None:
         """Makes each result's ``extras["detections"]`` (indices into :attr:`scene`'s frames) indices into the
-        scene given, in place: results of ``solve_scene(association.scene)`` or ``track_scene(...).frames``."""
-        for f, frame in enumerate(results):
+        scene given, in place: results of ``solve_scene(association.scene)`` or ``track_scene(...).frames``,
+        or those of the frames from ``first`` on."""
+        for f, frame in enumerate(results, first):
             for v in frame.vehicles:
                 if v.extras.get("detections") is not None:
                     v.extras["detections"] = [self.kept[f][j] for j in v.extras["detections"]]

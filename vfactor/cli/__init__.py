@@ -140,6 +140,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--batch", action="store_true", help="offline batch smoothing (Levenberg-Marquardt over each whole track)")
     p.add_argument("--online", action="store_true", help="write the estimates as each frame arrived (filtered)")
     p.add_argument("--plot", help="also write a PNG of the trajectories with covariance ellipses")
+    g = p.add_argument_group("live streams (docs/scaling.md): SCENE '-' reads JSON Lines from standard input")
+    g.add_argument("--follow", action="store_true",
+                   help="SCENE is a JSON Lines stream that another program is still writing: track each frame as "
+                   "its line arrives (like tail -f); --out - writes a result line per frame to standard output")
+    g.add_argument("--idle-timeout", type=float, metavar="SECONDS",
+                   help="with --follow, stop after this long without a new line (default: until interrupted)")
 
     for name, text in NET_COMMANDS.items():
         p = sub.add_parser(name, help=text, add_help=False)
@@ -276,8 +282,16 @@ def build_parser() -> argparse.ArgumentParser:
 def _estimate_options(p: argparse.ArgumentParser) -> None:
     """The arguments ``solve`` and ``track`` share: the scene, the result and its format, cameras, association,
     covariances, paths, the keypoint network."""
-    p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md; vfactor schema prints its JSON Schema)")
-    p.add_argument("--out", required=True, help="result file to write (written atomically; a folder for --format kitti)")
+    p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md; vfactor schema prints its JSON Schema); or "
+                   "a folder or a quoted glob ('site*/scene.json') of scene files, each with its own result in the "
+                   "folder --out (docs/scaling.md)")
+    p.add_argument("--out", required=True, help="result file to write (written atomically; a folder for --format kitti, "
+                   "and for many scenes)")
+    g = p.add_argument_group("scale-out (docs/scaling.md; needs the 'dask' extra)")
+    g.add_argument("--workers", type=int, metavar="N",
+                   help="spread the work over a local Dask cluster of N worker processes (default: this process)")
+    g.add_argument("--scheduler", metavar="ADDRESS",
+                   help="spread the work over the running Dask cluster whose scheduler is at ADDRESS (tcp://host:8786)")
     p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
     p.add_argument("--associate", action="store_true",
                    help="find the vehicles from geometry even where the detections name them (ids not trusted); "

@@ -7,7 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from vfactor.cli.common import check_out_file, check_outputs, detect, note, output, progress, report_unsolved
+from vfactor.cli.common import (EXIT_INPUT, EXIT_OK, EXIT_UNSOLVED, check_out_file, check_outputs, check_positive, detect, note,
+                                output, progress, report_unsolved, say)
+from vfactor.cli.scenes import scene_jobs
+from vfactor.cli.stream import is_stream, track_stream_command
 from vfactor.cli.interop import name_file_pairs
 from vfactor.errors import InputError
 
@@ -64,20 +67,76 @@ def write_output(args, results, scene) -> None:
         note(report.note())
 
 
+class _Engine:
+    """The engine of ``--workers`` / ``--scheduler`` (vfactor.parallel), started when first needed (a cluster takes
+    seconds to start: not before the options and the first scene are checked) and shared by every scene."""
+
+    def __init__(self, args):
+        self.args, self.engine = args, None
+
+    def get(self):
+        if self.engine is None:
+            from vfactor.parallel import open_engine
+
+            self.engine = open_engine(check_positive(self.args.workers, "--workers"), self.args.scheduler)
+        return self.engine
+
+    def close(self):
+        if self.engine is not None:
+            self.engine.close()
+
+
+def _each_scene(args, run) -> int:
+    """Runs ``run(args, engine)`` on the scene file, or on each scene of a folder or glob (docs/scaling.md)
+    with its own result under the folder ``--out``. With many scenes a bad one is reported (its file and
+    the field) and the others are still done; the exit code is then 2."""
+    if args.workers is not None and args.scheduler is not None:
+        raise InputError("--workers", "give --workers (a local cluster) or --scheduler (an existing one), not both")
+    check_positive(args.workers, "--workers")
+    jobs = scene_jobs(args)
+    engine = _Engine(args)
+    try:
+        if jobs is None:
+            return run(args, engine)
+        codes = []
+        for job in jobs:
+            try:
+                codes.append(run(job, engine))
+            except InputError as exc:
+                say(f"{job.scene}: {exc}")
+                codes.append(EXIT_INPUT)
+        if not args.quiet:
+            print(f"{len(jobs)} scenes: {codes.count(EXIT_OK)} done, {codes.count(EXIT_UNSOLVED)} with unsolved "
+                  f"vehicles, {codes.count(EXIT_INPUT)} not read; results in {args.out}")
+        return EXIT_INPUT if EXIT_INPUT in codes else max(codes, default=EXIT_OK)
+    finally:
+        engine.close()
+
+
 def solve(args) -> int:
+    return _each_scene(args, _solve_one)
+
+
+def _solve_one(args, engine: _Engine) -> int:
     from vfactor.factors.robust import RobustLoss
     from vfactor.graph import GraphConfig
-    from vfactor.solve import SolveOptions, solve_scene
+    from vfactor.solve import SolveOptions, iter_solve_scene
 
     check_outputs(args)
     given = detect(load_input(args), args)
     scene, association = associate(given, args)
     options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
     t0 = time.perf_counter()
-    results = solve_scene(scene, options, progress=progress("solving", not args.quiet))
-    if association is not None:
-        association.restore_indices(results)
-    write_output(args, results, scene)
+    results = []
+
+    def frames():  # written to --out as they come (vfactor.formats.write_results)
+        for frame in iter_solve_scene(scene, options, progress=progress("solving", not args.quiet), engine=engine.get()):
+            if association is not None:
+                association.restore_indices([frame], len(results))
+            results.append(frame)
+            yield frame
+
+    write_output(args, frames(), scene)
     vehicles = [v for fr in results for v in fr.vehicles]
     solved = sum(v.ok for v in vehicles)
     if not args.quiet:
@@ -87,24 +146,33 @@ def solve(args) -> int:
 
 
 def track(args) -> int:
-    from vfactor.solve import SolveOptions
-    from vfactor.track import TrackOptions, smooth_scene, track_scene
-
     if args.lag is not None and not (np.isfinite(args.lag) and args.lag > 0):
         raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
     if args.batch and (args.lag is not None or args.online):
         raise InputError("--batch", "batch smoothing uses every frame: it takes neither --lag nor --online")
+    if is_stream(args):
+        return track_stream_command(args)
+    if args.idle_timeout is not None:
+        raise InputError("--idle-timeout", "only with --follow")
+    return _each_scene(args, _track_one)
+
+
+def _track_one(args, engine: _Engine) -> int:
+    from vfactor.solve import SolveOptions
+    from vfactor.track import TrackOptions, smooth_scene, track_scene
+
     check_outputs(args)
     if args.plot:
         check_out_file(args.plot, "--plot", [("scene file", args.scene), ("result file --out", args.out)])
     given = detect(load_input(args), args)
     scene, association = associate(given, args)
     options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance)
+    where = engine.get()
     t0 = time.perf_counter()
     if args.batch:
-        results, messages = smooth_scene(scene, options), []
+        results, messages = smooth_scene(scene, options, progress=progress("smoothing", not args.quiet), engine=where), []
     else:
-        run = track_scene(scene, options, progress=progress("tracking", not args.quiet))
+        run = track_scene(scene, options, progress=progress("tracking", not args.quiet), engine=where)
         results, messages = (run.online if args.online else run.frames), run.messages
     if association is not None:
         association.restore_indices(results)

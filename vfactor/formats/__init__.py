@@ -57,12 +57,21 @@ FORMATS = {
 
 
 def _write_vfactor(path, results, scene=None) -> WriteReport:
+    """The one format written as the results come: ``results`` may be an iterator (each frame is written as
+    it is yielded; the file appears, atomically, after the last)."""
     from vfactor.scene import save_results
 
-    if scene is not None and len(scene.frames) != len(results):
-        raise InputError("scene", f"the scene has {len(scene.frames)} frames but the results {len(results)}")
-    save_results(path, results)
-    return WriteReport("vfactor", [Path(path)], unsolved_of(results), [])
+    seen: list[FrameResult] = []
+
+    def frames():
+        for frame in results:
+            seen.append(frame)
+            yield frame
+        if scene is not None and len(scene.frames) != len(seen):  # raised before the file is moved into place
+            raise InputError("scene", f"the scene has {len(scene.frames)} frames but the results {len(seen)}")
+
+    save_results(path, frames())
+    return WriteReport("vfactor", [Path(path)], unsolved_of(seen), [])
 
 
 _WRITERS = {"vfactor": _write_vfactor, "openlabel": write_openlabel, "kitti": write_kitti, "nuscenes": write_nuscenes,
@@ -76,7 +85,8 @@ def write_results(path: str | os.PathLike, results: list[FrameResult], scene: Sc
     Args:
         path: the file (a folder for ``kitti``).
         results: one :class:`~vfactor.result.FrameResult` per scene frame, in the scene's order
-            (``solve_scene(scene)`` or ``track_scene(scene).frames``).
+            (``solve_scene(scene)`` or ``track_scene(scene).frames``); for ``vfactor``, also an iterator
+            (``iter_solve_scene(scene)``), each frame written as it comes.
         scene: the scene they were solved from; needed by ``openlabel`` and ``kitti`` (cameras,
             keypoints), checked against the results by the others; None allowed for those.
         format: a key of :data:`FORMATS`.
@@ -94,6 +104,8 @@ def write_results(path: str | os.PathLike, results: list[FrameResult], scene: Sc
     writer = _WRITERS.get(format) if isinstance(format, str) else None
     if writer is None:
         raise InputError("format", f"expected one of {list(FORMATS)}, got {format!r}")
+    if format != "vfactor":  # the other formats need every frame at once
+        results = list(results)
     allowed = [p for p in inspect.signature(writer).parameters if p not in ("path", "folder", "results", "scene")]
     unknown = sorted(set(options) - set(allowed))
     if unknown:

@@ -138,7 +138,7 @@ class DaskEngine(Engine):
             self.client = client
         elif scheduler is not None:
             try:
-                self.client = Client(scheduler, timeout="10s")
+                self.client = Client(scheduler, timeout="5s")
             except (OSError, TimeoutError) as exc:
                 raise InputError("--scheduler", f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
         else:

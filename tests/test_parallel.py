@@ -8,6 +8,7 @@ import os
 import signal
 import time
 
+import numpy as np
 import pytest
 
 pytest.importorskip("distributed")
@@ -156,3 +157,16 @@ def test_cli_many_scenes_options(tmp_path, capsys):
     assert "scene: no scene file matches" in capsys.readouterr().err
     assert main(["solve", str(folder / "a.json"), "--out", str(tmp_path / "o.json"), "--workers", "0"]) == 2
     assert "--workers: expected an integer >= 1" in capsys.readouterr().err
+
+
+def test_eval_on_dask_equals_serial(engine):
+    from vfactor.evaluation import run_accuracy
+
+    def rows(runs):  # every figure but the times
+        return [(variant.name, {m: [{k: np.asarray(v).tolist() for k, v in r.items() if k != "seconds"} for r in rs]
+                                for m, rs in pooled.items()}) for variant, pooled in runs]
+
+    kwargs = dict(frames=2, levels=("paper",), seeds=2, methods=("factor_graph", "triangulation"))
+    serial = run_accuracy("library_2cam", **kwargs)
+    assert rows(run_accuracy("library_2cam", engine=engine, **kwargs)) == rows(serial)
+    assert {r["seed"] for r in serial[0][1]["factor_graph"]} == {0, 1}

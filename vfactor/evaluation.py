@@ -276,28 +276,42 @@ def body_type_table(rows: dict[str, list[dict]], reference: str = "known_shape")
 
 def run_accuracy(scenario: str = "accuracy_2cam", frames: int | None = None, seed: int = 0,
                  levels=("paper", "hard"), options: SolveOptions = SolveOptions(),
-                 methods=tuple(METHODS), seeds: int = 1) -> list[tuple[Scenario, dict[str, list[dict]]]]:
+                 methods=tuple(METHODS), seeds: int = 1, engine=None) -> list[tuple[Scenario, dict[str, list[dict]]]]:
     """The accuracy experiment of docs/results.md: each noise level (:data:`NOISE_LEVELS`) simulated, every method run.
 
     Args:
         seeds: simulate seeds ``seed .. seed + seeds - 1`` and pool their rows (each row keeps its ``seed``).
+        engine: where the simulated scenes (one per level and seed) are solved (:mod:`vfactor.parallel`;
+            default: in this process); the rows do not depend on it.
 
     Returns:
         (scenario variant, :func:`compare_methods` rows) per level.
     """
+    from vfactor.parallel import InProcess
+
     base = load_scenario(scenario)
-    out = []
+    variants = []
     for level in levels:
         if level not in NOISE_LEVELS:
             raise ValueError(f"noise level: expected one of {list(NOISE_LEVELS)}, got {level!r}")
         variant = noise_variant(base, **NOISE_LEVELS[level])
-        variant = dataclasses.replace(variant, name=f"{base.name} ({level})")
+        variants.append(dataclasses.replace(variant, name=f"{base.name} ({level})"))
+    units = [(variant, s, frames, options, tuple(methods)) for variant in variants for s in range(seed, seed + seeds)]
+    results = iter((engine or InProcess()).map(_accuracy_unit, units))
+    out = []
+    for variant in variants:
         pooled = {m: [] for m in methods}
         for s in range(seed, seed + seeds):
-            for method, rows in compare_methods(simulate(variant, seed=s, num_frames=frames), options, methods).items():
+            for method, rows in next(results).items():
                 pooled[method] += [dict(row, seed=s) for row in rows]
         out.append((variant, pooled))
     return out
+
+
+def _accuracy_unit(unit: tuple) -> dict[str, list[dict]]:
+    """One scene of :func:`run_accuracy`: a noise level's variant simulated with one seed, every method run."""
+    variant, seed, frames, options, methods = unit
+    return compare_methods(simulate(variant, seed=seed, num_frames=frames), options, methods)
 
 
 def compare_tracking(sim: Simulation, options=None, lag: float = 0.5) -> dict:

@@ -81,33 +81,45 @@ def _matched_errors(results, truth, max_distance: float) -> dict:
 
 def evaluate_association(scenario: str, seeds, num_frames: int | None = None, noise: dict | None = None,
                          options: AssociationOptions = AssociationOptions(), max_distance: float = 2.0,
-                         progress=None) -> list[AssociationRun]:
+                         progress=None, engine=None) -> list[AssociationRun]:
     """Runs the experiment of the module docstring on ``scenario`` for each seed (the simulation's and the
-    anonymiser's)."""
+    anonymiser's).
+
+    Args:
+        progress: called as ``progress(done, total)`` with the seeds done.
+        engine: where the seeds run (:mod:`vfactor.parallel`; default: in this process); the figures do not
+            depend on it, but for the association's time per frame.
+    """
+    from vfactor.parallel import InProcess
+
+    units = [(scenario, seed, num_frames, noise, options, max_distance) for seed in seeds]
+    return list((engine or InProcess()).map(_association_unit, units, progress=progress))
+
+
+def _association_unit(unit: tuple) -> AssociationRun:
+    """One seed of :func:`evaluate_association`."""
     from vfactor.sim import anonymise, load_scenario, simulate
 
-    runs = []
-    for seed in seeds:
-        sim = simulate(load_scenario(scenario), seed=seed, num_frames=num_frames)
-        anon = anonymise(sim, seed=seed, **(DEFAULT_NOISE if noise is None else noise))
-        t0 = time.perf_counter()
-        found = associate_scene(anon.scene, options, progress=progress)
-        seconds = (time.perf_counter() - t0) / max(len(anon.scene.frames), 1)
-        cameras = [[d.camera for d in f.detections] for f in anon.scene.frames]
-        tracked = track_scene(found.scene, TrackOptions(covariance=False)).frames
-        found.restore_indices(tracked)
-        pairs = cross_camera_pairs(anon.truth_ids, assigned_ids_from_results(tracked, [len(c) for c in cameras]),
-                                   cameras)
-        with_ids = track_scene(_with_true_ids(anon.scene, anon.truth_ids), TrackOptions(covariance=False)).frames
-        truth = truth_positions(sim.truth)
-        runs.append(AssociationRun(
-            scenario, seed, len(sim.scene.cameras), len(anon.scene.frames), sum(len(c) for c in cameras),
-            sum(v is None for ids in anon.truth_ids for v in ids), pairs,
-            clear_mot(truth, positions_from_results(tracked), max_distance),
-            clear_mot(truth, positions_from_results(with_ids), max_distance),
-            _matched_errors(tracked, sim.truth, max_distance), _matched_errors(with_ids, sim.truth, max_distance),
-            seconds))
-    return runs
+    scenario, seed, num_frames, noise, options, max_distance = unit
+    sim = simulate(load_scenario(scenario), seed=seed, num_frames=num_frames)
+    anon = anonymise(sim, seed=seed, **(DEFAULT_NOISE if noise is None else noise))
+    t0 = time.perf_counter()
+    found = associate_scene(anon.scene, options)
+    seconds = (time.perf_counter() - t0) / max(len(anon.scene.frames), 1)
+    cameras = [[d.camera for d in f.detections] for f in anon.scene.frames]
+    tracked = track_scene(found.scene, TrackOptions(covariance=False)).frames
+    found.restore_indices(tracked)
+    pairs = cross_camera_pairs(anon.truth_ids, assigned_ids_from_results(tracked, [len(c) for c in cameras]),
+                               cameras)
+    with_ids = track_scene(_with_true_ids(anon.scene, anon.truth_ids), TrackOptions(covariance=False)).frames
+    truth = truth_positions(sim.truth)
+    return AssociationRun(
+        scenario, seed, len(sim.scene.cameras), len(anon.scene.frames), sum(len(c) for c in cameras),
+        sum(v is None for ids in anon.truth_ids for v in ids), pairs,
+        clear_mot(truth, positions_from_results(tracked), max_distance),
+        clear_mot(truth, positions_from_results(with_ids), max_distance),
+        _matched_errors(tracked, sim.truth, max_distance), _matched_errors(with_ids, sim.truth, max_distance),
+        seconds)
 
 
 def body_type_report(runs: list[AssociationRun]) -> str:

@@ -276,7 +276,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lag", type=float, default=0.5,
                    help="tracks: the fixed lag of the isam2_lag row, seconds (default: 0.5)")
     p.add_argument("--markdown", help="also write the tables to this Markdown file")
+    _scale_options(p, "frames, tracks, association: spread the simulated scenes (one per noise level and seed) over")
     return parser
+
+
+def _scale_options(p: argparse.ArgumentParser, what: str = "spread the work over") -> None:
+    """``--workers`` and ``--scheduler`` (vfactor.parallel)."""
+    g = p.add_argument_group("scale-out (docs/scaling.md; needs the 'dask' extra)")
+    g.add_argument("--workers", type=int, metavar="N",
+                   help=f"{what} a local Dask cluster of N worker processes (default: this process)")
+    g.add_argument("--scheduler", metavar="ADDRESS",
+                   help=f"{what} the running Dask cluster whose scheduler is at ADDRESS (tcp://host:8786)")
 
 
 def _estimate_options(p: argparse.ArgumentParser) -> None:
@@ -287,11 +297,7 @@ def _estimate_options(p: argparse.ArgumentParser) -> None:
                    "folder --out (docs/scaling.md)")
     p.add_argument("--out", required=True, help="result file to write (written atomically; a folder for --format kitti, "
                    "and for many scenes)")
-    g = p.add_argument_group("scale-out (docs/scaling.md; needs the 'dask' extra)")
-    g.add_argument("--workers", type=int, metavar="N",
-                   help="spread the work over a local Dask cluster of N worker processes (default: this process)")
-    g.add_argument("--scheduler", metavar="ADDRESS",
-                   help="spread the work over the running Dask cluster whose scheduler is at ADDRESS (tcp://host:8786)")
+    _scale_options(p)
     p.add_argument("--no-covariance", action="store_true", help="skip the marginal covariances (faster)")
     p.add_argument("--associate", action="store_true",
                    help="find the vehicles from geometry even where the detections name them (ids not trusted); "

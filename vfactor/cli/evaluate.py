@@ -23,14 +23,24 @@ def evaluate(args) -> int:
         raise InputError("--draws", f"expected an integer >= 0, got {args.draws}")
     if not (np.isfinite(args.lag) and args.lag > 0):
         raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
-    if args.experiment == "frames":
-        sections = _eval_frames(args.scenario or "library_2cam", frames, args.seed, _levels(args.levels), args.seeds)
-    elif args.experiment == "tracks":
-        sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws, args.lag)
+    if args.experiment in ("images", "paper") and (args.workers is not None or args.scheduler is not None):
+        raise InputError("--workers" if args.workers is not None else "--scheduler",
+                         f"eval {args.experiment} runs in this process (frames, tracks and association take a cluster)")
+    if args.experiment in ("frames", "tracks", "association"):
+        from vfactor.parallel import open_engine
+
+        check_positive(args.workers, "--workers")
+        with open_engine(args.workers, args.scheduler) as engine:
+            if args.experiment == "frames":
+                sections = _eval_frames(args.scenario or "library_2cam", frames, args.seed, _levels(args.levels),
+                                        args.seeds, engine)
+            elif args.experiment == "tracks":
+                sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws,
+                                        args.lag, engine)
+            else:
+                sections = _eval_association(args.scenario, frames, args.seed, args.seeds, engine)
     elif args.experiment == "images":
         sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed)
-    elif args.experiment == "association":
-        sections = _eval_association(args.scenario, frames, args.seed, args.seeds)
     else:
         if args.scenario:
             raise InputError("--scenario", "the paper comparison uses its own scenario (paper_webots)")
@@ -66,13 +76,14 @@ def _levels(text: str) -> tuple[str, ...]:
     return levels
 
 
-def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper", "hard"), seeds: int = 1) -> list[str]:
+def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper", "hard"), seeds: int = 1,
+                 engine=None) -> list[str]:
     from vfactor.evaluation import (accuracy_table, body_type_table, consistency_table, keypoint_table, run_accuracy,
                                     summarise_methods)
 
     sections = []
     which = f"seed {seed}" if seeds == 1 else f"seeds {seed}-{seed + seeds - 1}"
-    for scenario, rows in run_accuracy(scenario_name, frames, seed, levels, seeds=seeds):
+    for scenario, rows in run_accuracy(scenario_name, frames, seed, levels, seeds=seeds, engine=engine):
         n = scenario.noise
         summary = summarise_methods(rows)
         title = (f"### {scenario.name}: {n.outlier_rate:.0%} outliers, {n.swap_rate:.0%} left/right swaps, "
@@ -93,7 +104,7 @@ def _eval_images(scenario_name: str, frames, seed: int) -> list[str]:
     return [images_report(evaluate_images(scenario_name, frames, seed, progress=progress("rendering")))]
 
 
-def _eval_association(scenario_name, frames, seed: int, seeds: int) -> list[str]:
+def _eval_association(scenario_name, frames, seed: int, seeds: int, engine=None) -> list[str]:
     import importlib.util
 
     if importlib.util.find_spec("motmetrics") is None:  # CLEAR-MOT's counts
@@ -102,31 +113,39 @@ def _eval_association(scenario_name, frames, seed: int, seeds: int) -> list[str]
 
     scenarios = [scenario_name] if scenario_name else ["association_4cam", "association_3cam"]
     runs = [run for name in scenarios
-            for run in evaluate_association(name, range(seed, seed + seeds), frames, progress=progress("associating"))]
+            for run in evaluate_association(name, range(seed, seed + seeds), frames, progress=progress("associating"),
+                                            engine=engine)]
     noise = ", ".join(f"{k} {v:g}" for k, v in DEFAULT_NOISE.items())
     return [f"### Association without ids ({noise}), beside the true ids\n\n{association_report(runs)}\n",
             f"Pose errors per body type and camera count (vehicles tracked within 2 m of a true one):\n\n"
             f"{body_type_report(runs)}\n"]
 
 
-def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int = 0, lag: float = 0.5) -> list[str]:
-    from vfactor.evaluation import compare_tracking, shape_draws_table, shape_over_noise_draws, tracking_table
-    from vfactor.sim import load_scenario, simulate
+def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int = 0, lag: float = 0.5,
+                 engine=None) -> list[str]:
+    from vfactor.parallel import InProcess
+    from vfactor.sim import load_scenario
 
     scenario = load_scenario(scenario_name)
     if scenario.motion is None:
         raise InputError("--scenario", f"{scenario.name!r} has no motion: each frame holds new vehicles, so there "
                          "is nothing to track; use a scenario with tracks, e.g. tracks_3veh or tracks_3cam")
-    sections = []
-    for s in range(seed, seed + seeds):
-        sim = simulate(scenario, seed=s, num_frames=frames)
-        ids = sorted({vid for f in sim.scene.frames for vid in f.vehicle_ids()})
-        title = (f"### {scenario.name}, seed {s}: {len(sim.scene.frames)} frames, {len(ids)} vehicles, "
-                 f"{len(sim.scene.cameras)} cameras" + (", road plane given" if sim.scene.ground_plane else ""))
-        sections.append(f"{title}\n\n{tracking_table(compare_tracking(sim, lag=lag))}\n")
-        if draws:
-            sections.append(f"Final shapes of batch smoothing over {draws} draws of the keypoint noise (same "
-                            f"vehicles and motion):\n\n{shape_draws_table(shape_over_noise_draws(sim, draws))}\n")
+    units = [(scenario, s, frames, draws, lag) for s in range(seed, seed + seeds)]
+    return [section for sections in (engine or InProcess()).map(_tracks_unit, units) for section in sections]
+
+
+def _tracks_unit(unit: tuple) -> list[str]:
+    """One seed of ``vfactor eval tracks``: its sections."""
+    from vfactor.evaluation import compare_tracking, shape_draws_table, shape_over_noise_draws, tracking_table
+    from vfactor.sim import simulate
+
+    scenario, s, frames, draws, lag = unit
+    sim = simulate(scenario, seed=s, num_frames=frames)
+    ids = sorted({vid for f in sim.scene.frames for vid in f.vehicle_ids()})
+    title = (f"### {scenario.name}, seed {s}: {len(sim.scene.frames)} frames, {len(ids)} vehicles, "
+             f"{len(sim.scene.cameras)} cameras" + (", road plane given" if sim.scene.ground_plane else ""))
+    sections = [f"{title}\n\n{tracking_table(compare_tracking(sim, lag=lag))}\n"]
+    if draws:
+        sections.append(f"Final shapes of batch smoothing over {draws} draws of the keypoint noise (same "
+                        f"vehicles and motion):\n\n{shape_draws_table(shape_over_noise_draws(sim, draws))}\n")
     return sections
-
-

@@ -215,3 +215,20 @@ def test_rendered_scenes_report_only_boxes_the_network_takes():
     from vfactor.render.scenes import render_simulation
 
     assert inspect.signature(render_simulation).parameters["min_inside"].default == MIN_ROI_INSIDE
+
+
+def test_detection_on_a_dask_cluster_equals_in_process(rendered, detector, tmp_path):
+    """detect_scene's units (a frame's boxes) on two workers, each loading the weights once: the same keypoints."""
+    pytest.importorskip("distributed")
+    from vfactor.parallel import DaskEngine
+
+    _, r = rendered
+    scene = load_scene(r.path)
+    serial = detect_scene(scene, detector)
+    with DaskEngine(workers=2, warm=False) as engine:
+        distributed = detect_scene(scene, detector, heatmaps_dir=tmp_path / "hm", engine=engine)
+    for a, b in zip(serial.frames, distributed.frames):
+        for da, db in zip(a.detections, b.detections):
+            np.testing.assert_allclose(db.keypoints, da.keypoints, atol=1e-5)
+            np.testing.assert_allclose(db.confidence, da.confidence, atol=1e-6)
+            assert not db.from_image and db.heatmaps and (tmp_path / "hm").joinpath(db.heatmaps).exists()

@@ -154,8 +154,9 @@ def report_unsolved(results, scene, quiet: bool) -> int:
     return code
 
 
-def detect(scene, args):
-    """Runs the keypoint network on the scene's box-only detections (if any); optionally saves the result."""
+def detect(scene, args, engine=None):
+    """Runs the keypoint network on the scene's box-only detections (if any), on ``engine``
+    (:mod:`vfactor.parallel`; default: this process); optionally saves the result."""
     pending = scene.undetected()
     if not pending:
         if args.weights:
@@ -178,7 +179,8 @@ def detect(scene, args):
     if args.save_detections:
         out = Path(args.save_detections)
         heatmaps_dir = out.with_name(out.stem + "_heatmaps")
-    scene = detect_scene(scene, detector, heatmaps_dir=heatmaps_dir, progress=progress("keypoints", not args.quiet))
+    scene = detect_scene(scene, detector, heatmaps_dir=heatmaps_dir, progress=progress("keypoints", not args.quiet),
+                         engine=engine)
     if args.save_detections:
         from vfactor.scene import save_scene
 

@@ -123,7 +123,7 @@ def _solve_one(args, engine: _Engine) -> int:
     from vfactor.solve import SolveOptions, iter_solve_scene
 
     check_outputs(args)
-    given = detect(load_input(args), args)
+    given = detect(load_input(args), args, engine.get())
     scene, association = associate(given, args)
     options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
     t0 = time.perf_counter()
@@ -164,7 +164,7 @@ def _track_one(args, engine: _Engine) -> int:
     check_outputs(args)
     if args.plot:
         check_out_file(args.plot, "--plot", [("scene file", args.scene), ("result file --out", args.out)])
-    given = detect(load_input(args), args)
+    given = detect(load_input(args), args, engine.get())
     scene, association = associate(given, args)
     options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance)
     where = engine.get()

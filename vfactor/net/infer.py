@@ -93,9 +93,10 @@ class KeypointDetector:
         device = torch.device(device if device is not None else ("cuda" if torch.cuda.is_available() else "cpu"))
         meta: dict = {}
         if isinstance(weights, StackedHourglass):
-            model = weights
+            model, self.weights_path = weights, None
         else:
-            model, meta = load_weights(weights if weights is not None else default_weights_path(), with_config=True)
+            self.weights_path = weights if weights is not None else default_weights_path()
+            model, meta = load_weights(self.weights_path, with_config=True)
         self.model = model.to(device).eval()
         self.device = device
         crop = meta.get("crop", {}) if isinstance(meta.get("crop"), dict) else {}

@@ -61,6 +61,7 @@ def detect_scene(
     detector=None,
     heatmaps_dir: str | Path | None = None,
     progress: Callable[[int, int], None] | None = None,
+    engine=None,
 ) -> Scene:
     """Finds the keypoints of every box-only detection of a scene with the keypoint network.
 
@@ -82,6 +83,9 @@ def detect_scene(
             same keypoints and overlays can show the heatmaps. Otherwise ``roi``
             stays the given box.
         progress: called with ``(frames done, frames total)``.
+        engine: where the frames' boxes go through the network (:mod:`vfactor.parallel`; default: in this
+            process). On a cluster every worker loads the detector's weights once (its images and
+            ``heatmaps_dir`` must be on a file system the workers share); the keypoints do not depend on it.
 
     Returns:
         A new :class:`Scene` (the input is not changed).
@@ -90,51 +94,85 @@ def detect_scene(
         SceneError: a frame's image cannot be read or is not its camera's
             ``image_size`` (the field names the image, e.g. ``frames[3].images.cam0``).
     """
-    if detector is None:
+    from vfactor.parallel import InProcess
+
+    engine = engine or InProcess()
+    if detector is None and isinstance(engine, InProcess):
         from vfactor.net.infer import KeypointDetector
 
         detector = KeypointDetector()
     out_dir = Path(heatmaps_dir) if heatmaps_dir is not None else None
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
-    frames = []
-    for f, frame in enumerate(scene.frames):
-        pending = [j for j, det in enumerate(frame.detections) if det.from_image]
-        detections = list(frame.detections)
-        if pending:
-            cams = list(dict.fromkeys(frame.detections[j].camera for j in pending))
-            images = []
-            for name in cams:
-                image = (frame.images or {}).get(name)
-                if image is None:
-                    raise SceneError(f"frames[{f}].images.{name}",
-                                     "missing: detections of this camera give only a box")
-                images.append(read_image(resolve_path(image, scene.base_dir), f"frames[{f}].images.{name}",
-                                          scene.cameras[name].image_size))
-            for j in pending:  # a box mostly outside its image is bad input, named here
-                det, image = frame.detections[j], images[cams.index(frame.detections[j].camera)]
-                try:
-                    check_roi_in_image(det.roi, image.shape[1], image.shape[0])
-                except ValueError as exc:
-                    raise SceneError(f"frames[{f}].detections[{j}].roi", str(exc)) from None
-            rois = [[frame.detections[j].roi for j in pending if frame.detections[j].camera == name] for name in cams]
-            found = detector.detect_batch(images, rois)
-            queue = {name: list(dets) for name, dets in zip(cams, found)}
-            for j in pending:
-                det = frame.detections[j]
-                result = queue[det.camera].pop(0)
-                kp = result.keypoints
-                changes = dict(keypoints=np.asarray(kp.uv, float), confidence=np.asarray(kp.confidence, float),
-                               covariance=np.asarray(kp.covariance, float), from_image=False)
-                if out_dir is not None:
-                    path = out_dir / f"f{f:04d}_d{j:02d}_{_safe(det.camera)}_{_safe(det.vehicle)}.npy"
-                    np.save(path, np.asarray(result.heatmaps, np.float32))
-                    changes.update(heatmaps=str(path.resolve()), roi=tuple(float(b) for b in result.roi))
-                detections[j] = dataclasses.replace(det, **changes)
-        frames.append(dataclasses.replace(frame, detections=detections))
-        if progress is not None:
-            progress(f + 1, len(scene.frames))
+    # a cluster's workers each build the detector from its settings (a torch model is not sent per task)
+    sent = detector if isinstance(engine, InProcess) else _detector_settings(detector)
+    units = ((f, frame, scene.cameras, scene.base_dir, sent, out_dir) for f, frame in enumerate(scene.frames))
+    frames = list(engine.map(_detect_frame, units, progress=progress, total=len(scene.frames)))
     return dataclasses.replace(scene, frames=frames)
+
+
+def _detector_settings(detector):
+    """What a worker needs to build the same detector: its weights file and settings ({}: the shipped weights);
+    a detector of in-memory weights is sent whole."""
+    if detector is None:
+        return {}
+    if detector.weights_path is None:
+        return detector
+    return {"weights": str(detector.weights_path), "roi_margin": detector.roi_margin, "roi_square": detector.roi_square,
+            "min_confidence": detector.min_confidence, "batch_size": detector.batch_size,
+            "flip_test": detector.flip_test, "calibration": detector.calibration.to_dict()}
+
+
+_DETECTORS: dict = {}
+
+
+def _worker_detector(settings: dict):
+    """The detector of ``settings`` on this worker, built once per process."""
+    key = tuple(sorted((k, str(v)) for k, v in settings.items()))
+    if key not in _DETECTORS:
+        from vfactor.net.infer import KeypointDetector
+
+        _DETECTORS[key] = KeypointDetector(**settings)
+    return _DETECTORS[key]
+
+
+def _detect_frame(unit: tuple):
+    """One frame of :func:`detect_scene`: the frame with its box-only detections detected."""
+    f, frame, cameras, base_dir, detector, out_dir = unit
+    if isinstance(detector, dict):
+        detector = _worker_detector(detector)
+    pending = [j for j, det in enumerate(frame.detections) if det.from_image]
+    detections = list(frame.detections)
+    if not pending:
+        return frame
+    cams = list(dict.fromkeys(frame.detections[j].camera for j in pending))
+    images = []
+    for name in cams:
+        image = (frame.images or {}).get(name)
+        if image is None:
+            raise SceneError(f"frames[{f}].images.{name}", "missing: detections of this camera give only a box")
+        images.append(read_image(resolve_path(image, base_dir), f"frames[{f}].images.{name}", cameras[name].image_size))
+    for j in pending:  # a box mostly outside its image is bad input, named here
+        det, image = frame.detections[j], images[cams.index(frame.detections[j].camera)]
+        try:
+            check_roi_in_image(det.roi, image.shape[1], image.shape[0])
+        except ValueError as exc:
+            raise SceneError(f"frames[{f}].detections[{j}].roi", str(exc)) from None
+    rois = [[frame.detections[j].roi for j in pending if frame.detections[j].camera == name] for name in cams]
+    found = detector.detect_batch(images, rois)
+    queue = {name: list(dets) for name, dets in zip(cams, found)}
+    for j in pending:
+        det = frame.detections[j]
+        result = queue[det.camera].pop(0)
+        kp = result.keypoints
+        changes = dict(keypoints=np.asarray(kp.uv, float), confidence=np.asarray(kp.confidence, float),
+                       covariance=np.asarray(kp.covariance, float), from_image=False)
+        if out_dir is not None:
+            path = out_dir / f"f{f:04d}_d{j:02d}_{_safe(det.camera)}_{_safe(det.vehicle)}.npy"
+            np.save(path, np.asarray(result.heatmaps, np.float32))
+            changes.update(heatmaps=str(path.resolve()), roi=tuple(float(b) for b in result.roi))
+        detections[j] = dataclasses.replace(det, **changes)
+    return dataclasses.replace(frame, detections=detections)
 
 
 def _safe(name: str) -> str:

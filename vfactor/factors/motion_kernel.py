@@ -3,10 +3,12 @@
 The non-holonomic and acceleration factors of :mod:`vfactor.factors.motion`
 are linearised once per pose (twice for the acceleration factor's two steps)
 per iSAM2 update. Written with GTSAM's Python ``Pose3.between`` and
-``Pose3.Logmap`` and NumPy they cost about 10 us a call, 28 % of the tracking
-time (docs/performance.md); these kernels compute the same residuals and
-Jacobians in one compiled call, so that mostly the ``CustomFactor`` call itself
-remains, as for the projection factor (:mod:`vfactor.factors.projection_kernel`).
+``Pose3.Logmap`` and NumPy they cost 16-24 us a linearisation, 28 % of the
+fixed-lag tracking time (docs/performance.md). These kernels compute the same
+residuals and Jacobians in one compiled call that fills the factor's output
+arrays (7-8 us a linearisation), so that mostly the ``CustomFactor`` call
+itself remains, as for the projection factor
+(:mod:`vfactor.factors.projection_kernel`).
 
 The maths is GTSAM's (``Pose3::between``, ``Pose3::Logmap``,
 ``Pose3::LogmapDerivative``; docs/factors.md), with ``k(theta) = 1/theta^2 -

@@ -19,8 +19,11 @@ body velocity and ``w / dt`` the angular velocity). Then:
   ``(v_b - v_a) / (sigma_acceleration dt_mid)`` and
   ``(omega_b - omega_a) / (sigma_yaw_acceleration dt_mid)``, ``dt_mid`` the mean step.
 
-Jacobians are analytic: the chain ``dr/dxi * dLog * dbetween`` with GTSAM's own
-``Pose3.between`` and ``Pose3.Logmap`` Jacobians (docs/factors.md).
+Jacobians are analytic: the chain ``dr/dxi * dLog * dbetween`` of GTSAM's
+``Pose3.between`` and ``Pose3.Logmap`` Jacobians (docs/factors.md), computed
+with the residual in one compiled call per factor
+(:mod:`vfactor.factors.motion_kernel`); each factor is a ``gtsam.CustomFactor``
+whose Python callback only reads the poses and calls the kernel.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import gtsam
 import numpy as np
 
 from vfactor.errors import check_numbers
+from vfactor.factors.motion_kernel import acceleration_kernel, nonholonomic_kernel, step_twist_kernel
 
 __all__ = ["MotionModel", "nonholonomic_factor", "acceleration_factor", "step_twist"]
 
@@ -66,12 +70,20 @@ class MotionModel:
 
 
 def step_twist(T1: gtsam.Pose3, T2: gtsam.Pose3, jacobians: bool = False):
-    """``Log(T1^-1 T2)`` and, if asked, its Jacobians with respect to ``T1`` and ``T2``."""
-    if not jacobians:
-        return gtsam.Pose3.Logmap(T1.between(T2)), None, None
-    H1, H2, Hlog = (np.zeros((6, 6), order="F") for _ in range(3))
-    xi = gtsam.Pose3.Logmap(T1.between(T2, H1, H2), Hlog)
-    return xi, Hlog @ H1, Hlog @ H2
+    """The twist of the step from ``T1`` to ``T2`` and, if asked, its Jacobians.
+
+    Args:
+        T1, T2: ``world_T_vehicle`` at the start and the end of the step (metres).
+        jacobians: whether to return the Jacobians.
+
+    Returns:
+        ``(xi, J1, J2)``: ``xi = Log(T1^-1 T2)`` (6,), rotation first (rad, then
+        metres, in the frame of ``T1``), and ``d xi / d T1``, ``d xi / d T2``
+        (6, 6; right perturbations, rotation first), or None for both when not asked.
+    """
+    xi, J1, J2 = np.empty(6), np.empty((6, 6)), np.empty((6, 6))
+    step_twist_kernel(T1.matrix(), T2.matrix(), jacobians, xi, J1, J2)
+    return (xi, J1, J2) if jacobians else (xi, None, None)
 
 
 def _check_dt(dt: float) -> float:
@@ -80,54 +92,66 @@ def _check_dt(dt: float) -> float:
     return float(dt)
 
 
-def _nonholonomic_error(dt, model: MotionModel, this, values, H):
-    k1, k2 = this.keys()
-    xi, J1, J2 = step_twist(values.atPose3(k1), values.atPose3(k2), H is not None)
-    yaw_rate = xi[2] / dt
-    over = yaw_rate - np.clip(yaw_rate, -model.max_yaw_rate, model.max_yaw_rate)
-    r = np.array([
-        xi[4] / (model.sigma_lateral * dt),
-        xi[5] / (model.sigma_vertical * dt),
-        xi[0] / (model.sigma_tilt * dt),
-        xi[1] / (model.sigma_tilt * dt),
-        over / model.yaw_rate_sigma,
-    ])
-    if H is not None:
-        S = np.zeros((5, 6))
-        S[0, 4] = 1 / (model.sigma_lateral * dt)
-        S[1, 5] = 1 / (model.sigma_vertical * dt)
-        S[2, 0] = S[3, 1] = 1 / (model.sigma_tilt * dt)
-        S[4, 2] = (over != 0) / (dt * model.yaw_rate_sigma)
-        H[0], H[1] = S @ J1, S @ J2
+def _nonholonomic_error(k1: int, k2: int, params: np.ndarray, out: tuple, this, values, H):
+    # out: this factor's (r, H1, H2), reused: GTSAM copies H[i] and the returned r
+    r, H1, H2 = out
+    want = H is not None
+    nonholonomic_kernel(values.atPose3(k1).matrix(), values.atPose3(k2).matrix(), params, want, r, H1, H2)
+    if want:
+        H[0], H[1] = H1, H2
     return r
 
 
 def nonholonomic_factor(key1: int, key2: int, dt: float, model: MotionModel = MotionModel()) -> gtsam.CustomFactor:
-    """Non-holonomic step between poses ``key1`` and ``key2`` (``dt`` seconds later)."""
-    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(5), [key1, key2], partial(_nonholonomic_error, _check_dt(dt), model))
+    """Non-holonomic step between two poses of a vehicle (5 whitened rows).
+
+    Args:
+        key1, key2: keys of the ``world_T_vehicle`` poses at the start and the end of the step.
+        dt: the step, seconds (> 0).
+        model: the motion model's sigmas and yaw-rate bound.
+
+    Returns:
+        A unit-noise ``CustomFactor``: the lateral and vertical velocity, the roll and
+        pitch rates, and the yaw rate beyond ``model.max_yaw_rate``, each over its sigma.
+
+    Raises:
+        ValueError: ``dt`` is not a positive finite number.
+    """
+    params = np.array([_check_dt(dt), model.sigma_lateral, model.sigma_vertical, model.sigma_tilt,
+                       model.max_yaw_rate, model.yaw_rate_sigma])
+    out = (np.empty(5), np.zeros((5, 6)), np.zeros((5, 6)))
+    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(5), [key1, key2],
+                              partial(_nonholonomic_error, key1, key2, params, out))
 
 
-def _acceleration_error(dt1, dt2, model: MotionModel, this, values, H):
-    k0, k1, k2 = this.keys()
-    T0, T1, T2 = values.atPose3(k0), values.atPose3(k1), values.atPose3(k2)
+def _acceleration_error(k0: int, k1: int, k2: int, params: np.ndarray, out: tuple, this, values, H):
+    # out: this factor's (r, H0, H1, H2), reused: GTSAM copies H[i] and the returned r
+    r, H0, H1, H2 = out
     want = H is not None
-    xa, Ja0, Ja1 = step_twist(T0, T1, want)
-    xb, Jb1, Jb2 = step_twist(T1, T2, want)
-    mid = 0.5 * (dt1 + dt2)
-    ca, cb = 1 / (model.sigma_acceleration * mid), 1 / (model.sigma_yaw_acceleration * mid)
-    r = np.array([ca * (xb[3] / dt2 - xa[3] / dt1), cb * (xb[2] / dt2 - xa[2] / dt1)])
+    acceleration_kernel(values.atPose3(k0).matrix(), values.atPose3(k1).matrix(), values.atPose3(k2).matrix(),
+                        params, want, r, H0, H1, H2)
     if want:
-        Sa, Sb = np.zeros((2, 6)), np.zeros((2, 6))
-        Sa[0, 3], Sb[0, 3] = -ca / dt1, ca / dt2
-        Sa[1, 2], Sb[1, 2] = -cb / dt1, cb / dt2
-        H[0] = Sa @ Ja0
-        H[1] = Sa @ Ja1 + Sb @ Jb1
-        H[2] = Sb @ Jb2
+        H[0], H[1], H[2] = H0, H1, H2
     return r
 
 
 def acceleration_factor(key0: int, key1: int, key2: int, dt1: float, dt2: float,
                         model: MotionModel = MotionModel()) -> gtsam.CustomFactor:
-    """Smooth speed and yaw rate over three consecutive poses (steps ``dt1`` then ``dt2`` seconds)."""
+    """Smooth speed and yaw rate over three consecutive poses of a vehicle (2 whitened rows).
+
+    Args:
+        key0, key1, key2: keys of the ``world_T_vehicle`` poses, in time order.
+        dt1, dt2: the steps ``key0 -> key1`` and ``key1 -> key2``, seconds (> 0).
+        model: the motion model's acceleration sigmas.
+
+    Returns:
+        A unit-noise ``CustomFactor``: the change of speed and of yaw rate between the
+        two steps, per mean step, each over its sigma.
+
+    Raises:
+        ValueError: a step is not a positive finite number.
+    """
+    params = np.array([_check_dt(dt1), _check_dt(dt2), model.sigma_acceleration, model.sigma_yaw_acceleration])
+    out = (np.empty(2), np.zeros((2, 6)), np.zeros((2, 6)), np.zeros((2, 6)))
     return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(2), [key0, key1, key2],
-                              partial(_acceleration_error, _check_dt(dt1), _check_dt(dt2), model))
+                              partial(_acceleration_error, key0, key1, key2, params, out))

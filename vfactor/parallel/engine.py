@@ -173,15 +173,15 @@ class DaskEngine(Engine):
             submitted += 1
             return True
 
-        for _ in range(ahead):
-            if not submit():
-                break
         next_out, done = 0, 0
+        # at most `ahead` chunks between the next one to yield and the last submitted: the results that wait for
+        # an earlier, slower chunk count too, so a stalled chunk (its worker lost) does not let them pile up
+        while submitted - next_out < ahead and submit():
+            pass
         try:
             for future in pending:
                 ready[index_of.pop(future.key)] = future.result()
                 future.release()
-                submit()
                 while next_out in ready:
                     for result in ready.pop(next_out):
                         done += 1
@@ -189,6 +189,8 @@ class DaskEngine(Engine):
                         if progress is not None:
                             progress(done, max(total, done))
                     next_out += 1
+                while submitted - next_out < ahead and submit():
+                    pass
         finally:
             for future in list(pending.futures):
                 future.cancel()

@@ -831,3 +831,24 @@ def test_frames_of_several_vehicles_without_ids_wait_for_the_association(tmp_pat
     written = json.loads((tmp_path / "again.json").read_text())["frames"][1]["detections"]
     assert all("vehicle" not in d for d in written) and written[0]["track"] == "cam0-17"
     assert load_scene(tmp_path / "again.json").unassigned() == scene.unassigned()
+
+
+def test_results_written_as_they_come(tmp_path):
+    """save_results takes an iterator (vfactor solve writes frames as they are solved): the same text as the
+    whole list, and nothing at the path when the iterator fails part-way."""
+    from vfactor.scene import _dumps, results_to_dict
+
+    results = make_results()
+    path = tmp_path / "streamed.json"
+    save_results(path, iter(results))
+    assert path.read_text(encoding="utf-8") == _dumps(results_to_dict(results)) + "\n"
+    save_results(tmp_path / "empty.json", iter([]))
+    assert strict_json((tmp_path / "empty.json").read_text(encoding="utf-8")) == {"frames": []}
+
+    def failing():
+        yield results[0]
+        raise RuntimeError("solver crashed")
+
+    with pytest.raises(RuntimeError, match="solver crashed"):
+        save_results(tmp_path / "partial.json", failing())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.json", "streamed.json"]  # no partial file, no temp

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vfactor.cli.common import (EXIT_INPUT, EXIT_OK, EXIT_UNSOLVED, check_out_file, check_outputs, check_positive, detect, note,
+from vfactor.cli.common import (EXIT_INPUT, EXIT_OK, EXIT_UNSOLVED, check_out_file, check_outputs, detect, note,
                                 output, progress, report_unsolved, say)
 from vfactor.cli.scenes import scene_jobs
 from vfactor.cli.stream import is_stream, track_stream_command
@@ -78,7 +78,7 @@ class _Engine:
         if self.engine is None:
             from vfactor.parallel import open_engine
 
-            self.engine = open_engine(check_positive(self.args.workers, "--workers"), self.args.scheduler)
+            self.engine = open_engine(self.args.workers, self.args.scheduler)
         return self.engine
 
     def close(self):
@@ -90,9 +90,9 @@ def _each_scene(args, run) -> int:
     """Runs ``run(args, engine)`` on the scene file, or on each scene of a folder or glob (docs/scaling.md)
     with its own result under the folder ``--out``. With many scenes a bad one is reported (its file and
     the field) and the others are still done; the exit code is then 2."""
-    if args.workers is not None and args.scheduler is not None:
-        raise InputError("--workers", "give --workers (a local cluster) or --scheduler (an existing one), not both")
-    check_positive(args.workers, "--workers")
+    from vfactor.parallel import check_engine_options
+
+    check_engine_options(args.workers, args.scheduler)
     jobs = scene_jobs(args)
     engine = _Engine(args)
     try:

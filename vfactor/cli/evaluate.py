@@ -29,7 +29,6 @@ def evaluate(args) -> int:
     if args.experiment in ("frames", "tracks", "association"):
         from vfactor.parallel import open_engine
 
-        check_positive(args.workers, "--workers")
         with open_engine(args.workers, args.scheduler) as engine:
             if args.experiment == "frames":
                 sections = _eval_frames(args.scenario or "library_2cam", frames, args.seed, _levels(args.levels),

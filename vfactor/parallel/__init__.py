@@ -7,6 +7,6 @@ and :func:`~vfactor.track.smooth_scene` take an ``engine``; ``vfactor solve`` an
 ``vfactor track`` build one from ``--workers N`` or ``--scheduler ADDRESS``.
 """
 
-from vfactor.parallel.engine import DaskEngine, Engine, InProcess, open_engine, warm_up
+from vfactor.parallel.engine import DaskEngine, Engine, InProcess, check_engine_options, open_engine, warm_up
 
-__all__ = ["Engine", "InProcess", "DaskEngine", "open_engine", "warm_up"]
+__all__ = ["Engine", "InProcess", "DaskEngine", "open_engine", "check_engine_options", "warm_up"]

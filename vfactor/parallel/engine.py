@@ -29,7 +29,7 @@ from typing import Any
 
 from vfactor.errors import InputError
 
-__all__ = ["Engine", "InProcess", "DaskEngine", "open_engine", "warm_up"]
+__all__ = ["Engine", "InProcess", "DaskEngine", "open_engine", "check_engine_options", "warm_up"]
 
 log = logging.getLogger(__name__)
 
@@ -125,8 +125,7 @@ class DaskEngine(Engine):
         field = "--scheduler" if scheduler else "--workers"
         if sum(x is not None for x in (workers, scheduler, client)) != 1:
             raise InputError(field, "give one of: a number of workers, a scheduler address, a client")
-        if workers is not None and workers < 1:
-            raise InputError("--workers", f"expected an integer >= 1, got {workers}")
+        check_engine_options(workers, scheduler)
         try:
             from distributed import Client, LocalCluster
         except ImportError as exc:
@@ -222,10 +221,25 @@ def _chunks(units: Iterable, size: int) -> Iterator[list]:
         yield piece
 
 
-def open_engine(workers: int | None = None, scheduler: str | None = None) -> Engine:
-    """The engine of a command's ``--workers N`` / ``--scheduler ADDRESS``: in process when neither is given."""
-    if workers is None and scheduler is None:
-        return InProcess()
+def check_engine_options(workers: int | None = None, scheduler: str | None = None) -> None:
+    """Checks a command's ``--workers N`` / ``--scheduler ADDRESS`` before any work (starts nothing).
+
+    Raises:
+        InputError: both given, or a number of workers below 1.
+    """
     if workers is not None and scheduler is not None:
         raise InputError("--workers", "give --workers (a local cluster) or --scheduler (an existing one), not both")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise InputError("--workers", f"expected an integer >= 1, got {workers}")
+
+
+def open_engine(workers: int | None = None, scheduler: str | None = None) -> Engine:
+    """The engine of a command's ``--workers N`` / ``--scheduler ADDRESS``: in process when neither is given.
+
+    Raises:
+        InputError: see :func:`check_engine_options` and :class:`DaskEngine`.
+    """
+    check_engine_options(workers, scheduler)
+    if workers is None and scheduler is None:
+        return InProcess()
     return DaskEngine(workers=workers, scheduler=scheduler)

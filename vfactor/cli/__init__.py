@@ -109,6 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"vfactor {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    parser.commands = sub.choices  # command name -> its parser (vfactor help COMMAND)
     common = [_common_options(defaults=False)]
 
     def add(name, **kwargs):
@@ -349,7 +350,7 @@ def _help(parser: argparse.ArgumentParser, topic: str | None) -> int:
         return EXIT_OK
     if topic in NET_COMMANDS:
         return _net([topic, "--help"], topic)
-    commands = parser._subparsers._group_actions[0].choices  # argparse keeps the sub-parsers only there
+    commands = parser.commands
     if topic not in commands:
         say(f"vfactor help: error: no command {topic!r}; the commands: {', '.join(commands)}")
         return EXIT_INPUT

@@ -1,0 +1,117 @@
+"""Compiled (numba) kernel of the noise scale's fixed point (:mod:`vfactor.shape_evidence`).
+
+:func:`vfactor.shape_evidence.noise_scale` and
+:func:`~vfactor.shape_evidence.inlier_noise_scale` ask, several times per
+vehicle, what the fit would be with every pixel sigma times ``s``: the
+effective number of parameters, the residuals one Gauss-Newton step ahead
+and each observation's 2 x 2 leverage block, each a 42 x 42 system. In NumPy
+that was three ``np.linalg.solve`` calls and a dozen small array operations
+per step (about 1500 LAPACK calls per 30 vehicles, and multi-threaded BLAS
+on 42 x 42 matrices that a shared machine slows down many times over); this
+kernel does one step in one compiled, single-threaded loop: the Cholesky
+factor of ``H(s)``, its inverse, and the products (docs/performance.md).
+
+The maths is that of :class:`vfactor.shape_evidence._ScaledFit` (docs/factors.md);
+the tests check it against ``np.linalg.solve``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["fit_at_scale_kernel"]
+
+
+@njit(cache=True)
+def fit_at_scale_kernel(total, projection, total_eta, projection_eta, jacobian, rhs, w, e_out, M_out):
+    """The fit with the projection factor's information times ``w = 1 / s^2``.
+
+    ``H(s) = H + (w - 1) H_proj``, ``eta(s) = eta + (w - 1) eta_proj``;
+    ``p = w tr(H_proj H(s)^-1)``; the residuals one Gauss-Newton step ahead,
+    ``e = A H(s)^-1 eta(s) - b``; the leverage blocks
+    ``M_i = w A_i H(s)^-1 A_i^T`` (``A_i``: observation i's two rows of the
+    whitened Jacobian).
+
+    Args:
+        total, projection: (m, m) Gauss-Newton Hessians of the whole graph and of
+            the projection factor (variables ``[pose (6), shape (36)]``, m = 42).
+        total_eta, projection_eta: (m,) their information vectors.
+        jacobian: (2n, m) the projection factor's whitened Jacobian ``A`` (0 rows:
+            no residuals or leverages are computed).
+        rhs: (2n,) its right-hand side ``b`` (minus the residuals).
+        w: ``1 / s^2``.
+        e_out: (2n,) predicted residuals, written.
+        M_out: (n, 2, 2) leverage blocks, written.
+
+    Returns:
+        ``p``, or NaN when ``H(s)`` is not positive definite.
+    """
+    m = total.shape[0]
+    # Cholesky factor of H(s) (lower; the mean of the two triangles, so that rounding cannot break symmetry)
+    L = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i + 1):
+            s = 0.5 * (total[i, j] + total[j, i]) + (w - 1.0) * 0.5 * (projection[i, j] + projection[j, i])
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            if i == j:
+                if not s > 0.0:
+                    return math.nan
+                L[i, i] = math.sqrt(s)
+            else:
+                L[i, j] = s / L[j, j]
+    # its inverse (lower triangular)
+    Li = np.zeros((m, m))
+    for j in range(m):
+        Li[j, j] = 1.0 / L[j, j]
+        for i in range(j + 1, m):
+            s = 0.0
+            for k in range(j, i):
+                s -= L[i, k] * Li[k, j]
+            Li[i, j] = s / L[i, i]
+    # H(s)^-1 = Li^T Li = U U^T with U = Li^T (rows contiguous): p and the step
+    U = np.ascontiguousarray(Li.T)
+    g = np.empty(m)
+    for a in range(m):
+        g[a] = total_eta[a] + (w - 1.0) * projection_eta[a]
+    step = np.zeros(m)
+    trace = 0.0
+    for a in range(m):
+        for b in range(a, m):
+            h = 0.0
+            for k in range(b, m):
+                h += U[a, k] * U[b, k]
+            if a == b:
+                trace += projection[a, a] * h
+                step[a] += h * g[a]
+            else:
+                trace += (projection[a, b] + projection[b, a]) * h
+                step[a] += h * g[b]
+                step[b] += h * g[a]
+    rows = jacobian.shape[0]
+    if rows == 0:
+        return w * trace
+    # residuals one step ahead, and X = A Li^T (so that A H(s)^-1 A^T = X X^T)
+    X = np.zeros((rows, m))
+    for r in range(rows):
+        s = -rhs[r]
+        for a in range(m):
+            s += jacobian[r, a] * step[a]
+        e_out[r] = s
+        for k in range(m):
+            x = 0.0
+            for j in range(k + 1):
+                x += jacobian[r, j] * Li[k, j]
+            X[r, k] = x
+    for i in range(rows // 2):
+        for a in range(2):
+            for b in range(a, 2):
+                s = 0.0
+                for k in range(m):
+                    s += X[2 * i + a, k] * X[2 * i + b, k]
+                M_out[i, a, b] = w * s
+                M_out[i, b, a] = w * s
+    return w * trace

@@ -1,6 +1,7 @@
 """Initial pose (and scale) of a vehicle with no pose guess.
 
-Candidates, all scored by the robust cross-projection cost over every camera:
+Candidates, all scored by the robust cross-projection cost over every camera
+in one compiled pass (:func:`vfactor.factors.projection.robust_costs`):
 
 * per camera, PnP of the mean wireframe (OpenCV RANSAC and SQPnP), with the
   labels as given and with left/right swapped, each also turned by 180 degrees
@@ -19,7 +20,7 @@ import cv2
 import gtsam
 import numpy as np
 
-from vfactor.factors.projection import KeypointObservations, whitened_residuals
+from vfactor.factors.projection import KeypointObservations, robust_costs
 from vfactor.factors.robust import RobustLoss
 from vfactor.keypoints import MIRROR_PERMUTATION
 from vfactor.wireframe import Wireframe
@@ -67,41 +68,53 @@ def umeyama(src: np.ndarray, dst: np.ndarray, weights=None, with_scale: bool = T
 def triangulate_keypoints(obs: KeypointObservations, min_views: int = 2):
     """Linear (DLT) triangulation of keypoints seen by ``min_views`` or more cameras.
 
+    Each observation gives two rows ``w (x P_3 - P_1)``, ``w (y P_3 - P_2)`` (``x, y`` its
+    undistorted normalised coordinates, ``P`` its camera's ``camera_T_world[:3]``, ``w``
+    its square-root information); the keypoint is the smallest right singular vector
+    of its rows. The pixels are undistorted once per camera and the keypoints with the
+    same number of rows solved in one batched SVD.
+
     Returns:
         (indices (m,), world points (m, 3)) of the keypoints that triangulate in
         front of all their cameras.
     """
-    indices, points = [], []
+    normalised = np.empty((len(obs), 2))
+    for c, camera in enumerate(obs.cameras):
+        rows = obs.camera_index == c
+        if rows.any():
+            normalised[rows] = camera.undistort_pixels(obs.uv[rows])
+    P = np.concatenate([obs._R_cw, obs._t_cw[:, :, None]], axis=2)  # (n, 3, 4) camera_T_world[:3] of each observation
+    w = obs.sqrt_information[:, 0, 0, None]
+    A = np.stack([w * (normalised[:, :1] * P[:, 2] - P[:, 0]), w * (normalised[:, 1:] * P[:, 2] - P[:, 1])], axis=1)
+    groups: dict[int, list] = {}
     for k in np.unique(obs.keypoint_index):
         rows = np.flatnonzero(obs.keypoint_index == k)
-        if len(set(obs.camera_index[rows])) < min_views:
-            continue
-        A = []
-        for i in rows:
-            camera = obs.cameras[obs.camera_index[i]]
-            x, y = camera.undistort_pixels(obs.uv[i : i + 1])[0]
-            P = camera.camera_T_world[:3]
-            w = obs.sqrt_information[i, 0, 0]
-            A.append(w * (x * P[2] - P[0]))
-            A.append(w * (y * P[2] - P[1]))
-        _, _, Vt = np.linalg.svd(np.array(A))
-        X = Vt[-1]
-        if abs(X[3]) < 1e-12:
-            continue
-        X = X[:3] / X[3]
-        if all(obs.cameras[obs.camera_index[i]].to_camera(X[None])[0, 2] > 0 for i in rows):
-            indices.append(k)
-            points.append(X)
-    return np.array(indices, dtype=int), np.array(points).reshape(-1, 3)
+        if len(set(obs.camera_index[rows])) >= min_views:
+            groups.setdefault(len(rows), []).append((k, rows))
+    indices, points = [], []
+    for count, members in sorted(groups.items()):
+        rows = np.array([r for _, r in members])  # (m, count)
+        _, _, Vt = np.linalg.svd(A[rows].reshape(len(members), 2 * count, 4))
+        X = Vt[:, -1]
+        for (k, r), x in zip(members, X):
+            if abs(x[3]) < 1e-12:
+                continue
+            x = x[:3] / x[3]
+            if np.all(obs._R_cw[r, 2] @ x + obs._t_cw[r, 2] > 0):  # in front of each of its cameras
+                indices.append(k)
+                points.append(x)
+    order = np.argsort(indices, kind="stable")
+    return np.array(indices, dtype=int)[order], np.array(points).reshape(-1, 3)[order]
 
 
 def cross_projection_cost(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, loss: RobustLoss) -> float:
-    """Robust cost of the projections of ``wireframe`` at a pose in every camera."""
-    e = whitened_residuals(obs, world_T_vehicle, wireframe.vehicle_p_keypoints)
-    return float(np.sum(loss.rho(np.linalg.norm(e, axis=1))))
+    """Robust cost ``sum rho(|e_i|)`` of the projections of ``wireframe`` at a pose in every camera."""
+    return float(robust_costs(obs, world_T_vehicle.matrix()[None], wireframe.vehicle_p_keypoints[None], loss)[0])
 
 
-def _pnp(camera, object_p, image_uv, threshold_px):
+def _pnp(camera, world_T_camera: gtsam.Pose3, object_p, image_uv, threshold_px):
+    """Poses (world_T_vehicle) of ``object_p`` (n, 3, body frame) seen at ``image_uv`` (n, 2 pixels) by ``camera``:
+    RANSAC (EPnP, ``threshold_px``; 6 points or more) and SQPnP."""
     found = []
     img, K, dist, px_per_unit = camera.pnp_inputs(image_uv)  # a fisheye lens: normalised points, identity K
     obj = object_p.astype(np.float64)
@@ -125,7 +138,7 @@ def _pnp(camera, object_p, image_uv, threshold_px):
         camera_T_vehicle[:3, 3] = np.ravel(tvec)
         if not np.all(np.isfinite(camera_T_vehicle)) or camera_T_vehicle[2, 3] <= 0:
             continue
-        poses.append(camera.pose.compose(gtsam.Pose3(camera_T_vehicle)))
+        poses.append(world_T_camera.compose(gtsam.Pose3(camera_T_vehicle)))
     return poses
 
 
@@ -146,8 +159,9 @@ def pose_candidates(
         if len(rows) < max(4, min_keypoints_in_one_view):
             continue
         threshold = float(3.0 * np.median(sigma[rows]))
+        world_T_camera = camera.pose  # once per camera
         for labels, tag in ((obs.keypoint_index[rows], "pnp"), (MIRROR_PERMUTATION[obs.keypoint_index[rows]], "pnp-mirrored")):
-            for pose in _pnp(camera, points[labels], obs.uv[rows], threshold):
+            for pose in _pnp(camera, world_T_camera, points[labels], obs.uv[rows], threshold):
                 out.append((pose, wireframe, f"{tag}:{camera.name}"))
                 out.append((pose.compose(flip), wireframe, f"{tag}-turned:{camera.name}"))
     idx, world = triangulate_keypoints(obs)
@@ -163,10 +177,13 @@ def best_candidates(
     min_angle_rad: float = 0.35, min_distance_m: float = 1.0, min_keypoints_in_one_view: int = 4,
 ) -> list[Candidate]:
     """The ``count`` lowest-cost candidates that differ by at least the given angle or distance."""
-    scored = sorted(
-        (Candidate(pose, w, cross_projection_cost(obs, pose, w, loss), source) for pose, w, source in pose_candidates(obs, wireframe, min_keypoints_in_one_view)),
-        key=lambda c: c.cost,
-    )
+    found = pose_candidates(obs, wireframe, min_keypoints_in_one_view)
+    if not found:
+        return []
+    costs = robust_costs(obs, np.array([pose.matrix() for pose, _, _ in found]),
+                         np.array([w.vehicle_p_keypoints for _, w, _ in found]), loss)  # every candidate in one pass
+    scored = sorted((Candidate(pose, w, float(cost), source) for (pose, w, source), cost in zip(found, costs)),
+                    key=lambda c: c.cost)
     chosen: list[Candidate] = []
     for cand in scored:
         if not np.isfinite(cand.cost):

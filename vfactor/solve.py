@@ -29,8 +29,8 @@ from vfactor.graph import (
     build_vehicle_graph,
     copy_graph,
     hwc_factor,
+    hwc_residuals,
     hwc_terms,
-    hwc_violation,
     insert_vehicle_values,
     observations_from_detections,
     wireframe_from_values,
@@ -388,27 +388,29 @@ def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc)
         hwc: the vehicle's HWC factor made of ``terms``.
 
     Returns:
-        (estimate, cost, hit the iteration limit, the graph finally used). The cost
-        always includes the HWC factor's error, so that starts which did and did
-        not need it compare on the same objective.
+        (estimate, cost, iterations, hit the iteration limit, the graph finally used).
+        The cost always includes the HWC factor's error, so that starts which did
+        and did not need it compare on the same objective; without the factor that
+        error is half the squared norm of the HWC residuals the check computed.
     """
     config = options.graph
     optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.lm_params())
     estimate = optimizer.optimize()
     hit_limit = optimizer.iterations() >= options.max_iterations
     iterations = optimizer.iterations()
-    added = False
-    if config.hwc == "lazy" and hwc_violation(wireframe_from_values(estimate, keys), terms) > config.hwc_tolerance:
-        with_hwc = copy_graph(graph)
-        with_hwc.add(hwc)
-        graph, added = with_hwc, True
-        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.lm_params())
-        estimate = optimizer.optimize()
-        hit_limit = optimizer.iterations() >= options.max_iterations
-        iterations += optimizer.iterations()
-    cost = graph.error(estimate)
-    if config.hwc == "lazy" and not added:
-        cost += hwc.error(estimate)
+    cost = optimizer.error()  # graph.error(estimate)
+    if config.hwc == "lazy":
+        residuals = hwc_residuals(wireframe_from_values(estimate, keys), terms)
+        if float(np.abs(residuals).max()) > config.hwc_tolerance:
+            graph = copy_graph(graph)
+            graph.add(hwc)
+            optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.lm_params())
+            estimate = optimizer.optimize()
+            hit_limit = optimizer.iterations() >= options.max_iterations
+            iterations += optimizer.iterations()
+            cost = optimizer.error()
+        else:
+            cost += 0.5 * float(residuals @ residuals)  # hwc.error(estimate), from the residuals of the check
     return estimate, cost, iterations, hit_limit, graph
 
 

@@ -3,9 +3,11 @@
 Candidates, all scored by the robust cross-projection cost over every camera
 in one compiled pass (:func:`vfactor.factors.projection.robust_costs`):
 
-* per camera, PnP of the mean wireframe (OpenCV RANSAC and SQPnP), with the
-  labels as given and with left/right swapped, each also turned by 180 degrees
-  about the body z axis;
+* per camera, PnP of the mean wireframe with the labels as given and with
+  left/right swapped, each also turned by 180 degrees about the body z axis:
+  SQPnP on all the camera's keypoints, and OpenCV's RANSAC (EPnP) only when
+  some keypoint is beyond the threshold from SQPnP's pose (with every
+  keypoint within it, RANSAC would keep them all: the same fit);
 * multi-view: keypoints seen by two or more cameras are triangulated and the
   mean wireframe is aligned to them (Umeyama, with scale).
 
@@ -113,24 +115,31 @@ def cross_projection_cost(obs: KeypointObservations, world_T_vehicle: gtsam.Pose
 
 
 def _pnp(camera, world_T_camera: gtsam.Pose3, object_p, image_uv, threshold_px):
-    """Poses (world_T_vehicle) of ``object_p`` (n, 3, body frame) seen at ``image_uv`` (n, 2 pixels) by ``camera``:
-    RANSAC (EPnP, ``threshold_px``; 6 points or more) and SQPnP."""
+    """Poses (world_T_vehicle) of ``object_p`` (n, 3, body frame) seen at ``image_uv`` (n, 2 pixels) by ``camera``.
+
+    SQPnP on every point; RANSAC (EPnP, ``threshold_px``) too when a point lies
+    beyond ``threshold_px`` from SQPnP's projection (and there are 6 points or more).
+    """
     found = []
     img, K, dist, px_per_unit = camera.pnp_inputs(image_uv)  # a fisheye lens: normalised points, identity K
     obj = object_p.astype(np.float64)
-    if len(obj) >= 6:
-        ok, rvec, tvec, _ = cv2.solvePnPRansac(
-            obj, img, K, dist, iterationsCount=200, reprojectionError=threshold_px / px_per_unit, confidence=0.999,
-            flags=cv2.SOLVEPNP_EPNP,
-        )
-        if ok:
-            found.append((rvec, tvec))
+    threshold = threshold_px / px_per_unit
+    all_within = False
     try:
         ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_SQPNP)
         if ok:
             found.append((rvec, tvec))
+            projected, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
+            all_within = bool(np.all(np.linalg.norm(projected.reshape(-1, 2) - img, axis=1) <= threshold))
     except cv2.error:
         pass
+    if len(obj) >= 6 and not all_within:
+        ok, rvec, tvec, _ = cv2.solvePnPRansac(
+            obj, img, K, dist, iterationsCount=200, reprojectionError=threshold, confidence=0.999,
+            flags=cv2.SOLVEPNP_EPNP,
+        )
+        if ok:
+            found.append((rvec, tvec))
     poses = []
     for rvec, tvec in found:
         camera_T_vehicle = np.eye(4)

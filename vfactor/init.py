@@ -7,7 +7,8 @@ in one compiled pass (:func:`vfactor.factors.projection.robust_costs`):
   left/right swapped, each also turned by 180 degrees about the body z axis:
   SQPnP on all the camera's keypoints, and OpenCV's RANSAC (EPnP) only when
   some keypoint is beyond the threshold from SQPnP's pose (with every
-  keypoint within it, RANSAC would keep them all: the same fit);
+  keypoint within it, RANSAC would keep them all: the same fit), and only for
+  the labelling whose SQPnP pose keeps the most keypoints within it;
 * multi-view: keypoints seen by two or more cameras are triangulated and the
   mean wireframe is aligned to them (Umeyama, with scale).
 
@@ -114,40 +115,56 @@ def cross_projection_cost(obs: KeypointObservations, world_T_vehicle: gtsam.Pose
     return float(robust_costs(obs, world_T_vehicle.matrix()[None], wireframe.vehicle_p_keypoints[None], loss)[0])
 
 
-def _pnp(camera, world_T_camera: gtsam.Pose3, object_p, image_uv, threshold_px):
-    """Poses (world_T_vehicle) of ``object_p`` (n, 3, body frame) seen at ``image_uv`` (n, 2 pixels) by ``camera``.
+def _world_pose(world_T_camera: gtsam.Pose3, rvec, tvec) -> gtsam.Pose3 | None:
+    """world_T_vehicle from OpenCV's camera_T_vehicle (``rvec``, ``tvec``); None when not finite or not in front."""
+    camera_T_vehicle = np.eye(4)
+    camera_T_vehicle[:3, :3] = cv2.Rodrigues(rvec)[0]
+    camera_T_vehicle[:3, 3] = np.ravel(tvec)
+    if not np.all(np.isfinite(camera_T_vehicle)) or camera_T_vehicle[2, 3] <= 0:
+        return None
+    return world_T_camera.compose(gtsam.Pose3(camera_T_vehicle))
 
-    SQPnP on every point; RANSAC (EPnP, ``threshold_px``) too when a point lies
-    beyond ``threshold_px`` from SQPnP's projection (and there are 6 points or more).
+
+def _camera_pnp(camera, world_T_camera: gtsam.Pose3, labellings, image_uv, threshold_px) -> list[list[gtsam.Pose3]]:
+    """PnP poses (world_T_vehicle) of one camera's keypoints under each labelling of them.
+
+    Each labelling is the (n, 3) body-frame points its labels name, seen at
+    ``image_uv`` (n, 2 pixels). SQPnP fits each on every point. RANSAC (EPnP,
+    ``threshold_px``; 6 points or more) runs only where that fit leaves some
+    point beyond ``threshold_px`` (with every point within it RANSAC would keep
+    them all: the same fit), and only for the labellings whose SQPnP fit keeps
+    the most points within it: RANSAC looks for the outliers of the labelling
+    the keypoints favour, the others keep their SQPnP pose.
+
+    Returns:
+        Per labelling, its poses (SQPnP's, then RANSAC's).
     """
-    found = []
     img, K, dist, px_per_unit = camera.pnp_inputs(image_uv)  # a fisheye lens: normalised points, identity K
-    obj = object_p.astype(np.float64)
     threshold = threshold_px / px_per_unit
-    all_within = False
-    try:
-        ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_SQPNP)
-        if ok:
-            found.append((rvec, tvec))
-            projected, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
-            all_within = bool(np.all(np.linalg.norm(projected.reshape(-1, 2) - img, axis=1) <= threshold))
-    except cv2.error:
-        pass
-    if len(obj) >= 6 and not all_within:
-        ok, rvec, tvec, _ = cv2.solvePnPRansac(
-            obj, img, K, dist, iterationsCount=200, reprojectionError=threshold, confidence=0.999,
-            flags=cv2.SOLVEPNP_EPNP,
-        )
-        if ok:
-            found.append((rvec, tvec))
-    poses = []
-    for rvec, tvec in found:
-        camera_T_vehicle = np.eye(4)
-        camera_T_vehicle[:3, :3] = cv2.Rodrigues(rvec)[0]
-        camera_T_vehicle[:3, 3] = np.ravel(tvec)
-        if not np.all(np.isfinite(camera_T_vehicle)) or camera_T_vehicle[2, 3] <= 0:
-            continue
-        poses.append(world_T_camera.compose(gtsam.Pose3(camera_T_vehicle)))
+    poses, within = [], []
+    for object_p in labellings:
+        obj = object_p.astype(np.float64)
+        found, kept = [], -1
+        try:
+            ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_SQPNP)
+            pose = _world_pose(world_T_camera, rvec, tvec) if ok else None
+            if pose is not None:
+                found.append(pose)
+                projected, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
+                kept = int(np.sum(np.linalg.norm(projected.reshape(-1, 2) - img, axis=1) <= threshold))
+        except cv2.error:
+            pass
+        poses.append(found)
+        within.append(kept)
+    for object_p, found, kept in zip(labellings, poses, within):
+        if len(object_p) >= 6 and kept < len(object_p) and kept == max(within):
+            ok, rvec, tvec, _ = cv2.solvePnPRansac(
+                object_p.astype(np.float64), img, K, dist, iterationsCount=200, reprojectionError=threshold,
+                confidence=0.999, flags=cv2.SOLVEPNP_EPNP,
+            )
+            pose = _world_pose(world_T_camera, rvec, tvec) if ok else None
+            if pose is not None:
+                found.append(pose)
     return poses
 
 
@@ -156,8 +173,9 @@ def pose_candidates(
 ) -> list[tuple[gtsam.Pose3, Wireframe, str]]:
     """All candidate (pose, wireframe, source) starts for one vehicle (unscored).
 
-    PnP runs on every camera that sees at least ``min_keypoints_in_one_view``
-    keypoints (4 at the least); triangulation needs 4 keypoints seen twice.
+    PnP (:func:`_camera_pnp`) runs on every camera that sees at least
+    ``min_keypoints_in_one_view`` keypoints (4 at the least), with the labels
+    as given and mirrored; triangulation needs 4 keypoints seen twice.
     """
     out = []
     points = wireframe.vehicle_p_keypoints
@@ -168,9 +186,11 @@ def pose_candidates(
         if len(rows) < max(4, min_keypoints_in_one_view):
             continue
         threshold = float(3.0 * np.median(sigma[rows]))
-        world_T_camera = camera.pose  # once per camera
-        for labels, tag in ((obs.keypoint_index[rows], "pnp"), (MIRROR_PERMUTATION[obs.keypoint_index[rows]], "pnp-mirrored")):
-            for pose in _pnp(camera, world_T_camera, points[labels], obs.uv[rows], threshold):
+        labels = obs.keypoint_index[rows]
+        fits = _camera_pnp(camera, camera.pose, (points[labels], points[MIRROR_PERMUTATION[labels]]), obs.uv[rows],
+                           threshold)
+        for tag, poses in zip(("pnp", "pnp-mirrored"), fits):
+            for pose in poses:
                 out.append((pose, wireframe, f"{tag}:{camera.name}"))
                 out.append((pose.compose(flip), wireframe, f"{tag}-turned:{camera.name}"))
     idx, world = triangulate_keypoints(obs)

@@ -28,7 +28,8 @@ from vfactor.factors.robust import RobustLoss
 from vfactor.keypoints import MIRROR_PERMUTATION
 from vfactor.wireframe import Wireframe
 
-__all__ = ["Candidate", "umeyama", "triangulate_keypoints", "pose_candidates", "best_candidates", "cross_projection_cost"]
+__all__ = ["Candidate", "umeyama", "triangulate_keypoints", "pose_candidates", "best_candidates", "cross_projection_cost",
+           "distinct_poses"]
 
 
 @dataclass(frozen=True)
@@ -201,30 +202,40 @@ def pose_candidates(
     return out
 
 
+def distinct_poses(a: gtsam.Pose3, b: gtsam.Pose3, min_angle_rad: float = 0.35, min_distance_m: float = 1.0) -> bool:
+    """Whether two vehicle poses differ by more than ``min_angle_rad`` (rotation) or ``min_distance_m`` (translation)."""
+    return bool(_distinct(a.rotation().matrix()[None], a.translation()[None], b.rotation().matrix(), b.translation(),
+                          min_angle_rad, min_distance_m)[0])
+
+
+def _distinct(R, t, R_other, t_other, min_angle_rad, min_distance_m) -> np.ndarray:
+    """(K,) whether each of K poses (rotations (K, 3, 3), translations (K, 3)) differs from one other pose."""
+    cos_angle = 0.5 * (np.einsum("kij,ij->k", R, R_other) - 1.0)  # cos of the angle of R^T R_other
+    angle = np.arccos(np.clip(cos_angle, -1.0, 1.0))
+    return (angle > min_angle_rad) | (np.linalg.norm(t - t_other, axis=1) > min_distance_m)
+
+
 def best_candidates(
-    obs: KeypointObservations, wireframe: Wireframe, loss: RobustLoss, count: int = 2,
+    obs: KeypointObservations, wireframe: Wireframe, loss: RobustLoss, count: int | None = 2,
     min_angle_rad: float = 0.35, min_distance_m: float = 1.0, min_keypoints_in_one_view: int = 4,
 ) -> list[Candidate]:
-    """The ``count`` lowest-cost candidates that differ by at least the given angle or distance."""
+    """The ``count`` lowest-cost candidates (None: all) that differ by at least the given angle or distance, best first."""
     found = pose_candidates(obs, wireframe, min_keypoints_in_one_view)
     if not found:
         return []
-    costs = robust_costs(obs, np.array([pose.matrix() for pose, _, _ in found]),
-                         np.array([w.vehicle_p_keypoints for _, w, _ in found]), loss)  # every candidate in one pass
-    scored = sorted((Candidate(pose, w, float(cost), source) for (pose, w, source), cost in zip(found, costs)),
-                    key=lambda c: c.cost)
+    T = np.array([pose.matrix() for pose, _, _ in found])
+    costs = robust_costs(obs, T, np.array([w.vehicle_p_keypoints for _, w, _ in found]), loss)  # every candidate in one pass
     chosen: list[Candidate] = []
-    for cand in scored:
-        if not np.isfinite(cand.cost):
+    finite = np.isfinite(costs)
+    keep = finite.copy()  # finite and distinct from every candidate chosen so far
+    for i in np.argsort(np.where(finite, costs, np.inf), kind="stable"):
+        if not finite[i]:
+            break
+        if not keep[i]:
             continue
-        distinct = all(
-            np.linalg.norm(gtsam.Rot3.Logmap(c.world_T_vehicle.rotation().between(cand.world_T_vehicle.rotation())))
-            > min_angle_rad
-            or np.linalg.norm(c.world_T_vehicle.translation() - cand.world_T_vehicle.translation()) > min_distance_m
-            for c in chosen
-        )
-        if distinct:
-            chosen.append(cand)
+        pose, w, source = found[i]
+        chosen.append(Candidate(pose, w, float(costs[i]), source))
         if len(chosen) == count:
             break
+        keep &= _distinct(T[:, :3, :3], T[:, :3, 3], T[i, :3, :3], T[i, :3, 3], min_angle_rad, min_distance_m)
     return chosen

@@ -35,7 +35,7 @@ from vfactor.graph import (
     observations_from_detections,
     wireframe_from_values,
 )
-from vfactor.init import best_candidates
+from vfactor.init import best_candidates, distinct_poses
 from vfactor.keys import KeyScheme
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
@@ -60,8 +60,12 @@ class SolveOptions:
         max_iterations: Levenberg-Marquardt iteration limit per start.
         relative_error_tol: stop when the cost decreases by less than this fraction.
         absolute_error_tol: stop when the cost decreases by less than this.
-        num_starts: how many distinct initial poses to optimise from (the lowest
-            final cost wins).
+        num_starts: at most this many distinct initial poses to optimise from
+            (the lowest final cost wins): the best candidate, then, while the best
+            solution so far keeps fewer than :data:`FURTHER_START_INLIERS` of the
+            keypoints as inliers, the next candidates that differ from every
+            solution reached (a start that LM would pull to a minimum already
+            found is not another start).
         covariance: compute the pose and keypoint covariances (``gtsam.Marginals``).
         min_observations: fewer seen keypoints (over all cameras) make the
             vehicle ``degenerate``.
@@ -192,7 +196,7 @@ def solve_observations(
         starts = [initial]
     else:
         per_view = np.bincount(obs.camera_index, minlength=len(obs.cameras)).max()
-        candidates = best_candidates(obs, mean, options.graph.loss, options.num_starts,
+        candidates = best_candidates(obs, mean, options.graph.loss, None,
                                      min_keypoints_in_one_view=options.min_keypoints_in_one_view)
         if not candidates:
             return VehicleResult(
@@ -209,7 +213,14 @@ def solve_observations(
     hwc = hwc_factor(keys, 0, terms=terms)
     best = None
     failure = "no start"
+    tried, solutions = 0, []  # the poses LM reached
     for world_T_vehicle, wireframe in starts:
+        if tried == options.num_starts or (best is not None and _inlier_share(obs, best[0], keys, options)
+                                            >= FURTHER_START_INLIERS):
+            break
+        if not all(distinct_poses(world_T_vehicle, p) for p in solutions):
+            continue  # LM would pull it to a minimum already found: not another start
+        tried += 1
         values = gtsam.Values()
         insert_vehicle_values(values, keys, world_T_vehicle, wireframe)
         try:
@@ -217,6 +228,7 @@ def solve_observations(
         except RuntimeError as exc:
             failure = summarise_error(exc)
             continue
+        solutions.append(outcome[0].atPose3(keys.pose_key()))
         if best is None or outcome[1] < best[1]:
             best = outcome
     if best is None:
@@ -265,6 +277,21 @@ def solve_observations(
     result.box = vehicle_box(world_T_vehicle, wireframe, joint, result.extras.get("body_type_posterior"),
                              options.box_model)
     return checked(result, [obs.cameras[c] for c in np.unique(obs.camera_index)], options.covariance)  # vfactor.sanity
+
+
+#: A further start (up to ``SolveOptions.num_starts``) is optimised only while the best solution so far keeps fewer than
+#: this share of the keypoints as inliers (robust-loss weight above 0.5): on 1476 simulated vehicles (library_2cam
+#: seeds 5-8, accuracy_2cam and intersection_2cam seeds 0-1, three noise levels) a second start found a lower cost
+#: once, where the first solution, turned by 180 degrees, kept 24 % of them; solutions within 90 degrees of the truth
+#: keep at least 43 % (hard noise: 15 % outliers, 8 % swaps), 90 % at the median, and 0.9 % of them fewer than 60 %.
+FURTHER_START_INLIERS = 0.6
+
+
+def _inlier_share(obs: KeypointObservations, estimate: gtsam.Values, keys: KeyScheme, options: SolveOptions) -> float:
+    """Share of the observations whose robust-loss weight at ``estimate`` is above 0.5 (whitened residual within the
+    loss's threshold)."""
+    e = whitened_residuals(obs, estimate.atPose3(keys.pose_key()), wireframe_from_values(estimate, keys).vehicle_p_keypoints)
+    return float(np.mean(options.graph.loss.weight(np.linalg.norm(e, axis=1)) > 0.5))
 
 
 #: An observation whose whitened residual's square is beyond this (the 99 % point of chi2(2)) is an outlier to the

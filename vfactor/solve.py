@@ -192,45 +192,54 @@ def solve_observations(
             message=f"only {n_seen} keypoints seen over all cameras; at least {options.min_observations} are needed",
         )
     mean = Wireframe(first_prior.mean)
-    if initial is not None:
-        starts = [initial]
-    else:
-        per_view = np.bincount(obs.camera_index, minlength=len(obs.cameras)).max()
-        candidates = best_candidates(obs, mean, options.graph.loss, None,
-                                     min_keypoints_in_one_view=options.min_keypoints_in_one_view)
-        if not candidates:
-            return VehicleResult(
-                vehicle_id, Status.DEGENERATE,
-                message=(
-                    f"no initial pose: the best camera sees {per_view} keypoints (PnP needs "
-                    f"{options.min_keypoints_in_one_view}) and too few keypoints triangulate"
-                ),
-            )
-        starts = [(c.world_T_vehicle, c.wireframe) for c in candidates]
     graph = build_vehicle_graph(obs, keys, config=options.graph, prior=first_prior, bounds=bounds,
                                 ground_plane=options.ground_plane)
     terms = hwc_terms(options.graph, bounds)
     hwc = hwc_factor(keys, 0, terms=terms)
-    best = None
-    failure = "no start"
-    tried, solutions = 0, []  # the poses LM reached
-    for world_T_vehicle, wireframe in starts:
-        if tried == options.num_starts or (best is not None and _inlier_share(obs, best[0], keys, options)
-                                            >= FURTHER_START_INLIERS):
+    best, failure, tried, reached = None, "no start", 0, []  # reached: the starts tried and the poses LM reached
+
+    def settled() -> bool:  # no further start: as many as allowed, or the best solution explains the keypoints
+        return tried == options.num_starts or (best is not None and _inlier_share(obs, best[0], keys, options)
+                                               >= FURTHER_START_INLIERS)
+
+    def candidate_starts(ransac: bool):
+        return [(c.world_T_vehicle, c.wireframe) for c in best_candidates(
+            obs, mean, options.graph.loss, None, min_keypoints_in_one_view=options.min_keypoints_in_one_view,
+            ransac=ransac)]
+
+    if initial is not None:
+        rounds = [lambda: [initial]]
+    else:  # the best SQPnP or triangulation start first; RANSAC's poses join the others only for a further start
+        rounds = [lambda: candidate_starts(False)[:1], lambda: candidate_starts(True)]
+    for make_starts in rounds:
+        if settled():
             break
-        if not all(distinct_poses(world_T_vehicle, p) for p in solutions):
-            continue  # LM would pull it to a minimum already found: not another start
-        tried += 1
-        values = gtsam.Values()
-        insert_vehicle_values(values, keys, world_T_vehicle, wireframe)
-        try:
-            outcome = _optimise(graph, values, keys, options, terms, hwc)
-        except RuntimeError as exc:
-            failure = summarise_error(exc)
-            continue
-        solutions.append(outcome[0].atPose3(keys.pose_key()))
-        if best is None or outcome[1] < best[1]:
-            best = outcome
+        for world_T_vehicle, wireframe in make_starts():
+            if settled():
+                break
+            if not all(distinct_poses(world_T_vehicle, p) for p in reached):
+                continue  # LM would pull it to a minimum already found: not another start
+            tried += 1
+            reached.append(world_T_vehicle)
+            values = gtsam.Values()
+            insert_vehicle_values(values, keys, world_T_vehicle, wireframe)
+            try:
+                outcome = _optimise(graph, values, keys, options, terms, hwc)
+            except RuntimeError as exc:
+                failure = summarise_error(exc)
+                continue
+            reached.append(outcome[0].atPose3(keys.pose_key()))
+            if best is None or outcome[1] < best[1]:
+                best = outcome
+    if best is None and tried == 0 and initial is None:
+        per_view = np.bincount(obs.camera_index, minlength=len(obs.cameras)).max()
+        return VehicleResult(
+            vehicle_id, Status.DEGENERATE,
+            message=(
+                f"no initial pose: the best camera sees {per_view} keypoints (PnP needs "
+                f"{options.min_keypoints_in_one_view}) and too few keypoints triangulate"
+            ),
+        )
     if best is None:
         return VehicleResult(vehicle_id, Status.FAILED, message=f"optimisation failed: {failure}")
     extras = {}

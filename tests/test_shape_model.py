@@ -81,6 +81,26 @@ def test_compiled_fit_at_a_noise_scale_matches_dense_solves():
     assert np.isnan(fit_at_scale_kernel(not_definite, 0 * not_definite, eta, eta_p, A, b, 1.0, e, M))
 
 
+def test_compiled_evidence_terms_match_dense_algebra():
+    """type_log_evidence's compiled terms: b^T (Lambda + P)^-1 b and log|Lambda + P| per prior, against NumPy."""
+    from vfactor.shape_evidence_kernel import log_evidence_kernel
+
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(20, 36))
+    information, eta = A.T @ A, rng.normal(size=36)  # singular: the views leave directions unseen
+    precisions = np.stack([np.eye(36) * (k + 1.0) + 0.1 * np.ones((36, 36)) for k in range(3)])
+    means = rng.normal(size=(3, 36))
+    quadratic, logdet = np.empty(3), np.empty(3)
+    log_evidence_kernel(information, eta, precisions, means, quadratic, logdet)
+    for k in range(3):
+        H = information + precisions[k]
+        b = eta + means[k]
+        assert quadratic[k] == pytest.approx(b @ np.linalg.solve(H, b), rel=1e-10)
+        assert logdet[k] == pytest.approx(np.linalg.slogdet(H)[1], rel=1e-10)
+    log_evidence_kernel(information, eta, -precisions, means, quadratic, logdet)
+    assert np.all(np.isnan(quadratic)) and np.all(np.isnan(logdet))
+
+
 def test_without_the_noise_scale_the_prior_holds_clean_vehicles_off(clean):
     """With the fixed 3 % sigma the shape prior outweighs clean keypoints: the estimate is worse."""
     fixed = SolveOptions(covariance=False, estimate_noise=False)

@@ -59,7 +59,7 @@ def test_noise_scale_follows_the_keypoint_noise(clean):
 
 
 def test_compiled_fit_at_a_noise_scale_matches_dense_solves():
-    """The noise scale's compiled step (Cholesky in numba) against ``np.linalg.solve`` on a random 42-variable system."""
+    """The noise scale's compiled step (Cholesky in numba, studentised residuals in closed form) against dense NumPy."""
     from vfactor.shape_evidence_kernel import fit_at_scale_kernel
 
     rng = np.random.default_rng(4)
@@ -68,17 +68,23 @@ def test_compiled_fit_at_a_noise_scale_matches_dense_solves():
     other = rng.normal(size=(60, m))
     projection, total = A.T @ A, A.T @ A + other.T @ other
     eta_p, eta, b = rng.normal(size=m), rng.normal(size=m), rng.normal(size=2 * n)
+    q, freedom = np.empty(n), np.empty(n)
     for scale in (0.1, 0.7, 1.0, 3.0):
         w = 1.0 / scale**2
         H = total + (w - 1.0) * projection
-        e, M = np.empty(2 * n), np.empty((n, 2, 2))
-        p = fit_at_scale_kernel(total, projection, eta, eta_p, A, b, w, e, M)
+        p = fit_at_scale_kernel(total, projection, eta, eta_p, A, b, w, 0.95, q, freedom)
         assert p == pytest.approx(np.trace(np.linalg.solve(H, w * projection)), rel=1e-10)
-        assert np.allclose(e, A @ np.linalg.solve(H, eta + (w - 1.0) * eta_p) - b, rtol=1e-9, atol=1e-10)
+        e = (A @ np.linalg.solve(H, eta + (w - 1.0) * eta_p) - b).reshape(n, 2)
         hat = w * A @ np.linalg.solve(H, A.T)
-        assert np.allclose(M, np.array([hat[2 * i:2 * i + 2, 2 * i:2 * i + 2] for i in range(n)]), rtol=1e-9, atol=1e-12)
+        M = np.array([hat[2 * i:2 * i + 2, 2 * i:2 * i + 2] for i in range(n)])
+        usable = np.linalg.eigvalsh(M)[:, -1] < 0.95
+        R = np.eye(2) - M
+        expected = np.einsum("ni,ni->n", e, np.linalg.solve(R, e[..., None])[..., 0])
+        assert np.array_equal(np.isfinite(q), usable)
+        assert np.allclose(q[usable], expected[usable], rtol=1e-9)
+        assert np.allclose(freedom, np.trace(R, axis1=1, axis2=2), rtol=1e-9)
     not_definite = -np.eye(m)
-    assert np.isnan(fit_at_scale_kernel(not_definite, 0 * not_definite, eta, eta_p, A, b, 1.0, e, M))
+    assert np.isnan(fit_at_scale_kernel(not_definite, 0 * not_definite, eta, eta_p, A, b, 1.0, 0.95, q, freedom))
 
 
 def test_compiled_evidence_terms_match_dense_algebra():

@@ -145,8 +145,7 @@ def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -
     fit = _ScaledFit(whitened, lin)
     for _ in range(iterations):
         previous = scale
-        p, e, M = fit.at(scale)
-        q, _ = _studentised(e, M)
+        p, q, _ = fit.at(scale)
         if q is None:
             return scale, p
         scale = float(np.clip(np.sqrt(max(float(np.median(q)) / _CHI2_2_MEDIAN, 0.0)), *NOISE_SCALE_RANGE))
@@ -206,15 +205,14 @@ def inlier_noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int
     fit = _ScaledFit(whitened, lin)
     for _ in range(iterations):
         previous = scale
-        p, e, M = fit.at(scale)
-        q, R = _studentised(e, M)
+        p, q, freedom = fit.at(scale)
         if q is None:
             return 1.0, p, 0.0
         s0 = float(np.median(q)) / _CHI2_2_MEDIAN
         if not s0 > 0:
             return 1.0, p, 0.0
         inlier = q < _CHI2_2_99 * s0
-        nu = float(np.trace(R[inlier], axis1=1, axis2=2).sum())
+        nu = float(freedom[inlier].sum())
         squared = float(np.mean(q[inlier])) / _CHI2_2_TRUNCATED_MEAN
         scale = float(np.clip(np.sqrt(squared), *NOISE_SCALE_RANGE))
         if abs(scale - previous) <= 1e-3 * previous:
@@ -253,14 +251,17 @@ def _f_over_chi2(dim: int, nu: float, level: float) -> float:
 
 
 class _ScaledFit:
-    """What the fit would be with every sigma times ``s``: (p, (n, 2) residuals, (n, 2, 2) leverage blocks).
+    """What the fit would be with every sigma times ``s``: ``p`` and the studentised residuals of the usable observations.
 
     ``H(s) = H - H_proj + H_proj / s^2``; ``p = tr(H_proj(s) H(s)^-1)``; the
     residuals are predicted by one Gauss-Newton step, ``e(s) = A dx(s) - b``
     with ``dx(s) = H(s)^-1 eta(s)``, and the leverages are
-    ``M_i = A_i H(s)^-1 A_i^T / s^2``. Without the whitened system (``lin.jacobian``)
-    the residuals stay ``whitened`` and every observation takes an equal share
-    ``p / 2n`` of the parameters. Each scale is one call of the compiled
+    ``M_i = A_i H(s)^-1 A_i^T / s^2``; the studentised squared residuals are
+    ``q_i = e_i^T (I - M_i)^-1 e_i``. Observations the fit absorbs whole
+    (leverage, the larger eigenvalue of ``M_i``, above :data:`_MAX_LEVERAGE`) are
+    left out. Without the whitened system (``lin.jacobian``) the residuals stay
+    ``whitened`` and every observation takes an equal share ``p / 2n`` of the
+    parameters. Each scale is one call of the compiled
     :func:`~vfactor.shape_evidence_kernel.fit_at_scale_kernel`; the inputs are
     checked and laid out once.
 
@@ -280,36 +281,23 @@ class _ScaledFit:
             lin.total, lin.projection, lin.total_eta, lin.projection_eta,
             lin.jacobian if self.has_system else np.empty((0, m)), lin.rhs if self.has_system else np.empty(0)))
 
-    def at(self, scale: float) -> tuple[float, np.ndarray, np.ndarray]:
+    def at(self, scale: float) -> tuple[float, np.ndarray | None, np.ndarray | None]:
+        """(p, q (usable,), tr(I - M_i) (usable,)) with every sigma times ``scale``; q and the traces are None when
+        no observation is usable."""
         n = len(self.whitened)
-        e, M = np.empty(2 * n if self.has_system else 0), np.empty((n if self.has_system else 0, 2, 2))
-        p = fit_at_scale_kernel(*self.arrays, 1.0 / scale**2, e, M)
+        q, freedom = np.empty(n), np.empty(n)
+        p = fit_at_scale_kernel(*self.arrays, 1.0 / scale**2, _MAX_LEVERAGE, q, freedom)
         if not np.isfinite(p):
             raise np.linalg.LinAlgError("the Hessian at this noise scale is not positive definite")
-        if not self.has_system:
-            return p, self.whitened, np.broadcast_to(np.eye(2) * min(p / (2.0 * n), 0.95), (n, 2, 2))
-        return p, e.reshape(n, 2), M
-
-
-def _studentised(e: np.ndarray, M: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """Studentised squared residuals ``q_i = e_i^T (I - M_i)^-1 e_i`` and ``I - M_i`` of the usable observations.
-
-    Observations the fit absorbs whole (leverage, the larger eigenvalue of the
-    symmetric 2 x 2 ``M_i``, above :data:`_MAX_LEVERAGE`) are left out; (None,
-    None) when none is left. The 2 x 2 eigenvalue and inverse are in closed form.
-    """
-    a, c = M[:, 0, 0], M[:, 1, 1]
-    b = 0.5 * (M[:, 0, 1] + M[:, 1, 0])
-    leverage = 0.5 * (a + c) + np.sqrt((0.5 * (a - c)) ** 2 + b * b)
-    usable = leverage < _MAX_LEVERAGE
-    if not np.any(usable):
-        return None, None
-    r00, r11, r01 = 1.0 - a[usable], 1.0 - c[usable], -b[usable]
-    e0, e1 = e[usable, 0], e[usable, 1]
-    q = (r11 * e0 * e0 - 2.0 * r01 * e0 * e1 + r00 * e1 * e1) / (r00 * r11 - r01 * r01)
-    R = np.empty((len(q), 2, 2))
-    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1] = r00, r01, r01, r11
-    return q, R
+        if not self.has_system:  # an equal share of the parameters for every observation
+            leverage = min(p / (2.0 * n), 0.95)
+            if not leverage < _MAX_LEVERAGE:
+                return p, None, None
+            return p, np.sum(self.whitened**2, axis=1) / (1.0 - leverage), np.full(n, 2.0 * (1.0 - leverage))
+        usable = np.isfinite(q)
+        if not usable.any():
+            return p, None, None
+        return p, q[usable], freedom[usable]
 
 
 def shape_information(lin: Linearisation, projection_factor: float = 1.0) -> tuple[np.ndarray, np.ndarray]:

@@ -26,14 +26,16 @@ __all__ = ["fit_at_scale_kernel", "log_evidence_kernel"]
 
 
 @njit(cache=True)
-def fit_at_scale_kernel(total, projection, total_eta, projection_eta, jacobian, rhs, w, e_out, M_out):
-    """The fit with the projection factor's information times ``w = 1 / s^2``.
+def fit_at_scale_kernel(total, projection, total_eta, projection_eta, jacobian, rhs, w, max_leverage, q_out,
+                        freedom_out):
+    """The fit with the projection factor's information times ``w = 1 / s^2``, and its studentised residuals.
 
     ``H(s) = H + (w - 1) H_proj``, ``eta(s) = eta + (w - 1) eta_proj``;
     ``p = w tr(H_proj H(s)^-1)``; the residuals one Gauss-Newton step ahead,
     ``e = A H(s)^-1 eta(s) - b``; the leverage blocks
     ``M_i = w A_i H(s)^-1 A_i^T`` (``A_i``: observation i's two rows of the
-    whitened Jacobian).
+    whitened Jacobian); the studentised squared residuals
+    ``q_i = e_i^T (I - M_i)^-1 e_i`` and ``tr(I - M_i)`` (2 x 2 algebra in closed form).
 
     Args:
         total, projection: (m, m) Gauss-Newton Hessians of the whole graph and of
@@ -43,8 +45,11 @@ def fit_at_scale_kernel(total, projection, total_eta, projection_eta, jacobian, 
             no residuals or leverages are computed).
         rhs: (2n,) its right-hand side ``b`` (minus the residuals).
         w: ``1 / s^2``.
-        e_out: (2n,) predicted residuals, written.
-        M_out: (n, 2, 2) leverage blocks, written.
+        max_leverage: an observation whose leverage (the larger eigenvalue of ``M_i``) is at
+            least this says nothing about the noise: its ``q_i`` is NaN.
+        q_out: (n,) studentised squared residuals, written.
+        freedom_out: (n,) ``tr(I - M_i)``, the observation's share of the residual degrees
+            of freedom, written.
 
     Returns:
         ``p``, or NaN when ``H(s)`` is not positive definite.
@@ -96,24 +101,32 @@ def fit_at_scale_kernel(total, projection, total_eta, projection_eta, jacobian, 
         return w * trace
     # residuals one step ahead, and X = A Li^T (so that A H(s)^-1 A^T = X X^T)
     X = np.zeros((rows, m))
+    e = np.empty(rows)
     for r in range(rows):
         s = -rhs[r]
         for a in range(m):
             s += jacobian[r, a] * step[a]
-        e_out[r] = s
+        e[r] = s
         for k in range(m):
             x = 0.0
             for j in range(k + 1):
                 x += jacobian[r, j] * Li[k, j]
             X[r, k] = x
     for i in range(rows // 2):
-        for a in range(2):
-            for b in range(a, 2):
-                s = 0.0
-                for k in range(m):
-                    s += X[2 * i + a, k] * X[2 * i + b, k]
-                M_out[i, a, b] = w * s
-                M_out[i, b, a] = w * s
+        m00, m01, m11 = 0.0, 0.0, 0.0
+        for k in range(m):
+            m00 += X[2 * i, k] * X[2 * i, k]
+            m01 += X[2 * i, k] * X[2 * i + 1, k]
+            m11 += X[2 * i + 1, k] * X[2 * i + 1, k]
+        m00, m01, m11 = w * m00, w * m01, w * m11
+        freedom_out[i] = 2.0 - m00 - m11
+        leverage = 0.5 * (m00 + m11) + math.sqrt((0.5 * (m00 - m11)) ** 2 + m01 * m01)
+        if not leverage < max_leverage:
+            q_out[i] = math.nan
+            continue
+        r00, r01, r11 = 1.0 - m00, -m01, 1.0 - m11  # I - M_i
+        e0, e1 = e[2 * i], e[2 * i + 1]
+        q_out[i] = (r11 * e0 * e0 - 2.0 * r01 * e0 * e1 + r00 * e1 * e1) / (r00 * r11 - r01 * r01)
     return w * trace
 
 

@@ -14,7 +14,8 @@ solve with covariances costs; the whole ``solve_vehicle`` call is compared
 with it (goal: at most 2x).
 
 The last rows are what a user pays, the whole ``solve_vehicle`` call
-(initialisation, two starts, LM, covariances): with the body-type shape model
+(initialisation, one start or, when its solution leaves most keypoints
+unexplained, two, the refinement's LM, covariances): with the body-type shape model
 and the estimated noise scale (the default), and as it was before them (one
 PASCAL3D+ car prior, fixed sigmas, the car HWC bounds), with the ratio between
 the two.
@@ -159,7 +160,7 @@ def main(argv=None) -> dict:
         ("vfactor graph without the HWC factor, LM", "vfactor_lm_no_hwc"),
         ("vfactor default: build, LM, HWC check (+ LM with HWC if broken)", "vfactor_lm_lazy"),
         ("vfactor graph with the HWC factor always on, build + LM", "vfactor_build_lm"),
-        ("vfactor solve_vehicle (init, 2 starts, LM, marginals)", "vfactor_solve_vehicle"),
+        ("vfactor solve_vehicle (init, starts, LM, marginals)", "vfactor_solve_vehicle"),
         ("solve_vehicle before body types (car prior, fixed sigmas)", "car_prior_solve_vehicle"),
     ]
     for label, key in rows:

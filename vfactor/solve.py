@@ -197,10 +197,10 @@ def solve_observations(
     terms = hwc_terms(options.graph, bounds)
     hwc = hwc_factor(keys, 0, terms=terms)
     best, failure, tried, reached = None, "no start", 0, []  # reached: the starts tried and the poses LM reached
+    best_inliers = 0.0  # the best solution's share of inliers
 
     def settled() -> bool:  # no further start: as many as allowed, or the best solution explains the keypoints
-        return tried == options.num_starts or (best is not None and _inlier_share(obs, best[0], keys, options)
-                                               >= FURTHER_START_INLIERS)
+        return tried == options.num_starts or best_inliers >= FURTHER_START_INLIERS
 
     def candidate_starts(ransac: bool):
         return [(c.world_T_vehicle, c.wireframe) for c in best_candidates(
@@ -230,7 +230,7 @@ def solve_observations(
                 continue
             reached.append(outcome[0].atPose3(keys.pose_key()))
             if best is None or outcome[1] < best[1]:
-                best = outcome
+                best, best_inliers = outcome, _inlier_share(obs, outcome[0], keys, options)
     if best is None and tried == 0 and initial is None:
         per_view = np.bincount(obs.camera_index, minlength=len(obs.cameras)).max()
         return VehicleResult(

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import gtsam
 import numpy as np
+import pytest
 
 from vfactor.graph import observations_from_detections
-from vfactor.init import best_candidates, triangulate_keypoints, umeyama
-from vfactor.factors.robust import RobustLoss
+from vfactor.init import best_candidates, cross_projection_cost, triangulate_keypoints, umeyama
+from vfactor.factors.projection import robust_costs, whitened_residuals
+from vfactor.factors.robust import LOSSES, RobustLoss
 from vfactor.shape_model import default_shape_prior
 from vfactor.wireframe import Wireframe
 
@@ -38,3 +40,19 @@ def test_best_candidate_is_near_the_truth_for_any_yaw(cameras, prius):
         best = best_candidates(obs, Wireframe(default_shape_prior().mean), RobustLoss(), 1)[0]
         angle = np.degrees(np.linalg.norm(gtsam.Rot3.Logmap(best.world_T_vehicle.rotation().between(truth.rotation()))))
         assert angle < 15, (yaw, best.source, angle)
+
+
+def test_candidates_are_scored_in_one_pass_as_by_their_residuals(cameras, prius, world_T_vehicle):
+    """robust_costs (every candidate in one compiled pass) is sum rho(|e|) of the NumPy whitened residuals."""
+    rng = np.random.default_rng(3)
+    obs = observations_from_detections(detections_for(cameras, prius, world_T_vehicle, noise_px=3.0, rng=rng), cameras)
+    poses = [world_T_vehicle.compose(gtsam.Pose3(gtsam.Rot3.Ypr(*rng.normal(0, 0.3, 3)), rng.normal(0, 0.5, 3)))
+             for _ in range(5)]
+    shapes = [prius.scaled(s).vehicle_p_keypoints for s in (0.8, 0.9, 1.0, 1.1, 1.2)]
+    for name in LOSSES:
+        loss = RobustLoss(name)
+        costs = robust_costs(obs, np.array([p.matrix() for p in poses]), np.array(shapes), loss)
+        expected = [np.sum(loss.rho(np.linalg.norm(whitened_residuals(obs, p, x), axis=1))) for p, x in zip(poses, shapes)]
+        assert np.allclose(costs, expected, rtol=1e-9), name
+    assert cross_projection_cost(obs, poses[0], prius, RobustLoss()) == pytest.approx(
+        robust_costs(obs, poses[0].matrix()[None], prius.vehicle_p_keypoints[None], RobustLoss())[0])

@@ -47,6 +47,7 @@ __all__ = [
     "wireframe_from_values",
     "hwc_terms",
     "hwc_factor",
+    "hwc_residuals",
     "hwc_violation",
 ]
 
@@ -236,9 +237,15 @@ def hwc_factor(keys: KeyScheme, vehicle: int = 0, config: GraphConfig = GraphCon
     return shape_terms_factor(keys.layer_keys(vehicle), terms if terms is not None else hwc_terms(config, bounds))
 
 
+def hwc_residuals(wireframe: Wireframe, terms) -> np.ndarray:
+    """Whitened residuals (sigmas) of the HWC ``terms`` (:func:`hwc_terms`) at a wireframe: the HWC factor's error is
+    half their squared norm."""
+    return evaluate_terms(terms, wireframe.vehicle_p_keypoints)
+
+
 def hwc_violation(wireframe: Wireframe, terms) -> float:
     """Largest whitened residual (sigmas) of the HWC ``terms`` (:func:`hwc_terms`); 0 when every condition holds."""
-    return float(np.abs(evaluate_terms(terms, wireframe.vehicle_p_keypoints)).max())
+    return float(np.abs(hwc_residuals(wireframe, terms)).max())
 
 
 def add_observation_factor(

@@ -1,10 +1,14 @@
 """Initial pose (and scale) of a vehicle with no pose guess.
 
-Candidates, all scored by the robust cross-projection cost over every camera:
+Candidates, all scored by the robust cross-projection cost over every camera
+in one compiled pass (:func:`vfactor.factors.projection.robust_costs`):
 
-* per camera, PnP of the mean wireframe (OpenCV RANSAC and SQPnP), with the
-  labels as given and with left/right swapped, each also turned by 180 degrees
-  about the body z axis;
+* per camera, PnP of the mean wireframe with the labels as given and with
+  left/right swapped, each also turned by 180 degrees about the body z axis:
+  SQPnP on all the camera's keypoints, and OpenCV's RANSAC (EPnP) only when
+  some keypoint is beyond the threshold from SQPnP's pose (with every
+  keypoint within it, RANSAC would keep them all: the same fit), and only for
+  the labelling whose SQPnP pose keeps the most keypoints within it;
 * multi-view: keypoints seen by two or more cameras are triangulated and the
   mean wireframe is aligned to them (Umeyama, with scale).
 
@@ -19,12 +23,13 @@ import cv2
 import gtsam
 import numpy as np
 
-from vfactor.factors.projection import KeypointObservations, whitened_residuals
+from vfactor.factors.projection import KeypointObservations, robust_costs
 from vfactor.factors.robust import RobustLoss
 from vfactor.keypoints import MIRROR_PERMUTATION
 from vfactor.wireframe import Wireframe
 
-__all__ = ["Candidate", "umeyama", "triangulate_keypoints", "pose_candidates", "best_candidates", "cross_projection_cost"]
+__all__ = ["Candidate", "umeyama", "triangulate_keypoints", "pose_candidates", "best_candidates", "cross_projection_cost",
+           "distinct_poses"]
 
 
 @dataclass(frozen=True)
@@ -67,75 +72,114 @@ def umeyama(src: np.ndarray, dst: np.ndarray, weights=None, with_scale: bool = T
 def triangulate_keypoints(obs: KeypointObservations, min_views: int = 2):
     """Linear (DLT) triangulation of keypoints seen by ``min_views`` or more cameras.
 
+    Each observation gives two rows ``w (x P_3 - P_1)``, ``w (y P_3 - P_2)`` (``x, y`` its
+    undistorted normalised coordinates, ``P`` its camera's ``camera_T_world[:3]``, ``w``
+    its square-root information); the keypoint is the smallest right singular vector
+    of its rows. The pixels are undistorted once per camera and the keypoints with the
+    same number of rows solved in one batched SVD.
+
     Returns:
         (indices (m,), world points (m, 3)) of the keypoints that triangulate in
         front of all their cameras.
     """
-    indices, points = [], []
+    normalised = np.empty((len(obs), 2))
+    for c, camera in enumerate(obs.cameras):
+        rows = obs.camera_index == c
+        if rows.any():
+            normalised[rows] = camera.undistort_pixels(obs.uv[rows])
+    P = np.concatenate([obs._R_cw, obs._t_cw[:, :, None]], axis=2)  # (n, 3, 4) camera_T_world[:3] of each observation
+    w = obs.sqrt_information[:, 0, 0, None]
+    A = np.stack([w * (normalised[:, :1] * P[:, 2] - P[:, 0]), w * (normalised[:, 1:] * P[:, 2] - P[:, 1])], axis=1)
+    groups: dict[int, list] = {}
     for k in np.unique(obs.keypoint_index):
         rows = np.flatnonzero(obs.keypoint_index == k)
-        if len(set(obs.camera_index[rows])) < min_views:
-            continue
-        A = []
-        for i in rows:
-            camera = obs.cameras[obs.camera_index[i]]
-            x, y = camera.undistort_pixels(obs.uv[i : i + 1])[0]
-            P = camera.camera_T_world[:3]
-            w = obs.sqrt_information[i, 0, 0]
-            A.append(w * (x * P[2] - P[0]))
-            A.append(w * (y * P[2] - P[1]))
-        _, _, Vt = np.linalg.svd(np.array(A))
-        X = Vt[-1]
-        if abs(X[3]) < 1e-12:
-            continue
-        X = X[:3] / X[3]
-        if all(obs.cameras[obs.camera_index[i]].to_camera(X[None])[0, 2] > 0 for i in rows):
-            indices.append(k)
-            points.append(X)
-    return np.array(indices, dtype=int), np.array(points).reshape(-1, 3)
+        if len(set(obs.camera_index[rows])) >= min_views:
+            groups.setdefault(len(rows), []).append((k, rows))
+    indices, points = [], []
+    for count, members in sorted(groups.items()):
+        rows = np.array([r for _, r in members])  # (m, count)
+        _, _, Vt = np.linalg.svd(A[rows].reshape(len(members), 2 * count, 4))
+        X = Vt[:, -1]
+        for (k, r), x in zip(members, X):
+            if abs(x[3]) < 1e-12:
+                continue
+            x = x[:3] / x[3]
+            if np.all(obs._R_cw[r, 2] @ x + obs._t_cw[r, 2] > 0):  # in front of each of its cameras
+                indices.append(k)
+                points.append(x)
+    order = np.argsort(indices, kind="stable")
+    return np.array(indices, dtype=int)[order], np.array(points).reshape(-1, 3)[order]
 
 
 def cross_projection_cost(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, loss: RobustLoss) -> float:
-    """Robust cost of the projections of ``wireframe`` at a pose in every camera."""
-    e = whitened_residuals(obs, world_T_vehicle, wireframe.vehicle_p_keypoints)
-    return float(np.sum(loss.rho(np.linalg.norm(e, axis=1))))
+    """Robust cost ``sum rho(|e_i|)`` of the projections of ``wireframe`` at a pose in every camera."""
+    return float(robust_costs(obs, world_T_vehicle.matrix()[None], wireframe.vehicle_p_keypoints[None], loss)[0])
 
 
-def _pnp(camera, object_p, image_uv, threshold_px):
-    found = []
+def _world_pose(world_T_camera: gtsam.Pose3, rvec, tvec) -> gtsam.Pose3 | None:
+    """world_T_vehicle from OpenCV's camera_T_vehicle (``rvec``, ``tvec``); None when not finite or not in front."""
+    camera_T_vehicle = np.eye(4)
+    camera_T_vehicle[:3, :3] = cv2.Rodrigues(rvec)[0]
+    camera_T_vehicle[:3, 3] = np.ravel(tvec)
+    if not np.all(np.isfinite(camera_T_vehicle)) or camera_T_vehicle[2, 3] <= 0:
+        return None
+    return world_T_camera.compose(gtsam.Pose3(camera_T_vehicle))
+
+
+def _camera_pnp(camera, world_T_camera: gtsam.Pose3, labellings, image_uv, threshold_px,
+                ransac: bool = True) -> list[list[gtsam.Pose3]]:
+    """PnP poses (world_T_vehicle) of one camera's keypoints under each labelling of them.
+
+    Each labelling is the (n, 3) body-frame points its labels name, seen at
+    ``image_uv`` (n, 2 pixels). SQPnP fits each on every point. RANSAC (EPnP,
+    ``threshold_px``; 6 points or more) runs only where that fit leaves some
+    point beyond ``threshold_px`` (with every point within it RANSAC would keep
+    them all: the same fit), and only for the labellings whose SQPnP fit keeps
+    the most points within it: RANSAC looks for the outliers of the labelling
+    the keypoints favour, the others keep their SQPnP pose. ``ransac=False``:
+    SQPnP alone.
+
+    Returns:
+        Per labelling, its poses (SQPnP's, then RANSAC's).
+    """
     img, K, dist, px_per_unit = camera.pnp_inputs(image_uv)  # a fisheye lens: normalised points, identity K
-    obj = object_p.astype(np.float64)
-    if len(obj) >= 6:
-        ok, rvec, tvec, _ = cv2.solvePnPRansac(
-            obj, img, K, dist, iterationsCount=200, reprojectionError=threshold_px / px_per_unit, confidence=0.999,
-            flags=cv2.SOLVEPNP_EPNP,
-        )
-        if ok:
-            found.append((rvec, tvec))
-    try:
-        ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_SQPNP)
-        if ok:
-            found.append((rvec, tvec))
-    except cv2.error:
-        pass
-    poses = []
-    for rvec, tvec in found:
-        camera_T_vehicle = np.eye(4)
-        camera_T_vehicle[:3, :3] = cv2.Rodrigues(rvec)[0]
-        camera_T_vehicle[:3, 3] = np.ravel(tvec)
-        if not np.all(np.isfinite(camera_T_vehicle)) or camera_T_vehicle[2, 3] <= 0:
-            continue
-        poses.append(camera.pose.compose(gtsam.Pose3(camera_T_vehicle)))
+    threshold = threshold_px / px_per_unit
+    poses, within = [], []
+    for object_p in labellings:
+        obj = object_p.astype(np.float64)
+        found, kept = [], -1
+        try:
+            ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_SQPNP)
+            pose = _world_pose(world_T_camera, rvec, tvec) if ok else None
+            if pose is not None:
+                found.append(pose)
+                projected, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
+                kept = int(np.sum(np.linalg.norm(projected.reshape(-1, 2) - img, axis=1) <= threshold))
+        except cv2.error:
+            pass
+        poses.append(found)
+        within.append(kept)
+    for object_p, found, kept in zip(labellings, poses, within):
+        if ransac and len(object_p) >= 6 and kept < len(object_p) and kept == max(within):
+            ok, rvec, tvec, _ = cv2.solvePnPRansac(
+                object_p.astype(np.float64), img, K, dist, iterationsCount=200, reprojectionError=threshold,
+                confidence=0.999, flags=cv2.SOLVEPNP_EPNP,
+            )
+            pose = _world_pose(world_T_camera, rvec, tvec) if ok else None
+            if pose is not None:
+                found.append(pose)
     return poses
 
 
 def pose_candidates(
-    obs: KeypointObservations, wireframe: Wireframe, min_keypoints_in_one_view: int = 4
+    obs: KeypointObservations, wireframe: Wireframe, min_keypoints_in_one_view: int = 4, ransac: bool = True,
 ) -> list[tuple[gtsam.Pose3, Wireframe, str]]:
     """All candidate (pose, wireframe, source) starts for one vehicle (unscored).
 
-    PnP runs on every camera that sees at least ``min_keypoints_in_one_view``
-    keypoints (4 at the least); triangulation needs 4 keypoints seen twice.
+    PnP (:func:`_camera_pnp`) runs on every camera that sees at least
+    ``min_keypoints_in_one_view`` keypoints (4 at the least), with the labels
+    as given and mirrored (``ransac=False``: SQPnP alone); triangulation needs 4
+    keypoints seen twice.
     """
     out = []
     points = wireframe.vehicle_p_keypoints
@@ -146,8 +190,11 @@ def pose_candidates(
         if len(rows) < max(4, min_keypoints_in_one_view):
             continue
         threshold = float(3.0 * np.median(sigma[rows]))
-        for labels, tag in ((obs.keypoint_index[rows], "pnp"), (MIRROR_PERMUTATION[obs.keypoint_index[rows]], "pnp-mirrored")):
-            for pose in _pnp(camera, points[labels], obs.uv[rows], threshold):
+        labels = obs.keypoint_index[rows]
+        fits = _camera_pnp(camera, camera.pose, (points[labels], points[MIRROR_PERMUTATION[labels]]), obs.uv[rows],
+                           threshold, ransac)
+        for tag, poses in zip(("pnp", "pnp-mirrored"), fits):
+            for pose in poses:
                 out.append((pose, wireframe, f"{tag}:{camera.name}"))
                 out.append((pose.compose(flip), wireframe, f"{tag}-turned:{camera.name}"))
     idx, world = triangulate_keypoints(obs)
@@ -158,27 +205,43 @@ def pose_candidates(
     return out
 
 
+def distinct_poses(a: gtsam.Pose3, b: gtsam.Pose3, min_angle_rad: float = 0.35, min_distance_m: float = 1.0) -> bool:
+    """Whether two vehicle poses differ by more than ``min_angle_rad`` (rotation) or ``min_distance_m`` (translation)."""
+    return bool(_distinct(a.rotation().matrix()[None], a.translation()[None], b.rotation().matrix(), b.translation(),
+                          min_angle_rad, min_distance_m)[0])
+
+
+def _distinct(R, t, R_other, t_other, min_angle_rad, min_distance_m) -> np.ndarray:
+    """(K,) whether each of K poses (rotations (K, 3, 3), translations (K, 3)) differs from one other pose."""
+    cos_angle = 0.5 * (np.einsum("kij,ij->k", R, R_other) - 1.0)  # cos of the angle of R^T R_other
+    angle = np.arccos(np.clip(cos_angle, -1.0, 1.0))
+    return (angle > min_angle_rad) | (np.linalg.norm(t - t_other, axis=1) > min_distance_m)
+
+
 def best_candidates(
-    obs: KeypointObservations, wireframe: Wireframe, loss: RobustLoss, count: int = 2,
-    min_angle_rad: float = 0.35, min_distance_m: float = 1.0, min_keypoints_in_one_view: int = 4,
+    obs: KeypointObservations, wireframe: Wireframe, loss: RobustLoss, count: int | None = 2,
+    min_angle_rad: float = 0.35, min_distance_m: float = 1.0, min_keypoints_in_one_view: int = 4, ransac: bool = True,
 ) -> list[Candidate]:
-    """The ``count`` lowest-cost candidates that differ by at least the given angle or distance."""
-    scored = sorted(
-        (Candidate(pose, w, cross_projection_cost(obs, pose, w, loss), source) for pose, w, source in pose_candidates(obs, wireframe, min_keypoints_in_one_view)),
-        key=lambda c: c.cost,
-    )
+    """The ``count`` lowest-cost candidates (None: all) that differ by at least the given angle or distance, best first.
+
+    ``ransac=False``: without the RANSAC PnP poses (:func:`pose_candidates`), a fraction of the cost.
+    """
+    found = pose_candidates(obs, wireframe, min_keypoints_in_one_view, ransac)
+    if not found:
+        return []
+    T = np.array([pose.matrix() for pose, _, _ in found])
+    costs = robust_costs(obs, T, np.array([w.vehicle_p_keypoints for _, w, _ in found]), loss)  # every candidate in one pass
     chosen: list[Candidate] = []
-    for cand in scored:
-        if not np.isfinite(cand.cost):
+    finite = np.isfinite(costs)
+    keep = finite.copy()  # finite and distinct from every candidate chosen so far
+    for i in np.argsort(np.where(finite, costs, np.inf), kind="stable"):
+        if not finite[i]:
+            break
+        if not keep[i]:
             continue
-        distinct = all(
-            np.linalg.norm(gtsam.Rot3.Logmap(c.world_T_vehicle.rotation().between(cand.world_T_vehicle.rotation())))
-            > min_angle_rad
-            or np.linalg.norm(c.world_T_vehicle.translation() - cand.world_T_vehicle.translation()) > min_distance_m
-            for c in chosen
-        )
-        if distinct:
-            chosen.append(cand)
+        pose, w, source = found[i]
+        chosen.append(Candidate(pose, w, float(costs[i]), source))
         if len(chosen) == count:
             break
+        keep &= _distinct(T[:, :3, :3], T[:, :3, 3], T[i, :3, :3], T[i, :3, 3], min_angle_rad, min_distance_m)
     return chosen

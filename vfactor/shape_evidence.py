@@ -23,6 +23,7 @@ import gtsam
 import numpy as np
 
 from vfactor.keys import KeyScheme
+from vfactor.shape_evidence_kernel import fit_at_scale_kernel
 from vfactor.shape_model import ANY, ShapeModel, ShapePrior
 
 __all__ = ["Linearisation", "linearise", "noise_scale", "inlier_noise_scale", "covariance_inflation", "shape_information", "BodyTypeChoice", "choose_body_type",
@@ -141,10 +142,10 @@ def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -
     scale, p = 1.0, 0.0
     if not len(whitened):
         return scale, p
+    fit = _ScaledFit(whitened, lin)
     for _ in range(iterations):
         previous = scale
-        p, e, M = _fit_at_scale(whitened, lin, scale)
-        q, _ = _studentised(e, M)
+        p, q, _ = fit.at(scale)
         if q is None:
             return scale, p
         scale = float(np.clip(np.sqrt(max(float(np.median(q)) / _CHI2_2_MEDIAN, 0.0)), *NOISE_SCALE_RANGE))
@@ -201,17 +202,17 @@ def inlier_noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int
     scale, p, nu = 1.0, 0.0, 0.0
     if not len(whitened):
         return scale, p, nu
+    fit = _ScaledFit(whitened, lin)
     for _ in range(iterations):
         previous = scale
-        p, e, M = _fit_at_scale(whitened, lin, scale)
-        q, R = _studentised(e, M)
+        p, q, freedom = fit.at(scale)
         if q is None:
             return 1.0, p, 0.0
         s0 = float(np.median(q)) / _CHI2_2_MEDIAN
         if not s0 > 0:
             return 1.0, p, 0.0
         inlier = q < _CHI2_2_99 * s0
-        nu = float(np.trace(R[inlier], axis1=1, axis2=2).sum())
+        nu = float(freedom[inlier].sum())
         squared = float(np.mean(q[inlier])) / _CHI2_2_TRUNCATED_MEAN
         scale = float(np.clip(np.sqrt(squared), *NOISE_SCALE_RANGE))
         if abs(scale - previous) <= 1e-3 * previous:
@@ -249,47 +250,54 @@ def _f_over_chi2(dim: int, nu: float, level: float) -> float:
     return float(dim * fdtri(dim, nu, level) / chdtri(dim, 1.0 - level))
 
 
-def _fit_at_scale(whitened: np.ndarray, lin: Linearisation, scale: float) -> tuple[float, np.ndarray, np.ndarray]:
-    """What the fit would be with every sigma times ``scale``: (p, (n, 2) residuals, (n, 2, 2) leverage blocks).
+class _ScaledFit:
+    """What the fit would be with every sigma times ``s``: ``p`` and the studentised residuals of the usable observations.
 
     ``H(s) = H - H_proj + H_proj / s^2``; ``p = tr(H_proj(s) H(s)^-1)``; the
     residuals are predicted by one Gauss-Newton step, ``e(s) = A dx(s) - b``
     with ``dx(s) = H(s)^-1 eta(s)``, and the leverages are
-    ``M_i = A_i H(s)^-1 A_i^T / s^2``. Without the whitened system (``lin.jacobian``)
-    the residuals stay ``whitened`` and every observation takes an equal share
-    ``p / 2n`` of the parameters.
+    ``M_i = A_i H(s)^-1 A_i^T / s^2``; the studentised squared residuals are
+    ``q_i = e_i^T (I - M_i)^-1 e_i``. Observations the fit absorbs whole
+    (leverage, the larger eigenvalue of ``M_i``, above :data:`_MAX_LEVERAGE`) are
+    left out. Without the whitened system (``lin.jacobian``) the residuals stay
+    ``whitened`` and every observation takes an equal share ``p / 2n`` of the
+    parameters. Each scale is one call of the compiled
+    :func:`~vfactor.shape_evidence_kernel.fit_at_scale_kernel`; the inputs are
+    checked and laid out once.
 
     Raises:
-        numpy.linalg.LinAlgError: the residuals or the linearisation are not finite.
+        numpy.linalg.LinAlgError: the residuals or the linearisation are not finite, or ``H(s)`` is not
+            positive definite.
     """
-    if not (np.all(np.isfinite(whitened)) and np.all(np.isfinite(lin.total)) and np.all(np.isfinite(lin.projection))):
-        raise np.linalg.LinAlgError("the residuals or the linearisation are not finite")
-    n = len(whitened)
-    w = 1.0 / scale**2
-    H = lin.total + (w - 1.0) * lin.projection
-    p = float(np.trace(np.linalg.solve(H, w * lin.projection)))
-    if lin.jacobian is None or lin.jacobian.shape[0] != 2 * n:
-        return p, np.asarray(whitened, dtype=float), np.broadcast_to(np.eye(2) * min(p / (2.0 * n), 0.95), (n, 2, 2))
-    step = np.linalg.solve(H, lin.total_eta + (w - 1.0) * lin.projection_eta)
-    e = (lin.jacobian @ step - lin.rhs).reshape(n, 2)
-    A = lin.jacobian.reshape(n, 2, -1)
-    X = np.linalg.solve(H, lin.jacobian.T).T.reshape(n, 2, -1)  # (A H^-1) per observation
-    return p, e, w * np.einsum("nik,njk->nij", X, A)
 
+    def __init__(self, whitened: np.ndarray, lin: Linearisation):
+        if not (np.all(np.isfinite(whitened)) and np.all(np.isfinite(lin.total)) and np.all(np.isfinite(lin.projection))):
+            raise np.linalg.LinAlgError("the residuals or the linearisation are not finite")
+        self.whitened = np.asarray(whitened, dtype=float)
+        n = len(whitened)
+        self.has_system = lin.jacobian is not None and lin.jacobian.shape[0] == 2 * n
+        m = len(lin.total)
+        self.arrays = tuple(np.ascontiguousarray(x, dtype=float) for x in (
+            lin.total, lin.projection, lin.total_eta, lin.projection_eta,
+            lin.jacobian if self.has_system else np.empty((0, m)), lin.rhs if self.has_system else np.empty(0)))
 
-def _studentised(e: np.ndarray, M: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """Studentised squared residuals ``q_i = e_i^T (I - M_i)^-1 e_i`` and ``I - M_i`` of the usable observations.
-
-    Observations the fit absorbs whole (leverage above :data:`_MAX_LEVERAGE`) are left out; (None, None)
-    when none is left.
-    """
-    M = 0.5 * (M + np.swapaxes(M, 1, 2))
-    usable = np.linalg.eigvalsh(M)[:, -1] < _MAX_LEVERAGE
-    if not np.any(usable):
-        return None, None
-    R = np.eye(2) - M[usable]
-    q = np.einsum("ni,ni->n", e[usable], np.linalg.solve(R, e[usable][..., None])[..., 0])
-    return q, R
+    def at(self, scale: float) -> tuple[float, np.ndarray | None, np.ndarray | None]:
+        """(p, q (usable,), tr(I - M_i) (usable,)) with every sigma times ``scale``; q and the traces are None when
+        no observation is usable."""
+        n = len(self.whitened)
+        q, freedom = np.empty(n), np.empty(n)
+        p = fit_at_scale_kernel(*self.arrays, 1.0 / scale**2, _MAX_LEVERAGE, q, freedom)
+        if not np.isfinite(p):
+            raise np.linalg.LinAlgError("the Hessian at this noise scale is not positive definite")
+        if not self.has_system:  # an equal share of the parameters for every observation
+            leverage = min(p / (2.0 * n), 0.95)
+            if not leverage < _MAX_LEVERAGE:
+                return p, None, None
+            return p, np.sum(self.whitened**2, axis=1) / (1.0 - leverage), np.full(n, 2.0 * (1.0 - leverage))
+        usable = np.isfinite(q)
+        if not usable.any():
+            return p, None, None
+        return p, q[usable], freedom[usable]
 
 
 def shape_information(lin: Linearisation, projection_factor: float = 1.0) -> tuple[np.ndarray, np.ndarray]:

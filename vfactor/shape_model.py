@@ -21,6 +21,7 @@ from itertools import combinations
 import numpy as np
 
 from vfactor.keypoints import LAYERS
+from vfactor.shape_evidence_kernel import log_evidence_kernel
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes, symmetrised
 
 __all__ = ["ShapePrior", "ShapeModel", "HwcBounds", "default_shape_prior", "default_shape_model", "default_hwc_bounds",
@@ -251,6 +252,7 @@ class ShapeModel:
     spreads: tuple = (1.0, 4.0, 16.0)
     pooled_probability: float = 1.0 / 7.0
     _variants: dict = field(default_factory=dict, repr=False, compare=False)
+    _evidence_stack: dict = field(default_factory=dict, repr=False, compare=False)
 
     def components(self) -> list[tuple[str, float]]:
         """The (body type, spread) priors the evidence weighs, and ``(ANY, 1.0)``: the pooled prior."""
@@ -303,13 +305,19 @@ class ShapeModel:
             (body type or :data:`ANY`, spread) -> log evidence.
         """
         keys = self.components()
-        terms = [self.prior(name, spread).evidence_terms() for name, spread in keys]
-        L = np.linalg.cholesky(information[None] + np.stack([t[0] for t in terms]))  # one batched factorisation
-        b = eta[None] + np.stack([t[1] for t in terms])
-        y = np.linalg.solve(L, b[..., None])[..., 0]
-        logdet_A = 2 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
-        value = -0.5 * (np.array([t[2] for t in terms]) - np.einsum("ki,ki->k", y, y)
-                        + np.array([t[3] for t in terms]) + logdet_A)
+        stacked = self._evidence_stack.get(tuple(keys))  # every component's terms, stacked once per model
+        if stacked is None:
+            terms = [self.prior(name, spread).evidence_terms() for name, spread in keys]
+            stacked = (np.ascontiguousarray(np.stack([t[0] for t in terms])),
+                       np.ascontiguousarray(np.stack([t[1] for t in terms])), np.array([t[2] + t[3] for t in terms]))
+            self._evidence_stack[tuple(keys)] = stacked
+        precisions, precision_means, constants = stacked
+        quadratic, logdet_A = np.empty(len(keys)), np.empty(len(keys))
+        log_evidence_kernel(np.ascontiguousarray(information, dtype=float), np.ascontiguousarray(eta, dtype=float),
+                            precisions, precision_means, quadratic, logdet_A)  # one Cholesky per component, compiled
+        if not np.all(np.isfinite(logdet_A)):
+            raise np.linalg.LinAlgError("the information plus a prior's precision is not positive definite")
+        value = -0.5 * (constants - quadratic + logdet_A)
         return {key: float(v) for key, v in zip(keys, value)}
 
 

@@ -29,13 +29,13 @@ from vfactor.graph import (
     build_vehicle_graph,
     copy_graph,
     hwc_factor,
+    hwc_residuals,
     hwc_terms,
-    hwc_violation,
     insert_vehicle_values,
     observations_from_detections,
     wireframe_from_values,
 )
-from vfactor.init import best_candidates
+from vfactor.init import best_candidates, distinct_poses
 from vfactor.keys import KeyScheme
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
@@ -60,8 +60,12 @@ class SolveOptions:
         max_iterations: Levenberg-Marquardt iteration limit per start.
         relative_error_tol: stop when the cost decreases by less than this fraction.
         absolute_error_tol: stop when the cost decreases by less than this.
-        num_starts: how many distinct initial poses to optimise from (the lowest
-            final cost wins).
+        num_starts: at most this many distinct initial poses to optimise from
+            (the lowest final cost wins): the best candidate, then, while the best
+            solution so far keeps fewer than :data:`FURTHER_START_INLIERS` of the
+            keypoints as inliers, the next candidates that differ from every
+            solution reached (a start that LM would pull to a minimum already
+            found is not another start).
         covariance: compute the pose and keypoint covariances (``gtsam.Marginals``).
         min_observations: fewer seen keypoints (over all cameras) make the
             vehicle ``degenerate``.
@@ -188,37 +192,54 @@ def solve_observations(
             message=f"only {n_seen} keypoints seen over all cameras; at least {options.min_observations} are needed",
         )
     mean = Wireframe(first_prior.mean)
-    if initial is not None:
-        starts = [initial]
-    else:
-        per_view = np.bincount(obs.camera_index, minlength=len(obs.cameras)).max()
-        candidates = best_candidates(obs, mean, options.graph.loss, options.num_starts,
-                                     min_keypoints_in_one_view=options.min_keypoints_in_one_view)
-        if not candidates:
-            return VehicleResult(
-                vehicle_id, Status.DEGENERATE,
-                message=(
-                    f"no initial pose: the best camera sees {per_view} keypoints (PnP needs "
-                    f"{options.min_keypoints_in_one_view}) and too few keypoints triangulate"
-                ),
-            )
-        starts = [(c.world_T_vehicle, c.wireframe) for c in candidates]
     graph = build_vehicle_graph(obs, keys, config=options.graph, prior=first_prior, bounds=bounds,
                                 ground_plane=options.ground_plane)
     terms = hwc_terms(options.graph, bounds)
     hwc = hwc_factor(keys, 0, terms=terms)
-    best = None
-    failure = "no start"
-    for world_T_vehicle, wireframe in starts:
-        values = gtsam.Values()
-        insert_vehicle_values(values, keys, world_T_vehicle, wireframe)
-        try:
-            outcome = _optimise(graph, values, keys, options, terms, hwc)
-        except RuntimeError as exc:
-            failure = summarise_error(exc)
-            continue
-        if best is None or outcome[1] < best[1]:
-            best = outcome
+    best, failure, tried, reached = None, "no start", 0, []  # reached: the starts tried and the poses LM reached
+    best_inliers = 0.0  # the best solution's share of inliers
+
+    def settled() -> bool:  # no further start: as many as allowed, or the best solution explains the keypoints
+        return tried == options.num_starts or best_inliers >= FURTHER_START_INLIERS
+
+    def candidate_starts(ransac: bool):
+        return [(c.world_T_vehicle, c.wireframe) for c in best_candidates(
+            obs, mean, options.graph.loss, None, min_keypoints_in_one_view=options.min_keypoints_in_one_view,
+            ransac=ransac)]
+
+    if initial is not None:
+        rounds = [lambda: [initial]]
+    else:  # the best SQPnP or triangulation start first; RANSAC's poses join the others only for a further start
+        rounds = [lambda: candidate_starts(False)[:1], lambda: candidate_starts(True)]
+    for make_starts in rounds:
+        if settled():
+            break
+        for world_T_vehicle, wireframe in make_starts():
+            if settled():
+                break
+            if not all(distinct_poses(world_T_vehicle, p) for p in reached):
+                continue  # LM would pull it to a minimum already found: not another start
+            tried += 1
+            reached.append(world_T_vehicle)
+            values = gtsam.Values()
+            insert_vehicle_values(values, keys, world_T_vehicle, wireframe)
+            try:
+                outcome = _optimise(graph, values, keys, options, terms, hwc)
+            except RuntimeError as exc:
+                failure = summarise_error(exc)
+                continue
+            reached.append(outcome[0].atPose3(keys.pose_key()))
+            if best is None or outcome[1] < best[1]:
+                best, best_inliers = outcome, _inlier_share(obs, outcome[0], keys, options)
+    if best is None and tried == 0 and initial is None:
+        per_view = np.bincount(obs.camera_index, minlength=len(obs.cameras)).max()
+        return VehicleResult(
+            vehicle_id, Status.DEGENERATE,
+            message=(
+                f"no initial pose: the best camera sees {per_view} keypoints (PnP needs "
+                f"{options.min_keypoints_in_one_view}) and too few keypoints triangulate"
+            ),
+        )
     if best is None:
         return VehicleResult(vehicle_id, Status.FAILED, message=f"optimisation failed: {failure}")
     extras = {}
@@ -265,6 +286,21 @@ def solve_observations(
     result.box = vehicle_box(world_T_vehicle, wireframe, joint, result.extras.get("body_type_posterior"),
                              options.box_model)
     return checked(result, [obs.cameras[c] for c in np.unique(obs.camera_index)], options.covariance)  # vfactor.sanity
+
+
+#: A further start (up to ``SolveOptions.num_starts``) is optimised only while the best solution so far keeps fewer than
+#: this share of the keypoints as inliers (robust-loss weight above 0.5): on 1476 simulated vehicles (library_2cam
+#: seeds 5-8, accuracy_2cam and intersection_2cam seeds 0-1, three noise levels) a second start found a lower cost
+#: once, where the first solution, turned by 180 degrees, kept 24 % of them; solutions within 90 degrees of the truth
+#: keep at least 43 % (hard noise: 15 % outliers, 8 % swaps), 90 % at the median, and 0.9 % of them fewer than 60 %.
+FURTHER_START_INLIERS = 0.6
+
+
+def _inlier_share(obs: KeypointObservations, estimate: gtsam.Values, keys: KeyScheme, options: SolveOptions) -> float:
+    """Share of the observations whose robust-loss weight at ``estimate`` is above 0.5 (whitened residual within the
+    loss's threshold)."""
+    e = whitened_residuals(obs, estimate.atPose3(keys.pose_key()), wireframe_from_values(estimate, keys).vehicle_p_keypoints)
+    return float(np.mean(options.graph.loss.weight(np.linalg.norm(e, axis=1)) > 0.5))
 
 
 #: An observation whose whitened residual's square is beyond this (the 99 % point of chi2(2)) is an outlier to the
@@ -388,27 +424,29 @@ def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc)
         hwc: the vehicle's HWC factor made of ``terms``.
 
     Returns:
-        (estimate, cost, hit the iteration limit, the graph finally used). The cost
-        always includes the HWC factor's error, so that starts which did and did
-        not need it compare on the same objective.
+        (estimate, cost, iterations, hit the iteration limit, the graph finally used).
+        The cost always includes the HWC factor's error, so that starts which did
+        and did not need it compare on the same objective; without the factor that
+        error is half the squared norm of the HWC residuals the check computed.
     """
     config = options.graph
     optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.lm_params())
     estimate = optimizer.optimize()
     hit_limit = optimizer.iterations() >= options.max_iterations
     iterations = optimizer.iterations()
-    added = False
-    if config.hwc == "lazy" and hwc_violation(wireframe_from_values(estimate, keys), terms) > config.hwc_tolerance:
-        with_hwc = copy_graph(graph)
-        with_hwc.add(hwc)
-        graph, added = with_hwc, True
-        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.lm_params())
-        estimate = optimizer.optimize()
-        hit_limit = optimizer.iterations() >= options.max_iterations
-        iterations += optimizer.iterations()
-    cost = graph.error(estimate)
-    if config.hwc == "lazy" and not added:
-        cost += hwc.error(estimate)
+    cost = optimizer.error()  # graph.error(estimate)
+    if config.hwc == "lazy":
+        residuals = hwc_residuals(wireframe_from_values(estimate, keys), terms)
+        if float(np.abs(residuals).max()) > config.hwc_tolerance:
+            graph = copy_graph(graph)
+            graph.add(hwc)
+            optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.lm_params())
+            estimate = optimizer.optimize()
+            hit_limit = optimizer.iterations() >= options.max_iterations
+            iterations += optimizer.iterations()
+            cost = optimizer.error()
+        else:
+            cost += 0.5 * float(residuals @ residuals)  # hwc.error(estimate), from the residuals of the check
     return estimate, cost, iterations, hit_limit, graph
 
 

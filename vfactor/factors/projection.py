@@ -32,12 +32,12 @@ import gtsam
 import numpy as np
 
 from vfactor.camera import LENS_FISHEYE, LENS_PLAIN, Camera, project_pinhole
-from vfactor.factors.projection_kernel import projection_kernel
+from vfactor.factors.projection_kernel import projection_kernel, robust_cost_kernel
 from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_terms import cross
 from vfactor.factors.truncation import truncated_means
 
-__all__ = ["KeypointObservations", "projection_factor", "project_keypoints", "whitened_residuals"]
+__all__ = ["KeypointObservations", "projection_factor", "project_keypoints", "whitened_residuals", "robust_costs"]
 
 _MIN_DEPTH = 0.05  # metres; points closer to (or behind) a camera are clamped to this depth
 _EMPTY = np.empty((0, 0))
@@ -205,6 +205,32 @@ def whitened_residuals(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, 
     uv, _, _, _ = project_keypoints(obs, world_T_vehicle, vehicle_p, jacobians=False)
     expected, _ = obs.expected_pixels(uv)
     return np.einsum("nij,nj->ni", obs.sqrt_information, expected - obs.uv)
+
+
+def robust_costs(obs: KeypointObservations, world_T_vehicle: np.ndarray, vehicle_p: np.ndarray, loss: RobustLoss) -> np.ndarray:
+    """Robust costs ``sum_i rho(|e_i|)`` of all observations at each of K poses and shapes, in one compiled pass.
+
+    ``e_i`` are the whitened residuals of :func:`whitened_residuals` (the same
+    projection, depth clamp and truncation), ``rho`` the loss; the
+    :func:`~vfactor.factors.projection_kernel.robust_cost_kernel` scores all K at once.
+
+    Args:
+        obs: the observations.
+        world_T_vehicle: (K, 4, 4) vehicle poses (vehicle -> world), metres.
+        vehicle_p: (K, 12, 3) body-frame keypoints of each, metres.
+        loss: the robust loss.
+
+    Returns:
+        (K,) costs (unitless; NaN or inf where a projection is not finite).
+    """
+    T = np.asarray(world_T_vehicle, dtype=float).reshape(-1, 4, 4)
+    points = np.ascontiguousarray(vehicle_p, dtype=float).reshape(len(T), 12, 3)
+    costs = np.empty(len(T))
+    robust_cost_kernel(np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3]), points, obs.keypoint_index,
+                       obs._R_cw, obs._t_cw, obs._intrinsics_table, obs._lens_table, obs._dist_table, obs.uv,
+                       obs.sqrt_information, obs._window_table, obs._sigma_table, loss.id, float(loss.threshold), _MIN_DEPTH,
+                       costs)
+    return costs
 
 
 def _layers_to_points(values: gtsam.Values, layer_keys) -> np.ndarray:

@@ -26,7 +26,7 @@ from numba import njit
 from vfactor.factors.robust import robust_scale
 from vfactor.factors.truncation import truncated_mean
 
-__all__ = ["projection_kernel"]
+__all__ = ["projection_kernel", "robust_cost_kernel"]
 
 #: Lens codes of the ``lens`` table (:meth:`vfactor.camera.Camera.kernel_lens`).
 _PLAIN, _FULL, _FISHEYE = 0, 1, 2
@@ -210,3 +210,29 @@ def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, lens
             H_pose[row, 5] = jp[2]
             for b in range(3):
                 H_shape[row, 3 * kp + b] = jp[b]
+
+
+@njit(cache=True)
+def robust_cost_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, lens, dist, uv, L, window, sigma, loss_id, k,
+                       min_depth, costs):
+    """Robust costs ``sum_i rho(|e_i|)`` of the observations at several poses and shapes, in one compiled pass.
+
+    Each is ``1/2 |r|^2`` of :func:`projection_kernel`'s residuals (``r = s(n) e`` with
+    ``1/2 s(n)^2 n^2 = rho(n)``), e.g. every initial candidate of a vehicle scored at once.
+
+    Args:
+        R, t: (K, 3, 3) rotations and (K, 3) translations of the ``world_T_vehicle`` to score.
+        points: (K, 12, 3) body-frame keypoints of each, metres.
+        keypoint_index .. min_depth: as for :func:`projection_kernel`.
+        costs: (K,) the robust costs, written.
+    """
+    n = keypoint_index.shape[0]
+    r = np.empty(2 * n)
+    unused = np.empty((0, 0))
+    for c in range(R.shape[0]):
+        projection_kernel(R[c], t[c], points[c], keypoint_index, R_cw, t_cw, intrinsics, lens, dist, uv, L, window, sigma,
+                          loss_id, k, min_depth, False, r, unused, unused)
+        total = 0.0
+        for j in range(2 * n):
+            total += r[j] * r[j]
+        costs[c] = 0.5 * total

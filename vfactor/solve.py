@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from dataclasses import dataclass, field
 from collections.abc import Iterator
+from dataclasses import dataclass, field
 from typing import Callable
 
 import gtsam
@@ -47,8 +47,8 @@ from vfactor.wireframe import Wireframe
 
 log = logging.getLogger(__name__)
 
-__all__ = ["SolveOptions", "solve_vehicle", "solve_observations", "solve_frame", "solve_scene", "iter_solve_scene", "pose_shape_covariance",
-           "keypoint_covariances"]
+__all__ = ["SolveOptions", "solve_vehicle", "solve_observations", "solve_frame", "solve_scene", "iter_solve_scene",
+           "pose_shape_covariance", "keypoint_covariances"]
 
 
 @dataclass(frozen=True)

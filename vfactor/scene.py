@@ -702,21 +702,17 @@ def _result_pieces(frames: Iterable[FrameResult]) -> Iterator[str]:
     yield '{\n  "frames": ['
     count = 0
     for i, frame in enumerate(frames):
-        yield ("," if i else "") + "\n    " + _dumps(_frame_to_dict(frame, i), 2)
+        yield ("," if i else "") + "\n    " + _dumps(frame_result_to_dict(frame, i), 2)
         count += 1
     yield ("\n  ]" if count else "]") + "\n}\n"
 
 
-def _frame_to_dict(frame: FrameResult, i: int) -> dict:
-    t = float(frame.t)
-    if not math.isfinite(t):
-        raise SceneError(f"frames[{i}].t", f"expected a finite number of seconds, got {t}")
-    return {"t": t, "vehicles": [_vehicle_to_dict(v, f"frames[{i}].vehicles[{j}]") for j, v in enumerate(frame.vehicles)]}
-
-
 def frame_result_to_dict(frame: FrameResult, index: int = 0) -> dict:
     """One frame of :func:`results_to_dict` (``{"t", "vehicles"}``; ``index`` names it in errors)."""
-    return _frame_to_dict(frame, index)
+    t = float(frame.t)
+    if not math.isfinite(t):
+        raise SceneError(f"frames[{index}].t", f"expected a finite number of seconds, got {t}")
+    return {"t": t, "vehicles": [_vehicle_to_dict(v, f"frames[{index}].vehicles[{j}]") for j, v in enumerate(frame.vehicles)]}
 
 
 def results_to_dict(frames: list[FrameResult]) -> dict:
@@ -737,7 +733,7 @@ def results_to_dict(frames: list[FrameResult]) -> dict:
     Raises:
         SceneError: a converged / max_iterations vehicle without a pose or wireframe.
     """
-    return {"frames": [_frame_to_dict(frame, i) for i, frame in enumerate(frames)]}
+    return {"frames": [frame_result_to_dict(frame, i) for i, frame in enumerate(frames)]}
 
 
 def load_results(path: str | os.PathLike) -> list[FrameResult]:

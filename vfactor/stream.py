@@ -102,18 +102,23 @@ class StreamTracker:
         self.scene = scene
         self.options = dataclasses.replace(options, solve=options.solve.for_scene(scene))
         self.tracker = Tracker(scene.cameras, self.options)
-        self.frames = 0
+        # a late frame's own solve gives the covariances the tracker gives (options.covariance)
+        self._alone = dataclasses.replace(self.options.solve, covariance=self.options.covariance)
         self.last_t: float | None = None
 
-    def add(self, frame: Frame) -> tuple[FrameResult, str]:
-        """The frame's result (each vehicle's filtered estimate) and a note when it could not be tracked."""
-        index, self.frames = self.frames, self.frames + 1
+    def add(self, frame: Frame, index: int) -> tuple[FrameResult, str]:
+        """The result of the stream's frame ``index`` (each vehicle's filtered estimate) and a note when it could not
+        be tracked.
+
+        Raises:
+            InputError: a detection names no vehicle.
+        """
         if any(d.vehicle == UNASSIGNED for d in frame.detections):
             raise InputError("vehicle", "the detections of a stream must name their vehicle (no association)")
         if self.last_t is not None and frame.t <= self.last_t:
             note = (f"arrived late: t = {frame.t:g} s is not after the last frame's {self.last_t:g} s; solved on its "
                     "own (one-frame solve), not tracked")
-            return solve_frame(frame, self.scene.cameras, self.options.solve), note
+            return solve_frame(frame, self.scene.cameras, self._alone), note
         self.last_t = frame.t
         result = self.tracker.add_frame(frame, index)
         self.tracker.forget(frame.t)
@@ -194,20 +199,15 @@ def track_stream(lines: Iterable[str], options: TrackOptions = TrackOptions(lag=
         raise InputError("header", "the stream is empty: its first line must be the header (the cameras)")
     header = stream_header(first[1], base_dir, allow_outside_paths)
     tracker = StreamTracker(header, options)
-    for frame in header.frames:
-        result, note = tracker.add(frame)
-        yield StreamItem(tracker.frames - 1, first[0], result, note)
+    n = -1  # the stream's frame number
+    for n, frame in enumerate(header.frames):
+        yield StreamItem(n, first[0], *tracker.add(frame, n))
     for k, line in numbered:
-        n = tracker.frames
+        n += 1
         try:
             frame = frame_from_dict(json.loads(line), header, "frame", allow_outside_paths)
-            result, note = tracker.add(frame)
+            yield StreamItem(n, k, *tracker.add(frame, n))
         except json.JSONDecodeError as exc:
-            tracker.frames += 1
             yield StreamItem(n, k, error=f"not JSON ({exc.msg} at column {exc.colno})")
-            continue
         except (InputError, SceneError) as exc:
-            tracker.frames = n + 1
             yield StreamItem(n, k, error=str(exc))
-            continue
-        yield StreamItem(n, k, result, note)

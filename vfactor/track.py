@@ -157,6 +157,7 @@ class _TrackState:
     poses: list = field(default_factory=list)  # (frame index, t, pose key)
     hwc_added: bool = False
     frames_seen: int = 0
+    last_seen: float = -math.inf  # time (s) of the last frame that saw the track (Tracker.forget)
     # while the track is young (fewer than _REANCHOR_FRAMES frames seen by two cameras) its observations and
     # motion factors are kept, so that it can be re-solved by Levenberg-Marquardt (see Tracker._reanchor)
     young: bool = False
@@ -289,8 +290,7 @@ class Tracker:
         """Drops every track not seen after ``t - options.max_gap`` (seconds): it would start a new segment, from
         a new smoother, anyway. A stream (:mod:`vfactor.stream`) calls it to hold its memory bounded however many
         vehicles come and go; a forgotten id seen again starts a new track. Returns the ids dropped."""
-        gone = [vid for vid, track in self._tracks.items()
-                if (track.poses[-1][1] if track.poses else -math.inf) < t - self.options.max_gap]
+        gone = [vid for vid, track in self._tracks.items() if track.last_seen < t - self.options.max_gap]
         for vid in gone:
             del self._tracks[vid]
         return gone
@@ -412,6 +412,7 @@ class Tracker:
 
     def _add(self, vid: str, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
         track = self._track(vid)
+        track.last_seen = t
         if len(obs) == 0:
             return VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen in this frame")
         track.frames_seen += 1
@@ -642,12 +643,7 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
         messages.append(f"vehicle '{vid}': {len(jumps)} jumps beyond the motion model ({where}; first: {jumps[0][2]}): "
                         "its id does not follow one vehicle there; tracked as new segments")
     frames = _frame_results(scene, final, options.covariance)
-    online = []
-    for i, f in enumerate(scene.frames):
-        vehicles = [online_of[(i, vid)] for vid in f.vehicle_ids()]
-        for v in vehicles:
-            v.extras["detections"] = f.indices_of(v.id)
-        online.append(FrameResult(f.t, vehicles))
+    online = [_with_detections(f, [online_of[(i, vid)] for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
     log.info("tracked %d vehicles over %d frames (%s): %d of %d poses solved", len(solved), len(frames),
              "smoothed" if options.lag is None else f"fixed lag {options.lag:g} s",
              sum(v.ok for fr in frames for v in fr.vehicles), sum(len(fr.vehicles) for fr in frames))
@@ -685,13 +681,16 @@ def _frame_results(scene: Scene, results: dict, covariance: bool) -> list[FrameR
     """The final results of every frame, in the scene's order, from (frame index, id) -> result: each
     sanity-checked against the cameras that saw it (:func:`vfactor.sanity.checked`) and with its
     ``extras["detections"]``."""
-    out = []
-    for i, f in enumerate(scene.frames):
-        vehicles = [checked(results[(i, vid)], _seen_by(f, vid, scene.cameras), covariance) for vid in f.vehicle_ids()]
-        for v in vehicles:
-            v.extras["detections"] = f.indices_of(v.id)
-        out.append(FrameResult(f.t, vehicles))
-    return out
+    return [_with_detections(f, [checked(results[(i, vid)], _seen_by(f, vid, scene.cameras), covariance)
+                                 for vid in f.vehicle_ids()]) for i, f in enumerate(scene.frames)]
+
+
+def _with_detections(frame: Frame, vehicles: list[VehicleResult]) -> FrameResult:
+    """The frame's results, each with ``extras["detections"]``: the indices of its detections in the scene frame
+    (a track's unit held only that track's detections)."""
+    for v in vehicles:
+        v.extras["detections"] = frame.indices_of(v.id)
+    return FrameResult(frame.t, vehicles)
 
 
 def _refresh(final: dict, estimates: dict, kind: str) -> None:

@@ -129,3 +129,12 @@ def test_cli_follow_to_file(tmp_path, sim, capsys):
         assert f"{field}:" in capsys.readouterr().err
     assert main(["track", str(scene), "--out", str(out), "--idle-timeout", "1"]) == 2
     assert "--idle-timeout: only with --follow" in capsys.readouterr().err
+
+
+def test_a_late_frame_gets_the_covariances_the_tracker_gives(sim):
+    lines = _lines(sim.scene)
+    items = list(track_stream(lines[:4] + [lines[2]], TrackOptions(solve=SolveOptions(covariance=False), lag=0.5)))
+    tracked, late = items[2], items[3]
+    assert late.note.startswith("arrived late")
+    assert all(v.pose_covariance is not None for v in tracked.result.vehicles if v.ok)
+    assert all(v.pose_covariance is not None for v in late.result.vehicles if v.ok) and late.result.vehicles

@@ -56,6 +56,7 @@ from vfactor.errors import CalibrationError, SceneError
 from vfactor.heatmaps import decode_heatmaps
 from vfactor.jsonio import describe as _kind, is_int as _is_int, is_number as _is_number, read_json, write_text_atomic
 from vfactor.keypoints import NUM_KEYPOINTS
+from vfactor.label_swaps import SwapFinding
 from vfactor.observations import DEFAULT_VEHICLE_ID, UNASSIGNED, Detection, Frame, Scene, resolve_path
 from vfactor.result import COVARIANCE_KINDS, FrameResult, Status, VehicleResult
 from vfactor.wireframe import Wireframe
@@ -101,6 +102,7 @@ _VEHICLE_KEYS = (
     "box",
     "pose_covariance_kind",
     "detections",
+    "swapped_keypoints",
 )
 _OK_STATUSES = (Status.CONVERGED, Status.MAX_ITERATIONS)
 #: Relative tolerance of the symmetry checks of covariance matrices.
@@ -801,6 +803,8 @@ def _vehicle_to_dict(v: VehicleResult, path: str) -> dict:
     out["status"] = status.value
     if v.extras.get("detections") is not None:
         out["detections"] = [int(j) for j in v.extras["detections"]]
+    if ok and v.extras.get("swapped_keypoints"):
+        out["swapped_keypoints"] = [finding.to_dict() for finding in v.extras["swapped_keypoints"]]
     out["iterations"] = int(v.iterations)
     error = float("nan") if v.final_error is None else float(v.final_error)
     out["final_error"] = error if math.isfinite(error) else None
@@ -912,6 +916,10 @@ def _vehicle_from_dict(data, path: str) -> VehicleResult:
         if not all(_is_int(j) and j >= 0 for j in items) or len(set(items)) != len(items):
             raise SceneError(f"{path}.detections", f"expected distinct indices >= 0 into the frame's detections, "
                                                    f"got {_kind(detections)}")
+    swapped = entry.get("swapped_keypoints")
+    if swapped is not None:
+        swapped = [SwapFinding.from_dict(item, f"{path}.swapped_keypoints[{k}]")
+                   for k, item in enumerate(_list(swapped, f"{path}.swapped_keypoints", "a list of swapped pairs"))]
     kind = entry.get("pose_covariance_kind")
     if kind is not None and (kind not in COVARIANCE_KINDS or pose_covariance is None):
         raise SceneError(f"{path}.pose_covariance_kind", f"expected one of {', '.join(COVARIANCE_KINDS)} beside a "
@@ -930,7 +938,8 @@ def _vehicle_from_dict(data, path: str) -> VehicleResult:
         body_type=body_type,
         body_type_probability=body_type_probability,
         extras={**({} if kind is None else {"covariance": kind}),
-                **({} if detections is None else {"detections": [int(j) for j in detections]})},
+                **({} if detections is None else {"detections": [int(j) for j in detections]}),
+                **({"swapped_keypoints": swapped} if swapped else {})},
     )
 
 

@@ -37,6 +37,7 @@ from vfactor.graph import (
 )
 from vfactor.init import best_candidates, distinct_poses
 from vfactor.keys import KeyScheme
+from vfactor.label_swaps import relabel_swaps
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
@@ -80,6 +81,9 @@ class SolveOptions:
             balance of keypoints and shape prior holds at any noise level;
             ``False`` keeps the sigmas of ``graph`` (``relative_pixel_sigma``,
             or the detections' covariances) as they are.
+        relabel_swaps: exchange the labels of each camera's left/right pairs that the first solution says are
+            swapped, and solve again (:mod:`vfactor.label_swaps`); the result's ``extras["swapped_keypoints"]``
+            lists them.
         shape_information: keep the observations' information on the shape in
             the result's ``extras["shape_information"]`` (10 kB a vehicle), for
             :func:`vfactor.shape_evidence.track_shape` over several frames.
@@ -97,6 +101,7 @@ class SolveOptions:
     min_keypoints_in_one_view: int = 4
     ground_plane: GroundPlane | None = None
     estimate_noise: bool = True
+    relabel_swaps: bool = True
     shape_information: bool = False
     box_model: BoxModel | None = None
 
@@ -242,6 +247,9 @@ def solve_observations(
         )
     if best is None:
         return VehicleResult(vehicle_id, Status.FAILED, message=f"optimisation failed: {failure}")
+    swaps = []
+    if options.relabel_swaps:
+        best, obs, swaps = _relabelled(best, obs, options, first_prior, keys, bounds, terms, hwc)
     extras = {}
     nominal = obs
     if model is not None or options.estimate_noise:
@@ -262,6 +270,8 @@ def solve_observations(
     if not options.shape_information:
         extras.pop("shape_information", None)
     result.extras.update(extras)
+    if swaps:
+        result.extras["swapped_keypoints"] = swaps
     e = whitened_residuals(obs, world_T_vehicle, wireframe.vehicle_p_keypoints)
     weights = options.graph.loss.weight(np.linalg.norm(e, axis=1))
     result.extras["inlier_weights"] = weights
@@ -350,6 +360,29 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
     out = copy_graph(graph)
     out.replace(0, projection_factor(pose_key, layer_keys, obs.subset(inlier), RobustLoss("none")))
     return out, inflation
+
+
+def _relabelled(best, obs: KeypointObservations, options: SolveOptions, prior: ShapePrior, keys: KeyScheme,
+                bounds: HwcBounds, terms, hwc):
+    """The first solution with the left/right labels it says are swapped exchanged
+    (:func:`vfactor.label_swaps.relabel_swaps`), solved again from there.
+
+    Returns:
+        (the outcome of :func:`_optimise`, the observations, the findings); ``best`` and ``obs`` as they were when no
+        pair is swapped or the new solve fails numerically.
+    """
+    estimate = best[0]
+    relabelled, swaps = relabel_swaps(obs, estimate.atPose3(keys.pose_key()),
+                                      wireframe_from_values(estimate, keys).vehicle_p_keypoints, options.graph.loss)
+    if not swaps:
+        return best, obs, []
+    graph = build_vehicle_graph(relabelled, keys, config=options.graph, prior=prior, bounds=bounds,
+                                ground_plane=options.ground_plane)
+    try:
+        outcome = _optimise(graph, estimate, keys, options, terms, hwc)
+    except RuntimeError:
+        return best, obs, []
+    return (outcome[0], outcome[1], best[2] + outcome[2], best[3] or outcome[3], outcome[4]), relabelled, swaps
 
 
 def _refine(first, obs: KeypointObservations, options: SolveOptions, model: ShapeModel | None, first_prior: ShapePrior,

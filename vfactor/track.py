@@ -46,6 +46,7 @@ from vfactor.graph import (
 )
 from vfactor.init import best_candidates, cross_projection_cost
 from vfactor.keys import KeyScheme
+from vfactor.label_swaps import apply_swaps, relabel_swaps
 from vfactor.observations import Frame, Scene
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
@@ -170,6 +171,7 @@ class _TrackState:
     body_type_probability: float | None = None
     noise_scale: float = 1.0  # multiplies the detections' pixel sigmas
     notes: dict = field(default_factory=dict)  # pose key -> message of every result of it (a new segment)
+    swaps: dict = field(default_factory=dict)  # pose key -> the frame's relabelled left/right pairs (vfactor.label_swaps)
     jumps: list = field(default_factory=list)  # (frame index, t, what) of each jump beyond the motion model
 
     def restart(self) -> None:
@@ -323,6 +325,8 @@ class Tracker:
                                body_type=track.body_type, body_type_probability=track.body_type_probability,
                                box=_box(pose, wireframe, track.body_type))
         result.extras["noise_scale"] = track.noise_scale
+        if key in track.swaps:
+            result.extras["swapped_keypoints"] = track.swaps[key]
         return result
 
     def _predict(self, track: _TrackState, estimate: gtsam.Values, t: float) -> gtsam.Pose3:
@@ -344,6 +348,9 @@ class Tracker:
         track.smoother = self._new_smoother()
         track.poses, track.hwc_added = [], False
         key = self.keys.pose_key(track.index, frame_index)
+        if first.extras.get("swapped_keypoints"):  # the track's graph takes the labels the frame's solve settled on
+            obs = apply_swaps(obs, first.extras["swapped_keypoints"])
+            track.swaps[key] = first.extras["swapped_keypoints"]
         motion, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         _add_pose_factors(motion, track.poses, key, t, self.options)
         track.young, track.young_frames = True, [(frame_index, obs, motion, first)]
@@ -447,6 +454,11 @@ class Tracker:
                     track.notes[key] = f"a new segment of the track: {jump}; the detections' id may not follow one vehicle"
                     return self._start(track, frame_index, t, raw)
                 guess = starts[0].world_T_vehicle
+        if options.relabel_swaps:  # left/right pairs that the track's shape at the prediction says are swapped
+            obs, swaps = relabel_swaps(obs, guess, wireframe.vehicle_p_keypoints, loss)
+            if swaps:
+                raw = apply_swaps(raw, swaps)
+                track.swaps[key] = swaps
         graph, motion, values = gtsam.NonlinearFactorGraph(), gtsam.NonlinearFactorGraph(), gtsam.Values()
         add_observation_factor(graph, self.keys, obs, track.index, frame_index, options.graph)
         _add_pose_factors(motion, track.poses, key, t, self.options)
@@ -472,6 +484,8 @@ class Tracker:
         smoother = track.smoother
         held = smoother.timestamps()  # forget poses the smoother has marginalised (with or without a lag)
         track.poses = [p for p in track.poses if p[2] in held]
+        if track.swaps:
+            track.swaps = {key: found for key, found in track.swaps.items() if key in held}
         keys = [key for _, _, key in track.poses[-recent if recent else 0:]]
         before = [smoother.calculateEstimatePose3(k) for k in keys]
         for _ in range(max_updates):
@@ -764,8 +778,12 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     add_shape_factors(graph, keys, index, config, track_prior, bounds)
     posed, best, segments = [], -1, {}
+    swaps = {}  # frame index -> the left/right pairs that frame's own solve relabelled, taken over by the batch graph
     for (i, t, obs), first in zip(items, firsts):
         obs = obs.scaled(scale)
+        if first is not None and first.ok and first.extras.get("swapped_keypoints"):
+            swaps[i] = first.extras["swapped_keypoints"]
+            obs = apply_swaps(obs, swaps[i])
         if first is None or not first.ok:
             if not posed:
                 results[i] = first or VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen")
@@ -809,6 +827,8 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
             iterations=optimizer.iterations(), final_error=graph.error(estimate), message=segments.get(i, ""),
             body_type=body_type, body_type_probability=probability, box=_box(pose, wireframe, body_type))
         results[i].extras["noise_scale"] = scale
+        if i in swaps:
+            results[i].extras["swapped_keypoints"] = swaps[i]
         if marginals:
             results[i].extras["covariance"] = "smoothed"
     return results

@@ -9,11 +9,11 @@ the shape and the initial pose.
 from __future__ import annotations
 
 import gtsam
-import numpy as np
 
 from vfactor.graph import GraphConfig, add_observation_factor, insert_vehicle_values
 from vfactor.factors.projection import KeypointObservations
 from vfactor.keys import KeyScheme
+from vfactor.label_swaps import relabel_swaps as _relabel_swaps
 from vfactor.result import Status, VehicleResult
 from vfactor.wireframe import Wireframe
 
@@ -26,19 +26,36 @@ def known_shape(
     wireframe_true: Wireframe,
     config: GraphConfig = GraphConfig(),
     vehicle_id: str = "vehicle",
+    relabel_swaps: bool = True,
 ) -> VehicleResult:
-    """Pose by Levenberg-Marquardt from the true pose with the true shape held fixed."""
+    """Pose by Levenberg-Marquardt from the true pose with the true shape held fixed.
+
+    With ``relabel_swaps`` (as the factor graph's solve does by default), the
+    left/right pairs that the solution says are swapped are relabelled and the
+    pose solved again (:func:`vfactor.label_swaps.relabel_swaps`).
+    """
     keys = KeyScheme()
+    values = gtsam.Values()
+    insert_vehicle_values(values, keys, world_T_vehicle_true, wireframe_true)
+    graph, estimate, iterations = _solve(obs, wireframe_true, values, keys, config)
+    if relabel_swaps:
+        relabelled, swaps = _relabel_swaps(obs, estimate.atPose3(keys.pose_key()), wireframe_true.vehicle_p_keypoints,
+                                           config.loss)
+        if swaps:
+            graph, estimate, more = _solve(relabelled, wireframe_true, estimate, keys, config)
+            iterations += more
+    return VehicleResult(
+        vehicle_id, Status.CONVERGED, world_T_vehicle=estimate.atPose3(keys.pose_key()), wireframe=wireframe_true,
+        iterations=iterations, final_error=graph.error(estimate),
+    )
+
+
+def _solve(obs, wireframe_true, values, keys, config):
     graph = gtsam.NonlinearFactorGraph()
     add_observation_factor(graph, keys, obs, config=config)
     fixed = gtsam.noiseModel.Isotropic.Sigma(12, 1e-6)
     for key, vec in zip(keys.layer_keys(), wireframe_true.layer_vectors().values()):
         graph.add(gtsam.PriorFactorVector(key, vec, fixed))
-    values = gtsam.Values()
-    insert_vehicle_values(values, keys, world_T_vehicle_true, wireframe_true)
     optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, gtsam.LevenbergMarquardtParams())
     estimate = optimizer.optimize()
-    return VehicleResult(
-        vehicle_id, Status.CONVERGED, world_T_vehicle=estimate.atPose3(keys.pose_key()), wireframe=wireframe_true,
-        iterations=optimizer.iterations(), final_error=graph.error(estimate),
-    )
+    return graph, estimate, optimizer.iterations()

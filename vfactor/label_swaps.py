@@ -1,0 +1,143 @@
+"""Left/right label swaps: a camera's keypoints whose labels the solution says are swapped, relabelled.
+
+Keypoint detectors confuse a vehicle's left and right side: a camera's
+detection may give the left front wheel's pixel as the right front wheel's and
+the other way round. To the robust loss a swapped pair is two outliers, so
+the keypoints' information is lost, and where the shape is free (every
+keypoint is a variable) the solve may bend the shape or turn the pose to
+half-explain them. :func:`relabel_swaps` asks the solution instead: for each
+camera and each left/right pair it compares the robust cost of the labels as
+given with the cost of the pair swapped (for a pair of which the camera saw
+one keypoint, that keypoint under its partner's label) and swaps where the
+swapped labels cost at least :data:`SWAP_MARGIN` less. The margin is a log
+prior odds against a swap: a pair is swapped only when the pixels say so
+clearly, never where both labels fit alike (a camera looking along the
+vehicle's axis sees left and right keypoints near each other).
+
+The one-frame solve (:func:`vfactor.solve.solve_observations`) relabels after
+its first solution and solves again from there; the known-shape reference does
+the same, so that it stays a bound for the same data (docs/factors.md,
+"Left/right swaps").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import gtsam
+import numpy as np
+
+from vfactor.errors import SceneError
+from vfactor.factors.projection import KeypointObservations, whitened_residuals
+from vfactor.factors.robust import RobustLoss
+from vfactor.keypoints import LEFT_RIGHT_PAIRS, MIRROR_PERMUTATION
+
+__all__ = ["SWAP_MARGIN", "SwapFinding", "relabel_swaps", "apply_swaps"]
+
+#: A pair is swapped when its swapped labels' robust cost is at least this much lower (the units of the cost,
+#: ``rho`` of the whitened residuals: a negative log-likelihood), about the log odds of a 5 % swap rate.
+SWAP_MARGIN = 3.0
+
+
+@dataclass(frozen=True)
+class SwapFinding:
+    """One camera's left/right pair whose labels were swapped.
+
+    Attributes:
+        camera: the camera's name.
+        pair: the pair's (left, right) keypoint indices (``vfactor.keypoints.LEFT_RIGHT_PAIRS``).
+        seen: how many of the two the camera saw (2: both labels exchanged; 1: the one keypoint took its partner's label).
+        gain: how much lower the robust cost is with the labels swapped (> :data:`SWAP_MARGIN`).
+    """
+
+    camera: str
+    pair: tuple[int, int]
+    seen: int
+    gain: float
+
+    def to_dict(self) -> dict:
+        """The finding as the result file gives it (docs/scene-format.md, ``swapped_keypoints``)."""
+        return {"camera": self.camera, "pair": [int(k) for k in self.pair], "seen": int(self.seen),
+                "gain": float(self.gain)}
+
+    @classmethod
+    def from_dict(cls, data, path: str) -> "SwapFinding":
+        """Reads :meth:`to_dict`'s form.
+
+        Raises:
+            SceneError: a field is missing or wrong (named by its path under ``path``).
+        """
+        if not isinstance(data, dict) or set(data) - {"camera", "pair", "seen", "gain"}:
+            raise SceneError(path, "expected an object with camera, pair, seen and gain")
+        for name in ("camera", "pair", "seen", "gain"):
+            if name not in data:
+                raise SceneError(f"{path}.{name}", "missing")
+        if not isinstance(data["camera"], str) or not data["camera"]:
+            raise SceneError(f"{path}.camera", f"expected a camera name, got {data['camera']!r}")
+        pair = data["pair"]
+        if not isinstance(pair, list) or tuple(pair) not in LEFT_RIGHT_PAIRS:
+            raise SceneError(f"{path}.pair", f"expected one of the left/right pairs {[list(p) for p in LEFT_RIGHT_PAIRS]}, "
+                                             f"got {pair!r}")
+        if data["seen"] not in (1, 2) or isinstance(data["seen"], bool):
+            raise SceneError(f"{path}.seen", f"expected 1 or 2, got {data['seen']!r}")
+        gain = data["gain"]
+        if isinstance(gain, bool) or not isinstance(gain, (int, float)) or not math.isfinite(gain):
+            raise SceneError(f"{path}.gain", f"expected a finite number, got {gain!r}")
+        return cls(data["camera"], (int(pair[0]), int(pair[1])), int(data["seen"]), float(gain))
+
+
+def relabel_swaps(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehicle_p_keypoints: np.ndarray,
+                  loss: RobustLoss, margin: float = SWAP_MARGIN) -> tuple[KeypointObservations, list[SwapFinding]]:
+    """The observations with the labels that ``world_T_vehicle`` and the shape say are swapped exchanged.
+
+    Args:
+        obs: one vehicle's observations (their sigmas as the solve weighs them).
+        world_T_vehicle: the solution's pose (vehicle -> world).
+        vehicle_p_keypoints: (12, 3) the solution's body-frame keypoints, metres.
+        loss: the solve's robust loss; the costs compared are ``sum rho(|e|)``.
+        margin: the least gain in cost for a swap.
+
+    Returns:
+        (observations, findings): ``obs`` itself when no pair is swapped, else a
+        copy with those rows' keypoint indices exchanged (every pixel, sigma and
+        window kept with its row); a finding per swapped pair, by camera and pair.
+    """
+    if len(obs) == 0:
+        return obs, []
+    mirrored = replace(obs, keypoint_index=MIRROR_PERMUTATION[obs.keypoint_index])
+    as_given = loss.rho(np.linalg.norm(whitened_residuals(obs, world_T_vehicle, vehicle_p_keypoints), axis=1))
+    as_swapped = loss.rho(np.linalg.norm(whitened_residuals(mirrored, world_T_vehicle, vehicle_p_keypoints), axis=1))
+    pair_of = np.empty(12, dtype=int)
+    for p, (left, right) in enumerate(LEFT_RIGHT_PAIRS):
+        pair_of[left] = pair_of[right] = p
+    swap = np.zeros(len(obs), dtype=bool)
+    findings = []
+    groups = obs.camera_index * len(LEFT_RIGHT_PAIRS) + pair_of[obs.keypoint_index]
+    for group in np.unique(groups):
+        rows = groups == group
+        if len(np.unique(obs.keypoint_index[rows])) != rows.sum():
+            continue  # the camera gave one label twice (two detections of it): no one-to-one swap to judge
+        gain = float(as_given[rows].sum() - as_swapped[rows].sum())
+        if gain >= margin:
+            swap |= rows
+            camera = int(group // len(LEFT_RIGHT_PAIRS))
+            findings.append(SwapFinding(obs.cameras[camera].name, LEFT_RIGHT_PAIRS[int(group % len(LEFT_RIGHT_PAIRS))],
+                                        int(rows.sum()), gain))
+    if not findings:
+        return obs, []
+    return replace(obs, keypoint_index=np.where(swap, mirrored.keypoint_index, obs.keypoint_index)), findings
+
+
+def apply_swaps(obs: KeypointObservations, findings: list[SwapFinding]) -> KeypointObservations:
+    """The observations with the labels of each finding's camera and pair exchanged (as :func:`relabel_swaps` did).
+
+    For observations of the same detections that the findings were made on, e.g. at other sigmas.
+    """
+    if not findings:
+        return obs
+    names = [camera.name for camera in obs.cameras]
+    swap = np.zeros(len(obs), dtype=bool)
+    for finding in findings:
+        swap |= (obs.camera_index == names.index(finding.camera)) & np.isin(obs.keypoint_index, finding.pair)
+    return replace(obs, keypoint_index=np.where(swap, MIRROR_PERMUTATION[obs.keypoint_index], obs.keypoint_index))

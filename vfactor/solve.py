@@ -247,7 +247,7 @@ def solve_observations(
         )
     if best is None:
         return VehicleResult(vehicle_id, Status.FAILED, message=f"optimisation failed: {failure}")
-    swaps = []
+    swaps, as_given = [], obs
     if options.relabel_swaps:
         best, obs, swaps = _relabelled(best, obs, options, first_prior, keys, bounds, terms, hwc)
     extras = {}
@@ -275,8 +275,9 @@ def solve_observations(
     e = whitened_residuals(obs, world_T_vehicle, wireframe.vehicle_p_keypoints)
     weights = options.graph.loss.weight(np.linalg.norm(e, axis=1))
     result.extras["inlier_weights"] = weights
-    # a camera at odds with the others inflates the estimated noise: judge it at no more than the nominal sigmas
-    strict = nominal.scaled(min(float(extras.get("noise_scale", 1.0)), 1.0))
+    # a camera at odds with the others inflates the estimated noise: judge it at no more than the nominal sigmas, and
+    # with its labels as given (relabelling its pairs to fit the other cameras' pose would hide a wrong extrinsic)
+    strict = as_given.scaled(min(float(extras.get("noise_scale", 1.0)), 1.0))
     strict_weights = options.graph.loss.weight(np.linalg.norm(
         whitened_residuals(strict, world_T_vehicle, wireframe.vehicle_p_keypoints), axis=1))
     problem, rejected = _camera_disagreement(strict, strict_weights, mean, options)

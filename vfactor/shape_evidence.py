@@ -22,8 +22,8 @@ from functools import lru_cache
 import gtsam
 import numpy as np
 
+from vfactor._kernels import fit_at_scale_kernel
 from vfactor.keys import KeyScheme
-from vfactor.shape_evidence_kernel import fit_at_scale_kernel
 from vfactor.shape_model import ANY, ShapeModel, ShapePrior
 
 __all__ = ["Linearisation", "linearise", "noise_scale", "inlier_noise_scale", "covariance_inflation", "shape_information", "BodyTypeChoice", "choose_body_type",
@@ -262,7 +262,7 @@ class _ScaledFit:
     left out. Without the whitened system (``lin.jacobian``) the residuals stay
     ``whitened`` and every observation takes an equal share ``p / 2n`` of the
     parameters. Each scale is one call of the compiled
-    :func:`~vfactor.shape_evidence_kernel.fit_at_scale_kernel`; the inputs are
+    :func:`kernels.shape_evidence.fit_at_scale_kernel`; the inputs are
     checked and laid out once.
 
     Raises:

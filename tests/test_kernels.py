@@ -20,9 +20,9 @@ def test_the_extension_is_built_from_the_current_kernel_sources():
     assert _kernels.source_digest() == source_digest()
 
 
-def test_a_solve_loads_no_numba(tmp_path):
-    """A fresh process imports vfactor and solves a vehicle from a scene file without numba: nothing is compiled at
-    run time."""
+def test_a_solve_loads_no_numba_and_no_scipy_special(tmp_path):
+    """A fresh process imports vfactor and solves a vehicle from a scene file without numba (nothing is compiled at
+    run time) and without scipy.special (a 0.3 s import)."""
     from vfactor.scene import save_scene
     from vfactor.sim import simulate
 
@@ -33,7 +33,7 @@ def test_a_solve_loads_no_numba(tmp_path):
         "from vfactor.scene import load_scene\n"
         "from vfactor.solve import solve_scene\n"
         f"assert solve_scene(load_scene({str(scene_file)!r}))[0].vehicles[0].ok\n"
-        "print(sorted(m for m in ('numba', 'llvmlite') if m in sys.modules))\n"
+        "print(sorted(m for m in ('numba', 'llvmlite', 'scipy.special') if m in sys.modules))\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert done.stdout.strip() == "[]"

@@ -60,7 +60,7 @@ def test_noise_scale_follows_the_keypoint_noise(clean):
 
 def test_compiled_fit_at_a_noise_scale_matches_dense_solves():
     """The noise scale's compiled step (Cholesky in numba, studentised residuals in closed form) against dense NumPy."""
-    from vfactor.shape_evidence_kernel import fit_at_scale_kernel
+    from vfactor._kernels import fit_at_scale_kernel
 
     rng = np.random.default_rng(4)
     n, m = 20, 42
@@ -89,7 +89,7 @@ def test_compiled_fit_at_a_noise_scale_matches_dense_solves():
 
 def test_compiled_evidence_terms_match_dense_algebra():
     """type_log_evidence's compiled terms: b^T (Lambda + P)^-1 b and log|Lambda + P| per prior, against NumPy."""
-    from vfactor.shape_evidence_kernel import log_evidence_kernel
+    from vfactor._kernels import log_evidence_kernel
 
     rng = np.random.default_rng(5)
     A = rng.normal(size=(20, 36))

@@ -20,8 +20,8 @@ from itertools import combinations
 
 import numpy as np
 
+from vfactor._kernels import log_evidence_kernel
 from vfactor.keypoints import LAYERS
-from vfactor.shape_evidence_kernel import log_evidence_kernel
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes, symmetrised
 
 __all__ = ["ShapePrior", "ShapeModel", "HwcBounds", "default_shape_prior", "default_shape_model", "default_hwc_bounds",

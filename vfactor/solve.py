@@ -16,6 +16,7 @@ from typing import Callable
 
 import gtsam
 import numpy as np
+import numpy.ma  # noqa: F401  numpy 2 imports it lazily, on a solve's first np.unique (about 10 ms): here, with the other imports
 
 from vfactor.box import BoxModel, vehicle_box
 from vfactor.camera import Camera

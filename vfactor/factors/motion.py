@@ -21,9 +21,10 @@ body velocity and ``w / dt`` the angular velocity). Then:
 
 Jacobians are analytic: the chain ``dr/dxi * dLog * dbetween`` of GTSAM's
 ``Pose3.between`` and ``Pose3.Logmap`` Jacobians (docs/factors.md), computed
-with the residual in one compiled call per factor
-(:mod:`vfactor.factors.motion_kernel`); each factor is a ``gtsam.CustomFactor``
-whose Python callback only reads the poses and calls the kernel.
+with the residual in one compiled call per factor (:mod:`kernels.motion`,
+compiled ahead of time into :mod:`vfactor._kernels`); each factor is a
+``gtsam.CustomFactor`` whose Python callback only reads the poses and calls
+the kernel.
 """
 
 from __future__ import annotations
@@ -34,8 +35,8 @@ from functools import partial
 import gtsam
 import numpy as np
 
+from vfactor._kernels import acceleration_kernel, nonholonomic_kernel, step_twist_kernel
 from vfactor.errors import check_numbers
-from vfactor.factors.motion_kernel import acceleration_kernel, nonholonomic_kernel, step_twist_kernel
 
 __all__ = ["MotionModel", "nonholonomic_factor", "acceleration_factor", "step_twist"]
 
@@ -118,7 +119,7 @@ def nonholonomic_factor(key1: int, key2: int, dt: float, model: MotionModel = Mo
         ValueError: ``dt`` is not a positive finite number.
     """
     params = np.array([_check_dt(dt), model.sigma_lateral, model.sigma_vertical, model.sigma_tilt,
-                       model.max_yaw_rate, model.yaw_rate_sigma])
+                       model.max_yaw_rate, model.yaw_rate_sigma], dtype=float)  # float64: the kernel's type
     out = (np.empty(5), np.zeros((5, 6)), np.zeros((5, 6)))
     return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(5), [key1, key2],
                               partial(_nonholonomic_error, key1, key2, params, out))
@@ -151,7 +152,7 @@ def acceleration_factor(key0: int, key1: int, key2: int, dt1: float, dt2: float,
     Raises:
         ValueError: a step is not a positive finite number.
     """
-    params = np.array([_check_dt(dt1), _check_dt(dt2), model.sigma_acceleration, model.sigma_yaw_acceleration])
+    params = np.array([_check_dt(dt1), _check_dt(dt2), model.sigma_acceleration, model.sigma_yaw_acceleration], dtype=float)
     out = (np.empty(2), np.zeros((2, 6)), np.zeros((2, 6)), np.zeros((2, 6)))
     return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(2), [key0, key1, key2],
                               partial(_acceleration_error, key0, key1, key2, params, out))

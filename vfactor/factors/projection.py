@@ -4,10 +4,10 @@ One factor holds any number of observations ``(camera, keypoint, uv, noise)``
 of one vehicle; the graph builder puts all observations of a vehicle in a
 frame into one factor, so that a frame costs one Python call per
 linearisation instead of one per keypoint, and the factor's residuals and
-Jacobians come from one compiled loop (:mod:`vfactor.factors.projection_kernel`;
-see docs/performance.md). A single observation is simply a factor with one
-row. :func:`project_keypoints` is the same projection in NumPy, for
-initialisation, diagnostics and the tests.
+Jacobians come from one compiled loop (:func:`kernels.projection.projection_kernel`,
+compiled ahead of time into :mod:`vfactor._kernels`; see docs/performance.md).
+A single observation is simply a factor with one row. :func:`project_keypoints`
+is the same projection in NumPy, for initialisation, diagnostics and the tests.
 
 For observation i of keypoint k from camera c (docs/factors.md)::
 
@@ -31,8 +31,8 @@ from functools import partial
 import gtsam
 import numpy as np
 
+from vfactor._kernels import projection_kernel, robust_cost_kernel
 from vfactor.camera import LENS_FISHEYE, LENS_PLAIN, Camera, project_pinhole
-from vfactor.factors.projection_kernel import projection_kernel, robust_cost_kernel
 from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_terms import cross
 from vfactor.factors.truncation import truncated_means
@@ -76,6 +76,18 @@ class KeypointObservations:
             raise ValueError("KeypointObservations: camera_index, keypoint_index, uv and sqrt_information differ in length")
         if self.window is not None and np.shape(self.window) != (n, 4):
             raise ValueError(f"KeypointObservations.window: expected shape ({n}, 4), got {np.shape(self.window)}")
+        # the compiled kernel reads these as they are: int64 keypoints, float64 pixels and information
+        keypoint_index = np.asarray(self.keypoint_index)
+        if keypoint_index.size and keypoint_index.dtype.kind not in "iu":
+            raise ValueError(f"KeypointObservations.keypoint_index: expected integers, got {keypoint_index.dtype}")
+        for name, value, shape in (("keypoint_index", np.asarray(keypoint_index, dtype=np.int64), (n,)),
+                                   ("uv", np.asarray(self.uv, dtype=float), (n, 2)),
+                                   ("sqrt_information", np.asarray(self.sqrt_information, dtype=float), (n, 2, 2))):
+            if value.size == 0:
+                value = value.reshape(shape)
+            if value.shape != shape:
+                raise ValueError(f"KeypointObservations.{name}: expected shape {shape}, got {value.shape}")
+            object.__setattr__(self, name, np.ascontiguousarray(value))
         # truncation table for the kernel: window (NaN: none) and the marginal pixel sigmas
         window = np.full((n, 4), np.nan) if self.window is None else np.asarray(self.window, dtype=float)
         truncated = np.isfinite(window[:, 0])
@@ -212,7 +224,7 @@ def robust_costs(obs: KeypointObservations, world_T_vehicle: np.ndarray, vehicle
 
     ``e_i`` are the whitened residuals of :func:`whitened_residuals` (the same
     projection, depth clamp and truncation), ``rho`` the loss; the
-    :func:`~vfactor.factors.projection_kernel.robust_cost_kernel` scores all K at once.
+    :func:`kernels.projection.robust_cost_kernel` scores all K at once.
 
     Args:
         obs: the observations.

@@ -17,44 +17,15 @@ Losses (``k`` is the threshold in whitened units, i.e. in sigmas):
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+
+from vfactor._kernels import robust_scale
 
 __all__ = ["RobustLoss", "LOSSES", "robust_scale"]
 
 LOSSES = ("none", "huber", "cauchy", "geman_mcclure")
-
-
-@njit(cache=True)
-def robust_scale(loss_id, k, n):
-    """``s(n)`` and ``s'(n) / n`` of one residual norm ``n``; ``loss_id`` is :attr:`RobustLoss.id`.
-
-    Compiled, for the factors' kernels; :meth:`RobustLoss.scale` is the same in
-    NumPy, the tests' reference.
-    """
-    if loss_id == 0:
-        return 1.0, 0.0
-    if loss_id == 1:
-        if n <= k:
-            return 1.0, 0.0
-        root = math.sqrt(2.0 * k * n - k * k)
-        return root / n, (k * k - k * n) / (n * n * n * root)
-    if loss_id == 2:
-        u = (n / k) ** 2
-        if u < 1e-6:
-            ratio = 1.0 - 0.5 * u
-            dratio = -0.5 + 2.0 * u / 3.0
-        else:
-            log_term = math.log1p(u)
-            ratio = log_term / u
-            dratio = (u / (1.0 + u) - log_term) / (u * u)
-        s = math.sqrt(ratio)
-        return s, dratio / (k * k * s)
-    denom = k * k + n * n
-    return k / math.sqrt(denom), -k / denom**1.5
 
 
 @dataclass(frozen=True)

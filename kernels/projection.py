@@ -1,4 +1,4 @@
-"""Compiled (numba) kernel of the keypoint projection factor.
+"""The keypoint projection factor's kernel (numba source, compiled ahead of time into :mod:`vfactor._kernels`).
 
 The projection factor is the one factor of the default graph that runs in
 Python; linearised per LM iteration, its NumPy form cost about 90 us for 24
@@ -23,8 +23,8 @@ import math
 import numpy as np
 from numba import njit
 
-from vfactor.factors.robust import robust_scale
-from vfactor.factors.truncation import truncated_mean
+from kernels.robust import robust_scale
+from kernels.truncation import truncated_mean
 
 __all__ = ["projection_kernel", "robust_cost_kernel"]
 
@@ -34,7 +34,7 @@ _PLAIN, _FULL, _FISHEYE = 0, 1, 2
 _FISHEYE_MIN_R2 = 1e-16
 
 
-@njit(cache=True)
+@njit
 def _full_lens(d, x, y):
     """OpenCV's pinhole distortion with all 14 coefficients: ``(xd, yd, d00, d01, d10, d11)``.
 
@@ -71,7 +71,7 @@ def _full_lens(d, x, y):
     return (xt, yt, t00 * d00 + t01 * d10, t00 * d01 + t01 * d11, t10 * d00 + t11 * d10, t10 * d01 + t11 * d11)
 
 
-@njit(cache=True)
+@njit
 def _fisheye_lens(d, x, y):
     """OpenCV's equidistant fisheye model: ``(xd, yd, d00, d01, d10, d11)`` (vfactor.camera._fisheye_lens)."""
     k1, k2, k3, k4 = d[0], d[1], d[2], d[3]
@@ -88,7 +88,7 @@ def _fisheye_lens(d, x, y):
     return g * x, g * y, g + h * x * x, h * x * y, h * x * y, g + h * y * y
 
 
-@njit(cache=True)
+@njit
 def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, lens, dist, uv, L, window, sigma, loss_id,
                       k, min_depth, want_jacobians, r_out, H_pose, H_shape):
     """Fills the robust whitened residuals and, if asked, the Jacobians of every observation.
@@ -212,7 +212,7 @@ def projection_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, lens
                 H_shape[row, 3 * kp + b] = jp[b]
 
 
-@njit(cache=True)
+@njit
 def robust_cost_kernel(R, t, points, keypoint_index, R_cw, t_cw, intrinsics, lens, dist, uv, L, window, sigma, loss_id, k,
                        min_depth, costs):
     """Robust costs ``sum_i rho(|e_i|)`` of the observations at several poses and shapes, in one compiled pass.

@@ -1,4 +1,5 @@
-"""Compiled (numba) kernel of the noise scale's fixed point (:mod:`vfactor.shape_evidence`).
+"""The noise scale's fixed point and the body types' evidence (:mod:`vfactor.shape_evidence`) as kernels (numba
+source, compiled ahead of time into :mod:`vfactor._kernels`).
 
 :func:`vfactor.shape_evidence.noise_scale` and
 :func:`~vfactor.shape_evidence.inlier_noise_scale` ask, several times per
@@ -25,7 +26,7 @@ from numba import njit
 __all__ = ["fit_at_scale_kernel", "log_evidence_kernel"]
 
 
-@njit(cache=True)
+@njit
 def fit_at_scale_kernel(total, projection, total_eta, projection_eta, jacobian, rhs, w, max_leverage, q_out,
                         freedom_out):
     """The fit with the projection factor's information times ``w = 1 / s^2``, and its studentised residuals.
@@ -130,7 +131,7 @@ def fit_at_scale_kernel(total, projection, total_eta, projection_eta, jacobian, 
     return w * trace
 
 
-@njit(cache=True)
+@njit
 def log_evidence_kernel(information, eta, precisions, precision_means, quadratic_out, logdet_out):
     """Per prior k: ``b^T (Lambda + P_k)^-1 b`` with ``b = eta + P_k mu_k``, and ``log|Lambda + P_k|``.
 

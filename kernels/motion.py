@@ -1,4 +1,5 @@
-"""Compiled (numba) kernels of the motion factors: Pose3 between, Logmap and their Jacobians.
+"""The motion factors' kernels: Pose3 between, Logmap and their Jacobians (numba source, compiled ahead of time
+into :mod:`vfactor._kernels`).
 
 The non-holonomic and acceleration factors of :mod:`vfactor.factors.motion`
 are linearised once per pose (twice for the acceleration factor's two steps)
@@ -8,7 +9,7 @@ fixed-lag tracking time (docs/performance.md). These kernels compute the same
 residuals and Jacobians in one compiled call that fills the factor's output
 arrays (7-8 us a linearisation), so that mostly the ``CustomFactor`` call
 itself remains, as for the projection factor
-(:mod:`vfactor.factors.projection_kernel`).
+(:mod:`kernels.projection`).
 
 The maths is GTSAM's (``Pose3::between``, ``Pose3::Logmap``,
 ``Pose3::LogmapDerivative``; docs/factors.md), with ``k(theta) = 1/theta^2 -
@@ -47,7 +48,7 @@ __all__ = ["step_twist_kernel", "nonholonomic_kernel", "acceleration_kernel"]
 _TAYLOR_BELOW = 1e-2
 
 
-@njit(cache=True)
+@njit
 def _skew_into(S, a0, a1, a2):
     """Fills the 3x3 ``S = [a]x``."""
     S[0, 0], S[0, 1], S[0, 2] = 0.0, -a2, a1
@@ -55,7 +56,7 @@ def _skew_into(S, a0, a1, a2):
     S[2, 0], S[2, 1], S[2, 2] = -a1, a0, 0.0
 
 
-@njit(cache=True)
+@njit
 def _mul_into(A, B, C):
     """Fills the 3x3 ``C = A B`` (explicit loops: BLAS is slower for matrices this small)."""
     for i in range(3):
@@ -63,7 +64,7 @@ def _mul_into(A, B, C):
             C[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
 
 
-@njit(cache=True)
+@njit
 def _so3_log(R):
     """``Log(R)`` (rad) of a 3x3 rotation matrix, as GTSAM's ``SO3::Logmap``.
 
@@ -101,7 +102,7 @@ def _so3_log(R):
     return magnitude * v0, magnitude * v1, magnitude * v2
 
 
-@njit(cache=True)
+@njit
 def _inverse_jacobian_coefficient(theta2):
     """``k(theta) = 1/theta^2 - 1 / (2 theta tan(theta / 2))`` of ``Jl^-1(w) = I - [w]x / 2 + k [w]x^2``.
 
@@ -117,7 +118,7 @@ def _inverse_jacobian_coefficient(theta2):
     return 1.0 / theta2 - 1.0 / (2.0 * theta * math.tan(0.5 * theta))
 
 
-@njit(cache=True)
+@njit
 def _pose_log(R, t0, t1, t2, xi):
     """Fills ``xi = Log((R, t))`` (rotation first: rad, then metres), as GTSAM's ``Pose3::Logmap``."""
     w0, w1, w2 = _so3_log(R)
@@ -135,7 +136,7 @@ _W, _V, _WW, _WV, _VW, _WVW, _WWV, _VWW, _WVWW, _WWVW, _Q, _JQ, _Q2, _R12, _T, _
 _SCRATCH = 17
 
 
-@njit(cache=True)
+@njit
 def _log_derivative(xi, D, S):
     """Fills the 6x6 ``D = d Log(T) / d T`` at ``xi = Log(T)``, as GTSAM's ``Pose3::LogmapDerivative``.
 
@@ -191,7 +192,7 @@ def _log_derivative(xi, D, S):
             D[3 + i, j] = -Q2[i, j]
 
 
-@njit(cache=True)
+@njit
 def _step_twist(M1, M2, want_jacobians, xi, J1, J2, S):
     """Fills ``xi = Log(T1^-1 T2)`` and, if asked, ``J1, J2 = d xi / d T1, d xi / d T2`` (6x6 each).
 
@@ -226,7 +227,7 @@ def _step_twist(M1, M2, want_jacobians, xi, J1, J2, S):
                             + J2[i, 0] * C[0, j] + J2[i, 1] * C[1, j] + J2[i, 2] * C[2, j])
 
 
-@njit(cache=True)
+@njit
 def step_twist_kernel(M1, M2, want_jacobians, xi, J1, J2):
     """``Log(T1^-1 T2)`` and, if asked, its Jacobians with respect to ``T1`` and ``T2``.
 
@@ -239,7 +240,7 @@ def step_twist_kernel(M1, M2, want_jacobians, xi, J1, J2):
     _step_twist(M1, M2, want_jacobians, xi, J1, J2, np.empty((_SCRATCH, 3, 3)))
 
 
-@njit(cache=True)
+@njit
 def nonholonomic_kernel(M1, M2, params, want_jacobians, r, H1, H2):
     """Residual and Jacobians of the non-holonomic factor (:func:`vfactor.factors.motion.nonholonomic_factor`).
 
@@ -272,7 +273,7 @@ def nonholonomic_kernel(M1, M2, params, want_jacobians, r, H1, H2):
                 H2[a, j] = scale[a] * J[1, rows[a], j]
 
 
-@njit(cache=True)
+@njit
 def acceleration_kernel(M0, M1, M2, params, want_jacobians, r, H0, H1, H2):
     """Residual and Jacobians of the acceleration factor (:func:`vfactor.factors.motion.acceleration_factor`).
 

@@ -142,7 +142,8 @@ def observations_from_detections(
     """Stacks the seen keypoints of one vehicle's detections, with their noise.
 
     The pixel noise of keypoint k is the detection's 2x2 covariance where one is
-    given, else isotropic with sigma ``max(min_pixel_sigma, relative_pixel_sigma *
+    given (marked ``calibrated`` when the detection says it is,
+    ``Detection.covariance_calibrated``), else isotropic with sigma ``max(min_pixel_sigma, relative_pixel_sigma *
     box_diagonal) / confidence``. With ``config.truncation``, a detection whose
     camera has an ``image_size`` and whose seen keypoints all lie in the image
     gets the image as its truncation window.
@@ -151,7 +152,7 @@ def observations_from_detections(
         InputError: a detection names a camera that is not in ``cameras``.
     """
     names = list(cameras)
-    cam_idx, kp_idx, uv, sqrt_info, window = [], [], [], [], []
+    cam_idx, kp_idx, uv, sqrt_info, window, calibrated = [], [], [], [], [], []
     for d in detections:
         if d.camera not in cameras:
             raise InputError("camera", f"unknown camera {d.camera!r}; known: {', '.join(names)}")
@@ -162,10 +163,12 @@ def observations_from_detections(
         base_sigma = max(config.min_pixel_sigma, config.relative_pixel_sigma * d.box_diagonal())
         for k in seen:
             cov = None if d.covariance is None else d.covariance[k]
-            if cov is not None and np.all(np.isfinite(cov)):
+            given = cov is not None and np.all(np.isfinite(cov))
+            if given:
                 L = np.linalg.cholesky(np.linalg.inv(cov)).T
             else:
                 L = np.eye(2) * (d.confidence[k] / base_sigma)
+            calibrated.append(bool(given and d.covariance_calibrated))
             cam_idx.append(names.index(d.camera))
             kp_idx.append(k)
             uv.append(d.keypoints[k])
@@ -179,6 +182,7 @@ def observations_from_detections(
         sqrt_information=np.array(sqrt_info, dtype=float).reshape(-1, 2, 2),
         window=np.array(window, dtype=float).reshape(-1, 4),
         min_sigma=config.min_pixel_sigma,
+        calibrated=np.array(calibrated, dtype=bool) if any(calibrated) else None,
     )
 
 

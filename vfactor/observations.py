@@ -62,6 +62,11 @@ class Detection:
         track: optional per-camera track id (the scene's ``"track"``): the id a camera's own 2D tracker gave
             this detection, evidence for the association across frames (it may switch; it is never a
             vehicle id shared between cameras).
+        covariance_calibrated: ``covariance`` is calibrated against the detector's true pixel errors
+            (:func:`vfactor.net.pipeline.detect_scene` sets it when the keypoint network's calibration is
+            applied; the scene's ``"covariances_calibrated"``). The result's covariances are then computed at
+            no less than these covariances: the residuals' noise scale may widen them, never narrow them
+            (docs/factors.md, "Covariances").
     """
 
     camera: str
@@ -74,6 +79,7 @@ class Detection:
     from_image: bool = False
     vehicle_class: str | None = None
     track: str | None = None
+    covariance_calibrated: bool = False
 
     @property
     def seen(self) -> np.ndarray:

@@ -18,7 +18,8 @@ otherwise)::
               "world_T_camera"?, "image_size"?}                                    (by file)
 
     detection = {"camera", "vehicle"?, "keypoints"?: 12 x [u, v, confidence],
-                 "keypoint_covariances"?: 12 x (null | 2x2), "heatmaps"?: "x.npy",
+                 "keypoint_covariances"?: 12 x (null | 2x2), "covariances_calibrated"?: bool,
+                 "heatmaps"?: "x.npy",
                  "roi"?: [x0, y0, x1, y1], "class"?: "car" | "truck" | "bus" | body type}
 
 A detection gives ``keypoints``, or ``heatmaps`` with ``roi``, or only a
@@ -26,7 +27,10 @@ A detection gives ``keypoints``, or ``heatmaps`` with ``roi``, or only a
 network then finds the keypoints, see :mod:`vfactor.net.pipeline`).
 
 ``keypoint_covariances`` is a vfactor extension: per keypoint a symmetric
-positive-definite 2x2 pixel covariance (px^2), or null where unknown. Optional
+positive-definite 2x2 pixel covariance (px^2), or null where unknown;
+``covariances_calibrated`` (default false) says they are calibrated against the
+detector's true errors (the keypoint network's, as ``vfactor.net`` writes them),
+so the result's covariances are computed at no less than them. Optional
 fields may also be given as null, which means "absent".
 
 Paths (``heatmaps``, ``images``, ``calibration``) are relative to the scene file's
@@ -83,7 +87,8 @@ _CAMERA_KEYS = ("name", "model", "K", "dist", "image_size", "world_T_camera", "c
 #: Inline camera fields a ``calibration`` file replaces (an error beside it).
 _INTRINSIC_KEYS = ("model", "K", "dist")
 _FRAME_KEYS = ("t", "detections", "images")
-_DETECTION_KEYS = ("camera", "vehicle", "track", "keypoints", "keypoint_covariances", "heatmaps", "roi", "class")
+_DETECTION_KEYS = ("camera", "vehicle", "track", "keypoints", "keypoint_covariances", "covariances_calibrated",
+                   "heatmaps", "roi", "class")
 _RESULT_TOP_KEYS = ("frames",)
 _RESULT_FRAME_KEYS = ("t", "vehicles")
 _VEHICLE_KEYS = (
@@ -522,6 +527,11 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Fol
     covariance = None
     if det.get("keypoint_covariances") is not None:
         covariance = _keypoint_covariances(det["keypoint_covariances"], f"{path}.keypoint_covariances")
+    calibrated = det.get("covariances_calibrated", False)
+    if not isinstance(calibrated, bool):
+        raise SceneError(f"{path}.covariances_calibrated", f"expected true or false, got {_kind(calibrated)}")
+    if calibrated and covariance is None:
+        raise SceneError(f"{path}.covariances_calibrated", "true without 'keypoint_covariances'")
 
     if det.get("keypoints") is not None:
         keypoints, confidence = _keypoints(det["keypoints"], f"{path}.keypoints")
@@ -558,6 +568,7 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Fol
         from_image=from_image,
         vehicle_class=vehicle_class,
         track=track,
+        covariance_calibrated=calibrated,
     )
     return detection, has_vehicle
 
@@ -668,6 +679,8 @@ def _detection_to_dict(det: Detection, path: str, scene_base: Path | None, out_b
         blocks = [S.tolist() if np.all(np.isfinite(S)) else None for S in cov]
         if any(b is not None for b in blocks):
             out["keypoint_covariances"] = blocks
+            if det.covariance_calibrated:
+                out["covariances_calibrated"] = True
     if det.heatmaps is not None:
         out["heatmaps"] = _path_out(det.heatmaps, scene_base, out_base)
     if det.roi is not None:

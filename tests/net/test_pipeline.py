@@ -74,6 +74,7 @@ def test_network_keypoints_and_graph_recover_the_vehicles(rendered, detector, tm
             x0, y0, x1, y1 = detector.crop_box(r.boxes_true[f][key])
             assert np.mean(px <= 0.1 * (x1 - x0)) >= 0.75  # PCK@0.1 of the crop side
             assert det.covariance.shape == (12, 2, 2) and np.isfinite(det.covariance[visible]).all()
+            assert det.covariance_calibrated  # the shipped weights' calibration was applied
             assert det.heatmaps is not None and np.load(det.heatmaps).shape[0] == 12
     for f, frame_result in enumerate(solve_scene(detected)):
         for v in frame_result.vehicles:

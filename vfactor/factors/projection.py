@@ -60,6 +60,9 @@ class KeypointObservations:
             measurements that are not truncated.
         min_sigma: no pixel sigma goes below this when the observations are
             :meth:`scaled` (``GraphConfig.min_pixel_sigma``), pixels.
+        calibrated: optional (n,) bools: the observation's noise is calibrated against the
+            detector's true errors (``Detection.covariance_calibrated``), so the covariances of
+            the result are computed at no less than it; None: none is.
     """
 
     cameras: tuple[Camera, ...]
@@ -69,11 +72,16 @@ class KeypointObservations:
     sqrt_information: np.ndarray
     window: np.ndarray | None = None
     min_sigma: float = 0.0
+    calibrated: np.ndarray | None = None
 
     def __post_init__(self):
         n = len(self.camera_index)
         if not (len(self.keypoint_index) == len(self.uv) == len(self.sqrt_information) == n):
             raise ValueError("KeypointObservations: camera_index, keypoint_index, uv and sqrt_information differ in length")
+        if self.calibrated is not None:
+            if np.shape(self.calibrated) != (n,):
+                raise ValueError(f"KeypointObservations.calibrated: expected shape ({n},), got {np.shape(self.calibrated)}")
+            object.__setattr__(self, "calibrated", np.asarray(self.calibrated, dtype=bool))
         if self.window is not None and np.shape(self.window) != (n, 4):
             raise ValueError(f"KeypointObservations.window: expected shape ({n}, 4), got {np.shape(self.window)}")
         # the compiled kernel reads these as they are: int64 keypoints, float64 pixels and information
@@ -128,19 +136,25 @@ class KeypointObservations:
         return KeypointObservations(
             self.cameras, self.camera_index[mask], self.keypoint_index[mask], self.uv[mask], self.sqrt_information[mask],
             None if self.window is None else self.window[mask], self.min_sigma,
+            None if self.calibrated is None else self.calibrated[mask],
         )
 
-    def scaled(self, noise_scale: float) -> "KeypointObservations":
+    def scaled(self, noise_scale) -> "KeypointObservations":
         """The same observations with every pixel sigma multiplied by ``noise_scale`` (> 0).
 
+        ``noise_scale`` is one factor, or (n,) factors, one per observation.
         An observation whose smallest sigma would fall below :attr:`min_sigma`
         is scaled only down to it (noise-free keypoints would otherwise make
         the information unbounded).
         """
-        if not noise_scale > 0:
-            raise ValueError(f"noise_scale: expected > 0, got {noise_scale}")
         L = np.asarray(self.sqrt_information, dtype=float)
-        factor = np.full(len(L), float(noise_scale))
+        try:
+            factor = np.array(np.broadcast_to(np.asarray(noise_scale, dtype=float), (len(L),)))
+        except ValueError:
+            raise ValueError(f"noise_scale: expected a number or {len(L)} numbers, got shape "
+                             f"{np.shape(noise_scale)}") from None
+        if not np.all(factor > 0):
+            raise ValueError(f"noise_scale: expected > 0, got {noise_scale}")
         if self.min_sigma > 0 and len(L):
             smallest_sigma = 1.0 / np.linalg.norm(L, ord=2, axis=(1, 2))
             factor = np.maximum(factor, self.min_sigma / smallest_sigma)

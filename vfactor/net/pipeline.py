@@ -69,8 +69,9 @@ def detect_scene(
     (``Detection.from_image``) are read and all their boxes go through the
     network in batches. Each such detection gets the decoded ``keypoints``
     (image pixels), ``confidence`` (0 where the network found nothing) and
-    ``covariance`` (px^2, the detector's calibrated heatmap covariances);
-    ``from_image`` is cleared. Other detections are kept as they are.
+    ``covariance`` (px^2, the detector's calibrated heatmap covariances) and
+    ``covariance_calibrated`` (True unless the detector's calibration is the
+    identity); ``from_image`` is cleared. Other detections are kept as they are.
 
     Args:
         scene: the scene (from :func:`vfactor.scene.load_scene`, or made in code).
@@ -166,7 +167,8 @@ def _detect_frame(unit: tuple):
         result = queue[det.camera].pop(0)
         kp = result.keypoints
         changes = dict(keypoints=np.asarray(kp.uv, float), confidence=np.asarray(kp.confidence, float),
-                       covariance=np.asarray(kp.covariance, float), from_image=False)
+                       covariance=np.asarray(kp.covariance, float), from_image=False,
+                       covariance_calibrated=not detector.calibration.is_identity)
         if out_dir is not None:
             path = out_dir / f"f{f:04d}_d{j:02d}_{_safe(det.camera)}_{_safe(det.vehicle)}.npy"
             np.save(path, np.asarray(result.heatmaps, np.float32))

@@ -15,9 +15,11 @@ clearly, never where both labels fit alike (a camera looking along the
 vehicle's axis sees left and right keypoints near each other).
 
 The one-frame solve (:func:`vfactor.solve.solve_observations`) relabels after
-its first solution and solves again from there; the known-shape reference does
-the same, so that it stays a bound for the same data (docs/factors.md,
-"Left/right swaps").
+its first solution and solves again from there; the tracker relabels each frame
+at its motion prediction with the track's shape; the known-shape reference does
+the same as the solve, so that it stays a bound for the same data
+(docs/factors.md, "Left/right label swaps"). The camera-disagreement check
+judges each camera with its labels as given.
 """
 
 from __future__ import annotations

@@ -127,7 +127,7 @@ def _world_pose(world_T_camera: gtsam.Pose3, rvec, tvec) -> gtsam.Pose3 | None:
 
 
 def _camera_pnp(camera, world_T_camera: gtsam.Pose3, labellings, image_uv, threshold_px,
-                ransac: bool = True) -> list[list[gtsam.Pose3]]:
+                ransac: bool = True, every_labelling: bool = False) -> list[list[gtsam.Pose3]]:
     """PnP poses (world_T_vehicle) of one camera's keypoints under each labelling of them.
 
     Each labelling is the (n, 3) body-frame points its labels name, seen at
@@ -136,7 +136,8 @@ def _camera_pnp(camera, world_T_camera: gtsam.Pose3, labellings, image_uv, thres
     point beyond ``threshold_px`` (with every point within it RANSAC would keep
     them all: the same fit), and only for the labellings whose SQPnP fit keeps
     the most points within it: RANSAC looks for the outliers of the labelling
-    the keypoints favour, the others keep their SQPnP pose. ``ransac=False``:
+    the keypoints favour, the others keep their SQPnP pose (``every_labelling``:
+    RANSAC for each labelling whose fit leaves a point out). ``ransac=False``:
     SQPnP alone.
 
     Returns:
@@ -160,7 +161,7 @@ def _camera_pnp(camera, world_T_camera: gtsam.Pose3, labellings, image_uv, thres
         poses.append(found)
         within.append(kept)
     for object_p, found, kept in zip(labellings, poses, within):
-        if ransac and len(object_p) >= 6 and kept < len(object_p) and kept == max(within):
+        if ransac and len(object_p) >= 6 and kept < len(object_p) and (every_labelling or kept == max(within)):
             ok, rvec, tvec, _ = cv2.solvePnPRansac(
                 object_p.astype(np.float64), img, K, dist, iterationsCount=200, reprojectionError=threshold,
                 confidence=0.999, flags=cv2.SOLVEPNP_EPNP,
@@ -173,12 +174,14 @@ def _camera_pnp(camera, world_T_camera: gtsam.Pose3, labellings, image_uv, thres
 
 def pose_candidates(
     obs: KeypointObservations, wireframe: Wireframe, min_keypoints_in_one_view: int = 4, ransac: bool = True,
+    ransac_every_labelling: bool = False,
 ) -> list[tuple[gtsam.Pose3, Wireframe, str]]:
     """All candidate (pose, wireframe, source) starts for one vehicle (unscored).
 
     PnP (:func:`_camera_pnp`) runs on every camera that sees at least
     ``min_keypoints_in_one_view`` keypoints (4 at the least), with the labels
-    as given and mirrored (``ransac=False``: SQPnP alone); triangulation needs 4
+    as given and mirrored (``ransac=False``: SQPnP alone; ``ransac_every_labelling``:
+    RANSAC for both labellings, not only the one the keypoints favour); triangulation needs 4
     keypoints seen twice.
     """
     out = []
@@ -192,7 +195,7 @@ def pose_candidates(
         threshold = float(3.0 * np.median(sigma[rows]))
         labels = obs.keypoint_index[rows]
         fits = _camera_pnp(camera, camera.pose, (points[labels], points[MIRROR_PERMUTATION[labels]]), obs.uv[rows],
-                           threshold, ransac)
+                           threshold, ransac, ransac_every_labelling)
         for tag, poses in zip(("pnp", "pnp-mirrored"), fits):
             for pose in poses:
                 out.append((pose, wireframe, f"{tag}:{camera.name}"))
@@ -221,12 +224,14 @@ def _distinct(R, t, R_other, t_other, min_angle_rad, min_distance_m) -> np.ndarr
 def best_candidates(
     obs: KeypointObservations, wireframe: Wireframe, loss: RobustLoss, count: int | None = 2,
     min_angle_rad: float = 0.35, min_distance_m: float = 1.0, min_keypoints_in_one_view: int = 4, ransac: bool = True,
+    ransac_every_labelling: bool = False,
 ) -> list[Candidate]:
     """The ``count`` lowest-cost candidates (None: all) that differ by at least the given angle or distance, best first.
 
-    ``ransac=False``: without the RANSAC PnP poses (:func:`pose_candidates`), a fraction of the cost.
+    ``ransac=False``: without the RANSAC PnP poses (:func:`pose_candidates`), a fraction of the cost;
+    ``ransac_every_labelling``: RANSAC for both labellings of each camera (:func:`pose_candidates`).
     """
-    found = pose_candidates(obs, wireframe, min_keypoints_in_one_view, ransac)
+    found = pose_candidates(obs, wireframe, min_keypoints_in_one_view, ransac, ransac_every_labelling)
     if not found:
         return []
     T = np.array([pose.matrix() for pose, _, _ in found])

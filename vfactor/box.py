@@ -35,6 +35,7 @@ from functools import lru_cache
 import gtsam
 import numpy as np
 
+from vfactor import prebuilt
 from vfactor.vehicle_library import BODY_TYPES, VehicleDimensions, vehicle_library
 from vfactor.wireframe import Wireframe
 
@@ -155,6 +156,8 @@ def default_box_model(exclude: frozenset = frozenset()) -> BoxModel:
     radius and overhangs against its keypoints' features), plus
     :data:`MODEL_SIGMA` squared.
     """
+    if not exclude and (shipped := prebuilt.get("box_model")) is not None:  # built at install (vfactor.prebuilt)
+        return shipped
     rows: dict[str, list] = {t: [] for t in BODY_TYPES}
     for vehicle_id, vehicle in vehicle_library().items():
         if vehicle_id in exclude:

@@ -21,6 +21,7 @@ from itertools import combinations
 import numpy as np
 
 from vfactor._kernels import log_evidence_kernel
+from vfactor import prebuilt
 from vfactor.keypoints import LAYERS
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes, symmetrised
 
@@ -187,6 +188,8 @@ def default_hwc_bounds(exclude: frozenset = frozenset()) -> HwcBounds:
     """
     from vfactor.vehicle_library import vehicle_library
 
+    if not exclude and (shipped := prebuilt.get("hwc_bounds")) is not None:  # built at install (vfactor.prebuilt)
+        return shipped
     wireframes = _car_wireframes(exclude) + [v.wireframe for v in vehicle_library().values() if v.id not in exclude]
     return HwcBounds.from_wireframes(wireframes, margin=0.5)
 
@@ -341,6 +344,8 @@ PASCAL3D_WHEELBASE = 2.75
 @lru_cache(maxsize=1)
 def pascal3d_wireframes() -> dict[str, Wireframe]:
     """The nine PASCAL3D+ car CAD models at :data:`PASCAL3D_WHEELBASE`, symmetrised, by id ``pascal3d_<index>`` (made once)."""
+    if (shipped := prebuilt.get("pascal3d_wireframes")) is not None:  # built at install (vfactor.prebuilt)
+        return shipped
     out = {}
     for i, shape in enumerate(symmetrised(pascal3d_shapes() * PASCAL3D_WHEELBASE)):
         out[f"pascal3d_{i}"] = Wireframe(shape - shape[list(LAYERS["wheel"])].mean(axis=0))
@@ -375,10 +380,18 @@ def default_shape_model(exclude=frozenset(), hub_sigma: float = 0.02, rule_sigma
     return _shape_model(frozenset(exclude), float(hub_sigma), float(rule_sigma), float(inflation))
 
 
+#: :func:`default_shape_model`'s ``hub_sigma``, ``rule_sigma`` and ``inflation`` (the model vfactor.prebuilt ships).
+_DEFAULT_SHAPE_ARGUMENTS = (0.02, 0.08, 1.5)
+
+
 @lru_cache(maxsize=128)
 def _shape_model(exclude: frozenset, hub_sigma: float, rule_sigma: float, inflation: float) -> ShapeModel:
-    """:func:`default_shape_model`, made once per set of arguments."""
+    """:func:`default_shape_model`, made once per set of arguments (the defaults' built at install: vfactor.prebuilt)."""
     from vfactor.vehicle_library import BODY_TYPES, vehicle_library
+
+    if not exclude and (hub_sigma, rule_sigma, inflation) == _DEFAULT_SHAPE_ARGUMENTS:
+        if (shipped := prebuilt.get("shape_model")) is not None:
+            return shipped
 
     floor_sigma = np.array([hub_sigma] * 4 + [rule_sigma] * 8)
     shapes = {t: [] for t in BODY_TYPES}

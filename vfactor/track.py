@@ -48,6 +48,7 @@ from vfactor.init import best_candidates, cross_projection_cost
 from vfactor.keys import KeyScheme
 from vfactor.label_swaps import apply_swaps, relabel_swaps
 from vfactor.observations import Frame, Scene
+from vfactor.parallel.engine import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
 from vfactor.shape_evidence import track_shape
@@ -627,7 +628,6 @@ def track_scene(scene: Scene, options: TrackOptions = TrackOptions(),
         InputError: a detection still waits for the keypoint network
             (:meth:`~vfactor.observations.Scene.require_keypoints`), or two frames have the same time.
     """
-    from vfactor.parallel import InProcess
 
     scene.require_keypoints()
     messages = []
@@ -751,7 +751,6 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
     Raises:
         InputError: a detection still waits for the keypoint network.
     """
-    from vfactor.parallel import InProcess
 
     scene.require_keypoints()
     order = frame_order(scene)

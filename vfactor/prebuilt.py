@@ -1,0 +1,98 @@
+"""The default models built once and shipped, so that a fresh process does not rebuild them on its first solve.
+
+vfactor's default vehicle library, PASCAL3D+ wireframes, HWC bounds, body-type
+shape model and box model are fixed functions of the packaged data and of the
+code that builds them. Built on a process's first solve they cost about 10 ms,
+as much as a warm solve (a new Dask worker or CLI call paid it on its first
+vehicle). ``vfactor/data/prebuilt_models.pickle`` holds them built, with the
+SHA-256 of every file they are built from (:data:`SOURCES`). A process loads
+the file (about 1 ms) only when that digest is its own files' digest and the
+file unpickles; otherwise every model is built as before, so an edited rule or
+data file is never served stale, and a NumPy that cannot read the pickle only
+costs the 10 ms.
+
+``python -m vfactor.prebuilt`` writes the file; ``tests/test_prebuilt.py``
+fails when the shipped file is not the one of the sources, and checks that what
+it holds equals what the code builds.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import pickle
+from functools import lru_cache
+from pathlib import Path
+
+__all__ = ["SOURCES", "PATH", "source_digest", "build", "write", "load", "get"]
+
+_PACKAGE = Path(__file__).resolve().parent
+#: The files the models are built from, relative to the package: a change to any of them makes the shipped file stale.
+SOURCES = ("vehicle_library.py", "shape_model.py", "box.py", "wireframe.py", "keypoints.py", "prebuilt.py",
+           "data/vehicle_dimensions.json", "data/pascal3d_car_shapes.json")
+#: The shipped file.
+PATH = _PACKAGE / "data" / "prebuilt_models.pickle"
+
+_building = False  # set while build() runs: the builders then build, whatever the shipped file holds
+
+
+def source_digest() -> str:
+    """SHA-256 (hex) of the :data:`SOURCES`, each as ``name NUL bytes NUL``."""
+    digest = hashlib.sha256()
+    for name in SOURCES:
+        digest.update(name.encode() + b"\0" + (_PACKAGE / name).read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
+def build() -> dict:
+    """Every default model, built from the sources (the priors' Cholesky factors included)."""
+    global _building
+    from vfactor.box import default_box_model
+    from vfactor.shape_model import _DEFAULT_SHAPE_ARGUMENTS, _shape_model, default_hwc_bounds, pascal3d_wireframes
+    from vfactor.vehicle_library import vehicle_library
+
+    _building = True  # each builder's own code, not its cache (which may hold a shipped model)
+    try:
+        models = {
+            "vehicle_library": vehicle_library.__wrapped__(),
+            "pascal3d_wireframes": pascal3d_wireframes.__wrapped__(),
+            "hwc_bounds": default_hwc_bounds.__wrapped__(frozenset()),
+            "box_model": default_box_model.__wrapped__(frozenset()),
+            "shape_model": _shape_model.__wrapped__(frozenset(), *_DEFAULT_SHAPE_ARGUMENTS),
+        }
+    finally:
+        _building = False
+    model = models["shape_model"]
+    for body_type, spread in model.components():  # each prior the evidence weighs, with its Cholesky factor
+        model.prior(body_type, spread).evidence_terms()
+    return models
+
+
+def write(path: Path | str = PATH) -> Path:
+    """Builds the models and writes them, with :func:`source_digest`, to ``path`` (default: the shipped file)."""
+    path = Path(path)
+    payload = {"digest": source_digest(), "models": build()}
+    path.write_bytes(pickle.dumps(payload, protocol=4))
+    return path
+
+
+@lru_cache(maxsize=1)
+def load() -> dict:
+    """The shipped models by name, or ``{}`` when the file is missing, stale or unreadable."""
+    try:
+        payload = pickle.loads(PATH.read_bytes())
+        if payload.get("digest") != source_digest():
+            return {}
+        return dict(payload["models"])
+    except Exception:  # noqa: BLE001  any failure to read the cache means: build the models
+        return {}
+
+
+def get(name: str):
+    """The shipped model ``name`` (a key of :func:`build`), or None: then the caller builds it."""
+    if _building:
+        return None
+    return load().get(name)
+
+
+if __name__ == "__main__":
+    print(f"wrote {write()} ({PATH.stat().st_size} bytes, sources {source_digest()[:12]})")

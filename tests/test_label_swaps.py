@@ -210,3 +210,18 @@ def test_mirror_permutation_swaps_each_pair():
 def test_a_finding_round_trips():
     finding = SwapFinding("cam_a", (4, 5), 2, 7.5)
     assert SwapFinding.from_dict(finding.to_dict(), "x") == finding
+
+
+def test_a_camera_giving_one_label_twice_is_not_judged(sim):
+    """Two detections of one camera for a vehicle: its pairs are no one-to-one swap, so they stay as given."""
+    frame, truth = sim.scene.frames[0], sim.truth[0]
+    vid = frame.vehicle_ids()[0]
+    detections = frame.detections_of(vid)
+    pair = _seen_pair(detections[0])
+    twice = [_swapped(detections[0], [pair]), _swapped(detections[0], [pair]), *detections[1:]]  # judged, swapped
+    obs = observations_from_detections(twice, sim.scene.cameras)
+    out, findings = relabel_swaps(obs, truth[vid].world_T_vehicle, truth[vid].wireframe.vehicle_p_keypoints,
+                                  SolveOptions().graph.loss)
+    assert not any(f.camera == detections[0].camera for f in findings)
+    np.testing.assert_array_equal(out.keypoint_index[obs.camera_index == obs.camera_index[0]],
+                                  obs.keypoint_index[obs.camera_index == obs.camera_index[0]])

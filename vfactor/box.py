@@ -148,6 +148,7 @@ def published_box(dimensions: VehicleDimensions) -> tuple[np.ndarray, np.ndarray
 
 
 @lru_cache(maxsize=16)
+@prebuilt.shipped("box_model")
 def default_box_model(exclude: frozenset = frozenset()) -> BoxModel:
     """The box offsets learnt from the vehicle library, without the vehicles ``exclude`` (ids).
 
@@ -156,8 +157,6 @@ def default_box_model(exclude: frozenset = frozenset()) -> BoxModel:
     radius and overhangs against its keypoints' features), plus
     :data:`MODEL_SIGMA` squared.
     """
-    if not exclude and (shipped := prebuilt.get("box_model")) is not None:  # built at install (vfactor.prebuilt)
-        return shipped
     rows: dict[str, list] = {t: [] for t in BODY_TYPES}
     for vehicle_id, vehicle in vehicle_library().items():
         if vehicle_id in exclude:

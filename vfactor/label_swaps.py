@@ -41,6 +41,10 @@ __all__ = ["SWAP_MARGIN", "SwapFinding", "relabel_swaps", "apply_swaps"]
 #: ``rho`` of the whitened residuals: a negative log-likelihood), about the log odds of a 5 % swap rate.
 SWAP_MARGIN = 3.0
 
+_PAIR_OF = np.empty(12, dtype=int)  # keypoint index -> the index of its pair in LEFT_RIGHT_PAIRS
+for _p, _pair in enumerate(LEFT_RIGHT_PAIRS):
+    _PAIR_OF[list(_pair)] = _p
+
 
 @dataclass(frozen=True)
 class SwapFinding:
@@ -110,12 +114,9 @@ def relabel_swaps(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehic
     mirrored = replace(obs, keypoint_index=MIRROR_PERMUTATION[obs.keypoint_index])
     as_given = loss.rho(np.linalg.norm(whitened_residuals(obs, world_T_vehicle, vehicle_p_keypoints), axis=1))
     as_swapped = loss.rho(np.linalg.norm(whitened_residuals(mirrored, world_T_vehicle, vehicle_p_keypoints), axis=1))
-    pair_of = np.empty(12, dtype=int)
-    for p, (left, right) in enumerate(LEFT_RIGHT_PAIRS):
-        pair_of[left] = pair_of[right] = p
     swap = np.zeros(len(obs), dtype=bool)
     findings = []
-    groups = obs.camera_index * len(LEFT_RIGHT_PAIRS) + pair_of[obs.keypoint_index]
+    groups = obs.camera_index * len(LEFT_RIGHT_PAIRS) + _PAIR_OF[obs.keypoint_index]
     for group in np.unique(groups):
         rows = groups == group
         if len(np.unique(obs.keypoint_index[rows])) != rows.sum():

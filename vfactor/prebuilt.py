@@ -18,12 +18,13 @@ it holds equals what the code builds.
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import inspect
 import pickle
-from functools import lru_cache
 from pathlib import Path
 
-__all__ = ["SOURCES", "PATH", "source_digest", "build", "write", "load", "get"]
+__all__ = ["SOURCES", "PATH", "source_digest", "shipped", "build", "write", "load", "get"]
 
 _PACKAGE = Path(__file__).resolve().parent
 #: The files the models are built from, relative to the package: a change to any of them makes the shipped file stale.
@@ -33,6 +34,7 @@ SOURCES = ("vehicle_library.py", "shape_model.py", "box.py", "wireframe.py", "ke
 PATH = _PACKAGE / "data" / "prebuilt_models.pickle"
 
 _building = False  # set while build() runs: the builders then build, whatever the shipped file holds
+_BUILDERS: dict = {}  # model name -> its builder, decorated by shipped()
 
 
 def source_digest() -> str:
@@ -43,22 +45,38 @@ def source_digest() -> str:
     return digest.hexdigest()
 
 
+def shipped(name: str):
+    """Decorates the builder of a default model: called with every argument at its default, it returns the shipped
+    model ``name`` while the file is current (:func:`get`), and otherwise builds; ``wrapper.build`` is the builder
+    itself (:func:`build`)."""
+    def decorate(builder):
+        signature = inspect.signature(builder)
+        defaults = {p: parameter.default for p, parameter in signature.parameters.items()}
+
+        @functools.wraps(builder)
+        def wrapper(*args, **kwargs):
+            bound = signature.bind(*args, **kwargs)
+            bound.apply_defaults()
+            if bound.arguments == defaults and (model := get(name)) is not None:
+                return model
+            return builder(*args, **kwargs)
+
+        wrapper.build = builder
+        _BUILDERS[name] = wrapper
+        return wrapper
+
+    return decorate
+
+
 def build() -> dict:
     """Every default model, built from the sources (the priors' Cholesky factors included)."""
     global _building
-    from vfactor.box import default_box_model
-    from vfactor.shape_model import _DEFAULT_SHAPE_ARGUMENTS, _shape_model, default_hwc_bounds, pascal3d_wireframes
-    from vfactor.vehicle_library import vehicle_library
+    import vfactor.box  # noqa: F401  the modules whose builders shipped() decorates
+    import vfactor.shape_model  # noqa: F401
 
-    _building = True  # each builder's own code, not its cache (which may hold a shipped model)
+    _building = True  # the builders' own code, not the shipped models, also where one builder calls another
     try:
-        models = {
-            "vehicle_library": vehicle_library.__wrapped__(),
-            "pascal3d_wireframes": pascal3d_wireframes.__wrapped__(),
-            "hwc_bounds": default_hwc_bounds.__wrapped__(frozenset()),
-            "box_model": default_box_model.__wrapped__(frozenset()),
-            "shape_model": _shape_model.__wrapped__(frozenset(), *_DEFAULT_SHAPE_ARGUMENTS),
-        }
+        models = {name: builder.build() for name, builder in _BUILDERS.items()}
     finally:
         _building = False
     model = models["shape_model"]
@@ -75,7 +93,7 @@ def write(path: Path | str = PATH) -> Path:
     return path
 
 
-@lru_cache(maxsize=1)
+@functools.lru_cache(maxsize=1)
 def load() -> dict:
     """The shipped models by name, or ``{}`` when the file is missing, stale or unreadable."""
     try:
@@ -95,4 +113,8 @@ def get(name: str):
 
 
 if __name__ == "__main__":
-    print(f"wrote {write()} ({PATH.stat().st_size} bytes, sources {source_digest()[:12]})")
+    # `python -m vfactor.prebuilt` runs a second copy of this module; the builders registered with the one vfactor
+    # imported
+    from vfactor import prebuilt as _imported
+
+    print(f"wrote {_imported.write()} ({_imported.PATH.stat().st_size} bytes, sources {source_digest()[:12]})")

@@ -23,9 +23,9 @@ import gtsam
 import numpy as np
 
 from vfactor._kernels import fit_at_scale_kernel
-from vfactor.stats import chi2_quantile, f_quantile
 from vfactor.keys import KeyScheme
 from vfactor.shape_model import ANY, ShapeModel, ShapePrior
+from vfactor.stats import chi2_quantile, f_quantile
 
 __all__ = ["Linearisation", "linearise", "noise_scale", "inlier_noise_scale", "covariance_inflation", "shape_information", "BodyTypeChoice", "choose_body_type",
            "TrackShape", "track_shape", "NOISE_SCALE_RANGE"]

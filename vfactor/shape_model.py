@@ -20,8 +20,8 @@ from itertools import combinations
 
 import numpy as np
 
-from vfactor._kernels import log_evidence_kernel
 from vfactor import prebuilt
+from vfactor._kernels import log_evidence_kernel
 from vfactor.keypoints import LAYERS
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes, symmetrised
 
@@ -176,6 +176,7 @@ def _car_wireframes(exclude: frozenset = frozenset()) -> list[Wireframe]:
 
 
 @lru_cache(maxsize=64)
+@prebuilt.shipped("hwc_bounds")
 def default_hwc_bounds(exclude: frozenset = frozenset()) -> HwcBounds:
     """HWC bounds spanning every vehicle of the library, the PASCAL3D+ cars at wheelbases 2.4-3.1 m and the presets.
 
@@ -188,8 +189,6 @@ def default_hwc_bounds(exclude: frozenset = frozenset()) -> HwcBounds:
     """
     from vfactor.vehicle_library import vehicle_library
 
-    if not exclude and (shipped := prebuilt.get("hwc_bounds")) is not None:  # built at install (vfactor.prebuilt)
-        return shipped
     wireframes = _car_wireframes(exclude) + [v.wireframe for v in vehicle_library().values() if v.id not in exclude]
     return HwcBounds.from_wireframes(wireframes, margin=0.5)
 
@@ -342,10 +341,9 @@ PASCAL3D_WHEELBASE = 2.75
 
 
 @lru_cache(maxsize=1)
+@prebuilt.shipped("pascal3d_wireframes")
 def pascal3d_wireframes() -> dict[str, Wireframe]:
     """The nine PASCAL3D+ car CAD models at :data:`PASCAL3D_WHEELBASE`, symmetrised, by id ``pascal3d_<index>`` (made once)."""
-    if (shipped := prebuilt.get("pascal3d_wireframes")) is not None:  # built at install (vfactor.prebuilt)
-        return shipped
     out = {}
     for i, shape in enumerate(symmetrised(pascal3d_shapes() * PASCAL3D_WHEELBASE)):
         out[f"pascal3d_{i}"] = Wireframe(shape - shape[list(LAYERS["wheel"])].mean(axis=0))
@@ -357,6 +355,7 @@ def _mahalanobis2(prior: ShapePrior, wireframe: Wireframe) -> float:
     return float(r @ r)
 
 
+@prebuilt.shipped("shape_model")
 def default_shape_model(exclude=frozenset(), hub_sigma: float = 0.02, rule_sigma: float = 0.08,
                         inflation: float = 1.5) -> ShapeModel:
     """The body-type shape model learnt from the vehicle library and the PASCAL3D+ cars, uniform over the types.
@@ -380,18 +379,10 @@ def default_shape_model(exclude=frozenset(), hub_sigma: float = 0.02, rule_sigma
     return _shape_model(frozenset(exclude), float(hub_sigma), float(rule_sigma), float(inflation))
 
 
-#: :func:`default_shape_model`'s ``hub_sigma``, ``rule_sigma`` and ``inflation`` (the model vfactor.prebuilt ships).
-_DEFAULT_SHAPE_ARGUMENTS = (0.02, 0.08, 1.5)
-
-
 @lru_cache(maxsize=128)
 def _shape_model(exclude: frozenset, hub_sigma: float, rule_sigma: float, inflation: float) -> ShapeModel:
-    """:func:`default_shape_model`, made once per set of arguments (the defaults' built at install: vfactor.prebuilt)."""
+    """:func:`default_shape_model`, made once per set of arguments."""
     from vfactor.vehicle_library import BODY_TYPES, vehicle_library
-
-    if not exclude and (hub_sigma, rule_sigma, inflation) == _DEFAULT_SHAPE_ARGUMENTS:
-        if (shipped := prebuilt.get("shape_model")) is not None:
-            return shipped
 
     floor_sigma = np.array([hub_sigma] * 4 + [rule_sigma] * 8)
     shapes = {t: [] for t in BODY_TYPES}

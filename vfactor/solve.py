@@ -40,7 +40,7 @@ from vfactor.init import best_candidates, distinct_poses
 from vfactor.keys import KeyScheme
 from vfactor.label_swaps import relabel_swaps
 from vfactor.observations import Detection, Frame, Scene
-from vfactor.parallel.engine import InProcess
+from vfactor.parallel import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
 from vfactor.shape_evidence import (NOISE_SCALE_RANGE, choose_body_type, covariance_inflation, inlier_noise_scale, linearise,
@@ -362,7 +362,8 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
     points = wireframe_from_values(estimate, keys).vehicle_p_keypoints
     inflation = 1.0
     if options.estimate_noise:
-        obs = nominal.with_min_sigma(options.graph.covariance_min_pixel_sigma).scaled(scale)
+        floored = nominal.with_min_sigma(options.graph.covariance_min_pixel_sigma)
+        obs = floored.scaled(scale)
         at_scale = copy_graph(graph)
         at_scale.replace(0, projection_factor(pose_key, layer_keys, obs, options.graph.loss))
         raw = projection_factor(pose_key, layer_keys, obs, RobustLoss("none"))
@@ -371,8 +372,7 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
         inflation = covariance_inflation(dof)
         calibrated = nominal.calibrated
         if calibrated is not None and scale * relative < 1.0:  # calibrated sigmas are not narrowed
-            obs = nominal.with_min_sigma(options.graph.covariance_min_pixel_sigma).scaled(
-                np.where(calibrated, 1.0, scale * relative))
+            obs = floored.scaled(np.where(calibrated, 1.0, scale * relative))
             inflation = 1.0 if calibrated.all() else inflation
         else:
             obs = obs.scaled(relative)

@@ -48,7 +48,7 @@ from vfactor.init import best_candidates, cross_projection_cost
 from vfactor.keys import KeyScheme
 from vfactor.label_swaps import apply_swaps, relabel_swaps
 from vfactor.observations import Frame, Scene
-from vfactor.parallel.engine import InProcess
+from vfactor.parallel import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
 from vfactor.shape_evidence import track_shape

@@ -276,10 +276,9 @@ def _dimensions(entry: dict, where: str) -> VehicleDimensions:
 
 
 @lru_cache(maxsize=1)
+@prebuilt.shipped("vehicle_library")
 def vehicle_library() -> dict[str, LibraryVehicle]:
     """Every library vehicle by id, in the file's order (``vfactor/data/vehicle_dimensions.json``)."""
-    if (shipped := prebuilt.get("vehicle_library")) is not None:  # built at install (vfactor.prebuilt)
-        return shipped
     with resources.files("vfactor.data").joinpath("vehicle_dimensions.json").open("r", encoding="utf-8") as f:
         data = json.load(f)
     out = {}

@@ -158,7 +158,7 @@ class DaskEngine(Engine):
         chunks = _chunks(units, chunk)
         pending = as_completed()
         index_of, ready, submitted = {}, {}, 0
-        name = f"vfactor-{getattr(function, '__name__', 'unit')}-{os.urandom(16).hex()}"  # os, not uuid: a lighter import"
+        name = f"vfactor-{getattr(function, '__name__', 'unit')}-{os.urandom(16).hex()}"  # os, not uuid: a lighter import
 
         def submit() -> bool:
             nonlocal submitted

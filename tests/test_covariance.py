@@ -11,7 +11,7 @@ from scipy.stats import chi2
 
 from vfactor.evaluation import NOISE_LEVELS, compare_methods, noise_variant
 from vfactor.metrics import CHI2_95, keypoint_nees, nees_summary, pose_nees
-from vfactor.shape_evidence import covariance_inflation
+from vfactor.shape_evidence import covariance_inflation, covariance_upper_bound, sandwich_covariance
 from vfactor.sim import load_scenario, simulate
 from vfactor.solve import SolveOptions
 
@@ -41,6 +41,68 @@ def test_covariance_inflation_holds_the_95_percent_region_of_a_student_t():
         nees = np.sum(x**2, axis=1) / s2 / covariance_inflation(nu)
         assert np.mean(nees < CHI2_95[6]) == pytest.approx(0.95, abs=0.003)
     assert covariance_inflation(0.0) == 1.0 and covariance_inflation(1e6) == pytest.approx(1.0, abs=1e-3)
+
+
+def _regression(rng, n=40, m=5, prior=0.5):
+    """A linear least-squares problem of ``n`` 2-row observations and ``m`` unknowns with a prior of information
+    ``prior``: (A, the whitened Jacobian (2n, m); H; P = H^-1)."""
+    A = rng.normal(size=(2 * n, m))
+    H = A.T @ A + prior * np.eye(m)
+    return A, H, np.linalg.inv(H)
+
+
+def test_sandwich_covariance_is_the_dense_formula_and_unbiased_at_the_model_noise():
+    rng = np.random.default_rng(3)
+    A, H, P = _regression(rng)
+    e = rng.normal(size=len(A))
+    C = sandwich_covariance(P, A, -e)
+    meat = H - A.T @ A
+    for i in range(len(A) // 2):  # HC2, one 2x2 block of the hat matrix at a time
+        Ai = A[2 * i : 2 * i + 2]
+        w, V = np.linalg.eigh(np.eye(2) - Ai @ P @ Ai.T)
+        g = Ai.T @ (V @ np.diag(w**-0.5) @ V.T @ e[2 * i : 2 * i + 2])
+        meat += np.outer(g, g)
+    np.testing.assert_allclose(C, P @ meat @ P, rtol=1e-9, atol=1e-12)
+    # errors of the model's size (whitened: unit), the prior's mean zero: the sandwich averages the model's covariance
+    mean = np.zeros_like(P)
+    for _ in range(2000):
+        noise = rng.normal(size=len(A))
+        x = P @ (A.T @ noise)  # the solution's error, prior at the truth
+        mean += sandwich_covariance(P, A, -(noise - A @ x)) / 2000
+    np.testing.assert_allclose(np.diag(mean), np.diag(P), rtol=0.05)
+
+
+def test_sandwich_covariance_sees_errors_larger_than_the_model_says():
+    """A quarter of the observations three times noisier than their sigmas: the model's covariance is too narrow (NEES
+    above its dimension), the sandwich's about right."""
+    rng = np.random.default_rng(4)
+    A, H, P = _regression(rng, n=60, m=4, prior=1e-6)
+    scale = np.where(np.arange(len(A)) < len(A) // 4, 3.0, 1.0)
+    model, sandwich = [], []
+    for _ in range(3000):
+        noise = scale * rng.normal(size=len(A))
+        x = P @ (A.T @ noise)
+        model.append(x @ np.linalg.solve(P, x))
+        sandwich.append(x @ np.linalg.solve(sandwich_covariance(P, A, -(noise - A @ x)), x))
+    assert np.mean(model) > 1.5 * 4
+    assert 0.8 * 4 < np.mean(sandwich) < 1.3 * 4
+
+
+def test_covariance_upper_bound_is_wider_than_both_and_the_least_such_in_the_model_frame():
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        X, Y = rng.normal(size=(2, 6, 6))
+        model, other = X @ X.T + 0.1 * np.eye(6), Y @ Y.T + 0.1 * np.eye(6)
+        C, widening = covariance_upper_bound(model, other)
+        assert np.linalg.eigvalsh(C - model).min() > -1e-9 and np.linalg.eigvalsh(C - other).min() > -1e-9
+        assert widening == pytest.approx(np.max(np.linalg.eigvals(np.linalg.solve(model, other)).real))
+    narrow, _ = covariance_upper_bound(model, 0.5 * model)
+    np.testing.assert_allclose(narrow, model, rtol=1e-9)
+    wide, widening = covariance_upper_bound(model, 2.0 * model)
+    np.testing.assert_allclose(wide, 2.0 * model, rtol=1e-9)
+    assert widening == pytest.approx(2.0)
+    with pytest.raises(np.linalg.LinAlgError):
+        covariance_upper_bound(-model, other)
 
 
 @pytest.mark.parametrize("level", ["clean", "paper"])

@@ -43,8 +43,9 @@ from vfactor.observations import Detection, Frame, Scene
 from vfactor.parallel import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
-from vfactor.shape_evidence import (NOISE_SCALE_RANGE, choose_body_type, covariance_inflation, inlier_noise_scale, linearise,
-                                    noise_scale, shape_information)
+from vfactor.shape_evidence import (NOISE_SCALE_RANGE, SANDWICH_DISCOUNT, choose_body_type, covariance_inflation,
+                                    covariance_upper_bound, inlier_noise_scale, linearise, noise_scale, sandwich_covariance,
+                                    shape_information)
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
 from vfactor.wireframe import Wireframe
 
@@ -292,6 +293,11 @@ def solve_observations(
                                                             estimate, keys, options)
             joint = inflation * pose_shape_covariance(gtsam.Marginals(covariance_graph, estimate), keys)
             result.extras["covariance_inflation"] = inflation
+            if options.estimate_noise:  # the residuals' own say: wider where the keypoints are off by more than the model says
+                jacobian, rhs = covariance_graph.at(0).linearize(estimate).jacobian()  # [pose, wheel, light, roof]
+                sandwich = sandwich_covariance(joint / inflation, jacobian, rhs)
+                joint, widening = covariance_upper_bound(joint, sandwich / SANDWICH_DISCOUNT)
+                result.extras["covariance_widening"] = max(widening, 1.0)
             result.pose_covariance = joint[:6, :6].copy()
             result.keypoint_covariances_world = keypoint_covariances(joint, keys, world_T_vehicle, wireframe)
         except (RuntimeError, np.linalg.LinAlgError) as exc:

@@ -293,11 +293,8 @@ def solve_observations(
                                                             estimate, keys, options)
             joint = inflation * pose_shape_covariance(gtsam.Marginals(covariance_graph, estimate), keys)
             result.extras["covariance_inflation"] = inflation
-            if options.estimate_noise:  # the residuals' own say: wider where the keypoints are off by more than the model says
-                jacobian, rhs = covariance_graph.at(0).linearize(estimate).jacobian()  # [pose, wheel, light, roof]
-                sandwich = sandwich_covariance(joint / inflation, jacobian, rhs)
-                joint, widening = covariance_upper_bound(joint, sandwich / SANDWICH_DISCOUNT)
-                result.extras["covariance_widening"] = max(widening, 1.0)
+            if options.estimate_noise:
+                joint = _widened_by_residuals(joint, inflation, covariance_graph, estimate, result.extras)
             result.pose_covariance = joint[:6, :6].copy()
             result.keypoint_covariances_world = keypoint_covariances(joint, keys, world_T_vehicle, wireframe)
         except (RuntimeError, np.linalg.LinAlgError) as exc:
@@ -386,6 +383,25 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
     out = copy_graph(graph)
     out.replace(0, projection_factor(pose_key, layer_keys, obs.subset(inlier), RobustLoss("none")))
     return out, inflation
+
+
+def _widened_by_residuals(joint: np.ndarray, inflation: float, covariance_graph: gtsam.NonlinearFactorGraph,
+                          estimate: gtsam.Values, extras: dict) -> np.ndarray:
+    """``joint`` (the model's (42, 42) covariance of pose and shape, times ``inflation``) widened where the residuals
+    say the keypoints are off by more than it assumes: the least covariance wider than both it and the sandwich
+    over :data:`~vfactor.shape_evidence.SANDWICH_DISCOUNT` (docs/factors.md, "Covariances", item 5). Sets
+    ``extras["covariance_widening"]``; ``joint`` as it is where the sandwich is not defined (a numerically singular
+    covariance)."""
+    jacobian, rhs = covariance_graph.at(0).linearize(estimate).jacobian()  # columns [pose, wheel, light, roof]
+    try:
+        sandwich = sandwich_covariance(joint / inflation, jacobian, rhs)
+        widened, widening = covariance_upper_bound(joint, sandwich / SANDWICH_DISCOUNT)
+    except np.linalg.LinAlgError:
+        return joint
+    if not np.all(np.isfinite(widened)):
+        return joint
+    extras["covariance_widening"] = max(widening, 1.0)
+    return widened
 
 
 def _relabelled(best, obs: KeypointObservations, options: SolveOptions, prior: ShapePrior, keys: KeyScheme,

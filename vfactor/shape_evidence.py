@@ -293,7 +293,8 @@ def sandwich_covariance(covariance: np.ndarray, jacobian: np.ndarray, rhs: np.nd
 
 
 def covariance_upper_bound(model: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, float]:
-    """The least covariance at least as wide as ``model`` and ``other`` in every direction of ``model``'s frame.
+    """A covariance at least as wide as both ``model`` and ``other`` (in the Loewner order), the least such in ``model``'s
+    whitened frame.
 
     ``C = L W L^T`` with ``model = L L^T`` and ``W`` the eigen-decomposition of
     ``L^-1 other L^-T`` with its eigenvalues raised to at least 1: ``model``

@@ -131,12 +131,11 @@ def test_mean_nees_is_within_the_chi2_interval_of_its_mean(level, body_type):
     assert lo <= keypoints.mean() <= hi, (keypoints.mean(), lo, hi)
 
 
-def test_the_sandwich_widens_the_covariance_where_one_camera_is_noisier_than_its_sigmas(monkeypatch):
+def test_the_sandwich_widens_the_covariance_where_one_camera_is_noisier_than_its_sigmas():
     """A detector whose sigmas (3 px) are wrong per camera: one camera's keypoints are off by 6 px, the other's by
     1 px. The pooled noise scale cannot describe both; the residuals' own (sandwich) covariance widens the pose's
     where the model alone is too narrow, and never narrows it."""
-    import vfactor.solve as solve_module
-    from vfactor.graph import observations_from_detections
+    from vfactor.graph import GraphConfig, observations_from_detections
     from vfactor.solve import solve_observations
 
     sim = simulate(noise_variant(load_scenario("library_2cam"), **NOISE_LEVELS["clean"]), seed=44, num_frames=60)
@@ -149,17 +148,18 @@ def test_the_sandwich_widens_the_covariance_where_one_camera_is_noisier_than_its
                                          covariance=np.tile(9.0 * np.eye(2), (12, 1, 1))) for i, d in enumerate(dets)]
             obs = observations_from_detections(noisy, sim.scene.cameras, SolveOptions().graph)
             widened = solve_observations(obs, SolveOptions(), vid)
-            with monkeypatch.context() as m:
-                m.setattr(solve_module, "SANDWICH_DISCOUNT", np.inf)  # the sandwich never wider: the model alone
-                model = solve_observations(obs, SolveOptions(), vid)
-            assert widened.ok and model.ok and widened.extras["covariance_widening"] >= 1.0
-            assert np.linalg.eigvalsh(widened.pose_covariance - model.pose_covariance).min() > -1e-12
+            model_only = solve_observations(obs, SolveOptions(graph=GraphConfig(covariance_sandwich_weight=0.0)), vid)
+            assert widened.ok and model_only.ok and widened.extras["covariance_widening"] >= 1.0
+            assert np.linalg.eigvalsh(widened.pose_covariance - model_only.pose_covariance).min() > -1e-12
             truth = sim.truth[f][vid].world_T_vehicle
             nees["sandwich"].append(pose_nees(widened.world_T_vehicle, widened.pose_covariance, truth))
-            nees["model"].append(pose_nees(model.world_T_vehicle, model.pose_covariance, truth))
+            nees["model"].append(pose_nees(model_only.world_T_vehicle, model_only.pose_covariance, truth))
     sandwich, model = np.array(nees["sandwich"]), np.array(nees["model"])
     assert len(sandwich) == 60
     assert sandwich.mean() < 0.9 * model.mean()
     assert np.mean(sandwich < CHI2_95[6]) > np.mean(model < CHI2_95[6])
     fixed = solve_observations(obs, SolveOptions(estimate_noise=False), vid)  # the user's sigmas: the model's
     assert fixed.ok and "covariance_widening" not in fixed.extras
+    assert "covariance_widening" not in model_only.extras  # weight 0: off
+    with pytest.raises(ValueError, match="GraphConfig.covariance_sandwich_weight"):
+        GraphConfig(covariance_sandwich_weight=-1.0)

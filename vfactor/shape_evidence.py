@@ -28,7 +28,7 @@ from vfactor.shape_model import ANY, ShapeModel, ShapePrior
 from vfactor.stats import chi2_quantile, f_quantile
 
 __all__ = ["Linearisation", "linearise", "noise_scale", "inlier_noise_scale", "covariance_inflation", "sandwich_covariance",
-           "covariance_upper_bound", "SANDWICH_DISCOUNT", "shape_information", "BodyTypeChoice", "choose_body_type",
+           "covariance_upper_bound", "shape_information", "BodyTypeChoice", "choose_body_type",
            "TrackShape", "track_shape", "NOISE_SCALE_RANGE"]
 
 #: The noise scale is kept within this range: down to a thirtieth of the detector's nominal sigma, up to four times it
@@ -243,15 +243,6 @@ def covariance_inflation(dof: float, dim: int = 6, level: float = 0.95) -> float
     if not dof > 0:
         return 1.0
     return _f_over_chi2(dim, round(max(float(dof), 3.0), 1), level)
-
-
-#: The sandwich covariance is divided by this before it can widen the model's (:func:`covariance_upper_bound`): from
-#: about 20 keypoints it is a noisy estimate, and the larger of a noisy and a sound covariance is wider than either on
-#: average, most of all in 42 dimensions. Chosen on ``library_2cam`` seeds 10-19 at three noise levels (1.5, 2 and 3
-#: tried; docs/results.md, "Consistency of the covariances"): the pose's share under the chi2 95 % bound (clean /
-#: paper / hard) went from 93.1 / 93.2 / 92.1 % to 96.0 / 94.4 / 93.5 %, the keypoints' from 91.5 / 94.9 / 93.8 % to
-#: 94.2 / 95.6 / 94.8 %; the pose's mean NEES from 0.98 / 0.98 / 1.12 to 0.82 / 0.94 / 1.03 times 6.
-SANDWICH_DISCOUNT = 2.0
 
 
 def sandwich_covariance(covariance: np.ndarray, jacobian: np.ndarray, rhs: np.ndarray,

@@ -43,7 +43,7 @@ from vfactor.observations import Detection, Frame, Scene
 from vfactor.parallel import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
-from vfactor.shape_evidence import (NOISE_SCALE_RANGE, SANDWICH_DISCOUNT, choose_body_type, covariance_inflation,
+from vfactor.shape_evidence import (NOISE_SCALE_RANGE, choose_body_type, covariance_inflation,
                                     covariance_upper_bound, inlier_noise_scale, linearise, noise_scale, sandwich_covariance,
                                     shape_information)
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
@@ -291,10 +291,12 @@ def solve_observations(
         try:
             covariance_graph, inflation = _covariance_graph(graph, obs, nominal, float(extras.get("noise_scale", 1.0)),
                                                             estimate, keys, options)
-            joint = inflation * pose_shape_covariance(gtsam.Marginals(covariance_graph, estimate), keys)
+            linear = covariance_graph.linearize(estimate)  # once: the marginals and the sandwich's residuals
+            joint = inflation * pose_shape_covariance(gtsam.Marginals(linear, estimate), keys)
             result.extras["covariance_inflation"] = inflation
-            if options.estimate_noise:
-                joint = _widened_by_residuals(joint, inflation, covariance_graph, estimate, result.extras)
+            if options.estimate_noise and options.graph.covariance_sandwich_weight > 0:
+                joint = _widened_by_residuals(joint, inflation, linear.at(0), options.graph.covariance_sandwich_weight,
+                                              result.extras)
             result.pose_covariance = joint[:6, :6].copy()
             result.keypoint_covariances_world = keypoint_covariances(joint, keys, world_T_vehicle, wireframe)
         except (RuntimeError, np.linalg.LinAlgError) as exc:
@@ -385,17 +387,17 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
     return out, inflation
 
 
-def _widened_by_residuals(joint: np.ndarray, inflation: float, covariance_graph: gtsam.NonlinearFactorGraph,
-                          estimate: gtsam.Values, extras: dict) -> np.ndarray:
+def _widened_by_residuals(joint: np.ndarray, inflation: float, projection: gtsam.GaussianFactor, weight: float,
+                          extras: dict) -> np.ndarray:
     """``joint`` (the model's (42, 42) covariance of pose and shape, times ``inflation``) widened where the residuals
-    say the keypoints are off by more than it assumes: the least covariance wider than both it and the sandwich
-    over :data:`~vfactor.shape_evidence.SANDWICH_DISCOUNT` (docs/factors.md, "Covariances", item 5). Sets
-    ``extras["covariance_widening"]``; ``joint`` as it is where the sandwich is not defined (a numerically singular
-    covariance)."""
-    jacobian, rhs = covariance_graph.at(0).linearize(estimate).jacobian()  # columns [pose, wheel, light, roof]
+    say the keypoints are off by more than it assumes: a covariance wider than both it and ``weight`` times the
+    sandwich of ``projection`` (the covariance graph's linearised projection factor; docs/factors.md, "Covariances",
+    item 5). Sets ``extras["covariance_widening"]``; ``joint`` as it is where the sandwich is not defined (a
+    numerically singular covariance)."""
+    jacobian, rhs = projection.jacobian()  # columns [pose, wheel, light, roof]
     try:
         sandwich = sandwich_covariance(joint / inflation, jacobian, rhs)
-        widened, widening = covariance_upper_bound(joint, sandwich / SANDWICH_DISCOUNT)
+        widened, widening = covariance_upper_bound(joint, weight * sandwich)
     except np.linalg.LinAlgError:
         return joint
     if not np.all(np.isfinite(widened)):

@@ -66,6 +66,24 @@ def test_a_vehicle_seen_by_one_camera_is_its_own_vehicle_and_a_far_detection_joi
     assert groups.results[groups.groups.index(alone)].ok  # a single view is still solved
 
 
+def test_a_weak_view_joins_a_vehicle_seen_alone_and_every_detection_is_in_one_group(multi):
+    """v2 seen well by cam0 only and by three keypoints in cam1: the weak view joins it, and cam0's detection is
+    in that one group (it was also left as a vehicle of its own, which dropped it)."""
+    frame = multi.scene.frames[0]
+    strong = next(d for d in frame.detections if d.vehicle == "v2" and d.camera == "cam0")
+    partial = next(d for d in frame.detections if d.vehicle == "v2" and d.camera == "cam1")
+    keep = np.flatnonzero(partial.seen)[:3]
+    seen = np.zeros(len(partial.seen), bool)
+    seen[keep] = True
+    weak = dataclasses.replace(partial, keypoints=np.where(seen[:, None], partial.keypoints, np.nan),
+                               confidence=np.where(seen, partial.confidence, 0.0))
+    dets = [weak] + [d for d in frame.detections if d.vehicle != "v2"] + [strong]
+    groups = associate_frame(Frame(frame.t, dets), multi.scene.cameras)
+    assert sorted(j for g in groups.groups for j in g) == list(range(len(dets)))
+    assert [0, len(dets) - 1] in groups.groups
+    assert all(r.ok for r in groups.results)
+
+
 def test_a_false_detection_is_not_merged_into_a_vehicle(multi):
     """A library van's keypoints where no vehicle is, in cam1: it stays apart."""
     import gtsam

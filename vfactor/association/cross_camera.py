@@ -22,10 +22,17 @@ that test:
    is a likelihood ratio per camera: one vehicle explains both views about
    as well as each explains its own, two vehicles cannot;
 3. compatible pairs are merged greedily, smallest rise first, into groups of
-   at most one detection per camera whose every pair is compatible;
+   at most one detection per camera whose every pair is compatible; then single
+   detections move, or swap with the same camera's detection of another group,
+   while that raises the groups' agreement (:func:`_improve`: a wrong best pair
+   first kept a third camera's view out of its vehicle);
 4. each group of three or more detections is solved once more as a whole, and
-   a camera that disagrees there is split off into a vehicle of its own;
-5. each detection still alone (or too weak to be solved alone) is tried once
+   a camera that disagrees there is split off into a vehicle of its own; two
+   groups of several detections whose vehicles stand within ``merge_distance``
+   are solved together and merged when every detection fits the joint vehicle
+   about as well as its own group (:func:`_merge_groups`: one pair that failed
+   its pre-gate split a vehicle of four views into two of two);
+5. each detection still alone (those first, then the weak ones) (or too weak to be solved alone) is tried once
    more with each group that projects near it, solved together with it: it
    joins when the group's detections fit the joint vehicle about as well as
    their own (:func:`_attach_leftovers`).
@@ -88,6 +95,9 @@ class AssociationOptions:
             (:func:`_attach_leftovers`).
         leftover_rise: in the second pass, the largest rise per keypoint of a group's detections' cost when a
             leftover detection joins it (true joins seen: up to 0.84; tuning scenes as for ``gate_cost``).
+        merge_distance: metres, on the road plane, between the vehicles of two groups of several detections each
+            (disjoint cameras) within which they are solved together and merged when every detection fits the
+            joint vehicle about as well as its own group (``leftover_rise``; :func:`_merge_groups`).
         leftover_cost: in the second pass, the largest cost per keypoint of the leftover detection's own
             keypoints in the joint solve (true joins seen: up to 5.4).
         hint_relax: how much wider both second-pass gates are for a group the cameras' own track ids point to.
@@ -107,6 +117,7 @@ class AssociationOptions:
     strong_keypoints: int = 8
     min_keypoints: int = 4
     leftover_rise: float = 1.0
+    merge_distance: float = 2.0
     leftover_cost: float = 6.0
     hint_relax: float = 2.0
     min_track_frames: int = 3
@@ -123,7 +134,7 @@ class AssociationOptions:
 
     def __post_init__(self):
         for name in ("gate_distance", "gate_cost", "gate_cost_weak", "strong_keypoints", "min_keypoints",
-                     "leftover_rise", "leftover_cost", "hint_relax", "min_track_frames", "max_track_residual", "min_hit_ratio",
+                     "leftover_rise", "merge_distance", "leftover_cost", "hint_relax", "min_track_frames", "max_track_residual", "min_hit_ratio",
                      "link_distance", "max_speed",
                      "max_acceleration", "max_missed", "track_bonus", "single_view_weight", "tentative_missed"):
             value = getattr(self, name)
@@ -223,6 +234,7 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
         members[a] = sorted(members[a] + members[b])
         for k in members.pop(b):
             group_of[k] = a
+    _improve(members, group_of, pairs, {i: det[i].camera for i in strong})
 
     groups, results, messages = [], [], []
     pending = sorted(members.values(), key=lambda g: g[0])
@@ -244,9 +256,113 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
                 continue
         groups.append(group)
         results.append(result)
+    _merge_groups(det, own, groups, results, cameras, options)
     _attach_leftovers(det, weak, own, groups, results, cameras, options, hints or {})
     order = sorted(range(len(groups)), key=lambda g: groups[g][0])
     return FrameGroups([groups[g] for g in order], [results[g] for g in order], pairs, messages)
+
+
+def _improve(members: dict[int, list[int]], group_of: dict[int, int], pairs: dict, camera: dict[int, str],
+             max_rounds: int = 20) -> None:
+    """Moves and swaps of single detections between the greedy groups, in place, while they raise the groups'
+    agreement: the sum, over the pairs within each group, of ``1 - score`` (a pair's rise over its gate), with
+    every pair within a group compatible and one detection per camera.
+
+    The greedy merging takes the best pair first; where that pair is wrong (two vehicles side by side, seen
+    along similar rays) it keeps a third camera's view out of the right group, which agrees with two of its
+    detections. Such a view moves to where it agrees with more; a detection swaps with the same camera's
+    detection of another group where both agree better after the swap.
+    """
+    def gain(k: int, group) -> float:
+        total = 0.0
+        for m in group:
+            if m == k:
+                continue
+            if camera[m] == camera[k]:
+                return -math.inf
+            ok, score = pairs.get((min(k, m), max(k, m)), (False, math.inf))
+            if not ok:
+                return -math.inf
+            total += 1.0 - score
+        return total
+
+    for _ in range(max_rounds):
+        changed = False
+        for k in sorted(group_of):
+            a = group_of[k]
+            here = gain(k, members[a])
+            best, target = here + 1e-9, None
+            for b, group in members.items():
+                if b != a and group:
+                    g = gain(k, group)
+                    if g > best:
+                        best, target = g, b
+            if target is None:
+                continue  # (alone it would gain 0, never more than it has)
+            members[a] = [m for m in members[a] if m != k]
+            members[target] = sorted(members[target] + [k])
+            group_of[k] = target
+            changed = True
+        for k, m in itertools.combinations(sorted(group_of), 2):
+            a, b = group_of[k], group_of[m]
+            if a == b or camera[k] != camera[m]:
+                continue
+            rest_a = [x for x in members[a] if x != k]
+            rest_b = [x for x in members[b] if x != m]
+            delta = gain(k, rest_b) + gain(m, rest_a) - gain(k, rest_a) - gain(m, rest_b)
+            if delta > 1e-9:
+                members[a], members[b] = sorted(rest_a + [m]), sorted(rest_b + [k])
+                group_of[k], group_of[m] = b, a
+                changed = True
+        if not changed:
+            break
+    for b in [b for b, group in members.items() if not group]:
+        del members[b]
+
+
+def _merge_groups(det: list[Detection], own: dict, groups: list[list[int]], results: list[VehicleResult],
+                  cameras: dict[str, Camera], options: AssociationOptions) -> None:
+    """Merges groups of several detections that are one vehicle, in place: two groups of disjoint cameras whose
+    vehicles stand within ``merge_distance`` of each other are solved together, and merged when that solve is
+    sane (no camera disagrees) and every detection of both fits it about as well as it fits its own group (its
+    cost rises by at most ``leftover_rise`` per keypoint).
+
+    The pair test needs every pair of a group compatible; one pair that failed its pre-gate (a view whose
+    single-view pose is metres off) splits a vehicle seen by four cameras into two vehicles of two. Their
+    multi-view positions agree to centimetres, which two vehicles side by side do not.
+    """
+    tried: set[tuple[int, ...]] = set()
+    while True:
+        candidates = []
+        for a, b in itertools.combinations(range(len(groups)), 2):
+            if len(groups[a]) < 2 or len(groups[b]) < 2 or not results[a].ok or not results[b].ok:
+                continue
+            if {det[k].camera for k in groups[a]} & {det[k].camera for k in groups[b]}:
+                continue
+            gap = float(np.linalg.norm(results[a].world_T_vehicle.translation()[:2]
+                                       - results[b].world_T_vehicle.translation()[:2]))
+            if gap <= options.merge_distance:
+                candidates.append((gap, a, b))
+        merged = False
+        for _, a, b in sorted(candidates):
+            start = results[a] if len(groups[a]) >= len(groups[b]) else results[b]
+            members = sorted(groups[a] + groups[b])
+            if tuple(members) in tried:
+                continue
+            tried.add(tuple(members))
+            together = _solve([det[k] for k in members], cameras, options, "+".join(f"d{k}" for k in members),
+                              initial=start)
+            if not together.ok:
+                continue
+            rises = [(_cost(own[k], together, options) - _cost(own[k], results[g], options))
+                     / max(int(det[k].seen.sum()), 1) for g in (a, b) for k in groups[g]]
+            if max(rises) <= options.leftover_rise:
+                groups[a], results[a] = members, together
+                del groups[b], results[b]
+                merged = True
+                break  # the indices moved: look again
+        if not merged:
+            return
 
 
 def _attach_leftovers(det: list[Detection], weak: list[int], own: dict, groups: list[list[int]],
@@ -260,18 +376,23 @@ def _attach_leftovers(det: list[Detection], weak: list[int], own: dict, groups: 
     detection are solved together, and the detection joins when that solve is sane, the group's own detections
     fit it about as well as they fit the group (each detection's cost rises by at most ``leftover_rise`` per
     keypoint: they are seen well, so a vehicle elsewhere would move them), and the detection's keypoints cost at
-    most ``leftover_cost`` each. Of several groups that pass, the one whose detections' cost rises least; a
-    detection that joins none stays a vehicle of its own (one too weak to solve is reported ``degenerate``).
+    most ``leftover_cost`` each. Of several groups that pass, the one where the sum of its detections' rises and the
+    detection's own cost per keypoint is least (a weak view's few keypoints barely move any group, so its own fit
+    decides); a detection that joins none stays a vehicle of its own (one too weak to solve is reported ``degenerate``).
     A group holding a detection of the leftover's hint (the same vehicle by the cameras' own trackers) is
     tried wherever it projects, with both gates ``hint_relax`` times wider.
     """
     from vfactor.result import Status
 
-    leftovers = sorted(set(weak) | {g[0] for g in groups if len(g) == 1})
+    # the detections alone first (solved alone: they may join a group of several), then the weak ones (which may
+    # also join a detection alone); every detection ends in exactly one group
+    leftovers = sorted(g[0] for g in groups if len(g) == 1) + sorted(set(weak))
     for k in leftovers:
         if own[k] is None:
             continue
-        home = next((g for g, group in enumerate(groups) if group == [k]), None)
+        home = next((g for g, group in enumerate(groups) if k in group), None)
+        if home is not None and len(groups[home]) > 1:
+            continue  # a weak detection joined it: no longer alone
         camera = cameras[det[k].camera]
         uv = det[k].keypoints[det[k].seen]
         best = None
@@ -296,7 +417,7 @@ def _attach_leftovers(det: list[Detection], weak: list[int], own: dict, groups: 
                      for m in group]
             mine = _cost(own[k], together, options) / max(int(det[k].seen.sum()), 1)
             if max(rises) <= relax * options.leftover_rise and mine <= relax * options.leftover_cost:
-                score = sum(rises)
+                score = sum(rises) + mine
                 if best is None or score < best[0]:
                     best = (score, g, together)
         if best is not None:

@@ -27,11 +27,7 @@ that test:
    while that raises the groups' agreement (:func:`_improve`: a wrong best pair
    first kept a third camera's view out of its vehicle);
 4. each group of three or more detections is solved once more as a whole, and
-   a camera that disagrees there is split off into a vehicle of its own; two
-   groups of several detections whose vehicles stand within ``merge_distance``
-   are solved together and merged when every detection fits the joint vehicle
-   about as well as its own group (:func:`_merge_groups`: one pair that failed
-   its pre-gate split a vehicle of four views into two of two);
+   a camera that disagrees there is split off into a vehicle of its own;
 5. each detection still alone (those first, then the weak ones) (or too weak to be solved alone) is tried once
    more with each group that projects near it, solved together with it: it
    joins when the group's detections fit the joint vehicle about as well as
@@ -95,9 +91,6 @@ class AssociationOptions:
             (:func:`_attach_leftovers`).
         leftover_rise: in the second pass, the largest rise per keypoint of a group's detections' cost when a
             leftover detection joins it (true joins seen: up to 0.84; tuning scenes as for ``gate_cost``).
-        merge_distance: metres, on the road plane, between the vehicles of two groups of several detections each
-            (disjoint cameras) within which they are solved together and merged when every detection fits the
-            joint vehicle about as well as its own group (``leftover_rise``; :func:`_merge_groups`).
         leftover_cost: in the second pass, the largest cost per keypoint of the leftover detection's own
             keypoints in the joint solve (true joins seen: up to 5.4).
         hint_relax: how much wider both second-pass gates are for a group the cameras' own track ids point to.
@@ -117,7 +110,6 @@ class AssociationOptions:
     strong_keypoints: int = 8
     min_keypoints: int = 4
     leftover_rise: float = 1.0
-    merge_distance: float = 2.0
     leftover_cost: float = 6.0
     hint_relax: float = 2.0
     min_track_frames: int = 3
@@ -134,7 +126,7 @@ class AssociationOptions:
 
     def __post_init__(self):
         for name in ("gate_distance", "gate_cost", "gate_cost_weak", "strong_keypoints", "min_keypoints",
-                     "leftover_rise", "merge_distance", "leftover_cost", "hint_relax", "min_track_frames", "max_track_residual", "min_hit_ratio",
+                     "leftover_rise", "leftover_cost", "hint_relax", "min_track_frames", "max_track_residual", "min_hit_ratio",
                      "link_distance", "max_speed",
                      "max_acceleration", "max_missed", "track_bonus", "single_view_weight", "tentative_missed"):
             value = getattr(self, name)
@@ -256,7 +248,6 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
                 continue
         groups.append(group)
         results.append(result)
-    _merge_groups(det, own, groups, results, cameras, options)
     _attach_leftovers(det, weak, own, groups, results, cameras, options, hints or {})
     order = sorted(range(len(groups)), key=lambda g: groups[g][0])
     return FrameGroups([groups[g] for g in order], [results[g] for g in order], pairs, messages)
@@ -318,51 +309,6 @@ def _improve(members: dict[int, list[int]], group_of: dict[int, int], pairs: dic
             break
     for b in [b for b, group in members.items() if not group]:
         del members[b]
-
-
-def _merge_groups(det: list[Detection], own: dict, groups: list[list[int]], results: list[VehicleResult],
-                  cameras: dict[str, Camera], options: AssociationOptions) -> None:
-    """Merges groups of several detections that are one vehicle, in place: two groups of disjoint cameras whose
-    vehicles stand within ``merge_distance`` of each other are solved together, and merged when that solve is
-    sane (no camera disagrees) and every detection of both fits it about as well as it fits its own group (its
-    cost rises by at most ``leftover_rise`` per keypoint).
-
-    The pair test needs every pair of a group compatible; one pair that failed its pre-gate (a view whose
-    single-view pose is metres off) splits a vehicle seen by four cameras into two vehicles of two. Their
-    multi-view positions agree to centimetres, which two vehicles side by side do not.
-    """
-    tried: set[tuple[int, ...]] = set()
-    while True:
-        candidates = []
-        for a, b in itertools.combinations(range(len(groups)), 2):
-            if len(groups[a]) < 2 or len(groups[b]) < 2 or not results[a].ok or not results[b].ok:
-                continue
-            if {det[k].camera for k in groups[a]} & {det[k].camera for k in groups[b]}:
-                continue
-            gap = float(np.linalg.norm(results[a].world_T_vehicle.translation()[:2]
-                                       - results[b].world_T_vehicle.translation()[:2]))
-            if gap <= options.merge_distance:
-                candidates.append((gap, a, b))
-        merged = False
-        for _, a, b in sorted(candidates):
-            start = results[a] if len(groups[a]) >= len(groups[b]) else results[b]
-            members = sorted(groups[a] + groups[b])
-            if tuple(members) in tried:
-                continue
-            tried.add(tuple(members))
-            together = _solve([det[k] for k in members], cameras, options, "+".join(f"d{k}" for k in members),
-                              initial=start)
-            if not together.ok:
-                continue
-            rises = [(_cost(own[k], together, options) - _cost(own[k], results[g], options))
-                     / max(int(det[k].seen.sum()), 1) for g in (a, b) for k in groups[g]]
-            if max(rises) <= options.leftover_rise:
-                groups[a], results[a] = members, together
-                del groups[b], results[b]
-                merged = True
-                break  # the indices moved: look again
-        if not merged:
-            return
 
 
 def _attach_leftovers(det: list[Detection], weak: list[int], own: dict, groups: list[list[int]],

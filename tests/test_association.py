@@ -204,3 +204,18 @@ def test_a_single_view_position_weighs_little_in_a_track_s_velocity():
     assert linker.link(0.4, [np.array([4.0 + 1.2, 1.35])], [set()], [True]) == [vid]  # within the gate: 1.8 m off
     predicted = linker.tracks[0].predict(0.5)
     assert np.linalg.norm(predicted - [5.0, 0.0]) < 1.0, predicted
+
+
+def test_a_wrong_best_pair_gives_its_views_back_to_the_vehicles_they_agree_with():
+    """Two vehicles side by side: the best-scoring pair (7, 12) is wrong and the greedy merging took it first,
+    keeping 12 out of the vehicle of 10 and 16 (both agree with it) and 7 away from 1. The moves put them back."""
+    from vfactor.association.cross_camera import _improve
+
+    camera = {1: "cam0", 7: "cam2", 10: "cam0", 12: "cam1", 16: "cam2"}
+    pairs = {(7, 12): (True, 0.10), (10, 16): (True, 0.30), (10, 12): (True, 0.33), (12, 16): (True, 0.18),
+             (1, 7): (True, 0.33), (1, 12): (False, 3.0), (7, 10): (False, 2.0), (1, 16): (False, 4.0)}
+    members = {7: [7, 12], 10: [10, 16], 1: [1]}
+    group_of = {k: g for g, group in members.items() for k in group}
+    _improve(members, group_of, pairs, camera)
+    assert sorted(members.values()) == [[1, 7], [10, 12, 16]]
+    assert all(k in members[group_of[k]] for k in camera)

@@ -28,7 +28,7 @@ that test:
    first kept a third camera's view out of its vehicle);
 4. each group of three or more detections is solved once more as a whole, and
    a camera that disagrees there is split off into a vehicle of its own;
-5. each detection still alone (those first, then the weak ones) (or too weak to be solved alone) is tried once
+5. each detection still alone, and then each one too weak to be solved alone, is tried once
    more with each group that projects near it, solved together with it: it
    joins when the group's detections fit the joint vehicle about as well as
    their own (:func:`_attach_leftovers`).

@@ -219,3 +219,59 @@ def test_a_wrong_best_pair_gives_its_views_back_to_the_vehicles_they_agree_with(
     _improve(members, group_of, pairs, camera)
     assert sorted(members.values()) == [[1, 7], [10, 12, 16]]
     assert all(k in members[group_of[k]] for k in camera)
+
+
+
+def test_a_view_entering_a_camera_joins_the_vehicle_its_camera_track_joins_later():
+    """tracks_3cam, frames 13-16: in frame 13 cam0's first view of v1 is two keypoints, 20 sigmas off (a
+    vehicle entering the view, which the second pass alone refuses); from frame 14 cam0's tracker follows it
+    under the same track id, seen well, and that view joins v1. The first view then joins v1 too, through its
+    camera track (associated in time order, frame 13 had no earlier track to go by); without track ids it is
+    left out."""
+    sim = simulate(load_scenario("tracks_3cam"), seed=0, num_frames=30)
+    first = next(j for j, d in enumerate(sim.scene.frames[13].detections) if d.vehicle == "v1" and d.camera == "cam0")
+
+    def scene_with(tracked: bool):
+        frames = []
+        for f in range(13, 17):
+            dets = list(sim.scene.frames[f].detections)
+            if f == 13:
+                d = dets[first]
+                seen = np.zeros(len(d.seen), bool)
+                seen[np.flatnonzero(d.seen)[[0, -1]]] = True
+                sigma = 0.03 * float(np.linalg.norm(np.ptp(d.keypoints[seen], axis=0)))
+                dets[first] = dataclasses.replace(d, keypoints=np.where(seen[:, None], d.keypoints + 20 * sigma, np.nan),
+                                                  confidence=np.where(seen, 1.0, 0.0))
+            dets = [dataclasses.replace(d, vehicle=UNASSIGNED, track=f"{d.camera}:{d.vehicle}" if tracked else None)
+                    for d in dets]
+            frames.append(Frame(sim.scene.frames[f].t, dets, sim.scene.frames[f].images))
+        return dataclasses.replace(sim.scene, frames=frames)
+
+    truth = [[d.vehicle for d in sim.scene.frames[f].detections] for f in range(13, 17)]
+    tracked = associate_scene(scene_with(True))
+    assert pair_counts(tracked.scene.frames[:1], [[v for k, v in enumerate(truth[0]) if k in tracked.kept[0]]]) == (9, 0, 0)
+    assert [sorted(truth[0][j] for j in g) for g in tracked.groups[0].values() if first in g] == [["v1"] * 3]
+    without = associate_scene(scene_with(False))
+    assert (0, first, "too few keypoints to associate or to solve alone") in without.left_out
+
+
+def test_camera_tracks_favour_their_pairs_but_never_make_a_pair_the_geometry_refuses():
+    """tracks_3cam frame 14 (three vehicles, three cameras). Hints from the cameras' tracks take ``hint_bonus``
+    off the scores of the pairs they support and leave the others; hints that cross two vehicles (v1's cam0
+    view and v2's cam1 view said to be one) change no group: the crossed pair fails its gate."""
+    sim = simulate(load_scenario("tracks_3cam"), seed=0, num_frames=30)
+    frame = sim.scene.frames[14]
+    truth = [d.vehicle for d in frame.detections]
+    plain = associate_frame(frame, sim.scene.cameras)
+    right = associate_frame(frame, sim.scene.cameras, hints={j: v for j, v in enumerate(truth)})
+    bonus = AssociationOptions().hint_bonus
+    assert right.pairs.keys() == plain.pairs.keys() and len(plain.pairs) > 0
+    for (i, j), (ok, score) in plain.pairs.items():
+        assert right.pairs[(i, j)][0] == ok
+        assert right.pairs[(i, j)][1] == pytest.approx(score - bonus if truth[i] == truth[j] else score)
+    a = next(j for j, d in enumerate(frame.detections) if d.vehicle == "v1" and d.camera == "cam0")
+    b = next(j for j, d in enumerate(frame.detections) if d.vehicle == "v2" and d.camera == "cam1")
+    crossed = associate_frame(frame, sim.scene.cameras, hints={a: "x", b: "x"})
+    assert not crossed.pairs.get((min(a, b), max(a, b)), (False, 0))[0]
+    assert sorted(crossed.groups) == sorted(plain.groups)
+    assert all(len({truth[j] for j in g}) == 1 for g in plain.groups + right.groups)

@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from vfactor.association.cross_camera import AssociationOptions, FrameGroups, associate_frame
+from vfactor.association.cross_camera import AssociationOptions, FrameGroups, _observations, associate_frame, join_test
 from vfactor.association.linking import Track, TrackLinker, constant_velocity
 from vfactor.observations import UNASSIGNED, Frame, Scene
 from vfactor.track import frame_order
@@ -97,6 +97,7 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
     weak: set[tuple[int, int]] = set()
     followed: dict[tuple[str, str], str] = {}  # (camera, camera track id) -> the vehicle it last showed
     path: dict[str, list[tuple[float, np.ndarray, int]]] = {}  # vehicle id -> (t, world x-y, n) of its solved frames
+    solved: list[dict[str, object]] = [{} for _ in frames]  # per frame, vehicle id -> its joint solve
     order = frame_order(scene)
     for n, f in enumerate(order):
         frame = frames[f]
@@ -118,13 +119,65 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
             frames[f] = Frame(frame.t, [dataclasses.replace(d, vehicle=vehicle_of[j]) if j in vehicle_of else d
                                         for j, d in enumerate(frame.detections)], frame.images)
             groups[f] = {vid: list(g) for vid, g in zip(ids, found.groups)}
+            solved[f] = dict(zip(ids, found.results))
             for vid, g in groups[f].items():
                 for j in g:
                     if frame.detections[j].track is not None:
                         followed[(frame.detections[j].camera, frame.detections[j].track)] = vid
         if progress is not None:
             progress(n + 1, len(order))
+    _join_by_later_tracks(scene, frames, order, groups, solved, weak, path, options)
     return _confirmed(scene, frames, groups, weak, path, messages, options)
+
+
+def _join_by_later_tracks(scene: Scene, frames: list[Frame], order: list[int], groups, solved, weak, path,
+                          options: AssociationOptions) -> None:
+    """A detection left alone in its frame joins the vehicle that its camera's own track id (``Detection.track``)
+    shows next, when that vehicle is in the frame and passes the second pass's test with ``hint_relax``
+    (:func:`vfactor.association.cross_camera.join_test`); in place, frames latest first.
+
+    The frames are associated in time order, so the hints of :func:`associate_frame` come from earlier frames
+    only: a vehicle leaving a view is helped by them, one entering it (a wheel, then a light, then enough
+    keypoints to pair) is not. Its camera's tracker says which vehicle those first views belong to once a later
+    view of the same camera track has joined one.
+    """
+    following: dict[tuple[str, str], str] = {}  # (camera, camera track id) -> the vehicle it shows next
+    for n in range(len(order) - 1, -1, -1):
+        f = order[n]
+        frame, frame_groups = frames[f], groups[f]
+        for vid, g in list(frame_groups.items()):
+            if len(g) != 1 or vid not in frame_groups:
+                continue
+            j = g[0]
+            d = frame.detections[j]
+            target = following.get((d.camera, d.track)) if d.track is not None else None
+            if target is None or target == vid or target not in frame_groups:
+                continue
+            group = frame_groups[target]
+            result = solved[f].get(target)
+            if result is None or not result.ok or any(frame.detections[m].camera == d.camera for m in group):
+                continue
+            own = {m: _observations(frame.detections[m], scene.cameras, options) for m in group + [j]}
+            if own[j] is None:
+                continue
+            joined = join_test(frame.detections, j, group, result, own, scene.cameras, options, options.hint_relax,
+                               f"{target}+d{j}")
+            if joined is None:
+                continue
+            together = joined[1]
+            frame_groups[target] = sorted(group + [j])
+            del frame_groups[vid]
+            solved[f][target] = together
+            weak.discard((f, j))
+            path[vid] = [p for p in path.get(vid, []) if p[2] != n]
+            path[target] = [(t, together.world_T_vehicle.translation()[:2], m) if m == n else (t, xy, m)
+                            for t, xy, m in path.get(target, [])]
+            frames[f].detections[j] = dataclasses.replace(d, vehicle=target)
+        for vid, g in frame_groups.items():
+            for j in g:
+                d = frame.detections[j]
+                if d.track is not None:
+                    following[(d.camera, d.track)] = vid
 
 
 def _steady(points: list[tuple[float, np.ndarray, int]], options: AssociationOptions) -> bool:

@@ -94,6 +94,9 @@ class AssociationOptions:
         leftover_cost: in the second pass, the largest cost per keypoint of the leftover detection's own
             keypoints in the joint solve (true joins seen: up to 5.4).
         hint_relax: how much wider both second-pass gates are for a group the cameras' own track ids point to.
+        hint_bonus: taken off the score (the rise over its gate) of a pair whose two detections' camera tracks
+            last showed the same vehicle, so that the merging and the moves prefer it to a pairing the cameras'
+            trackers do not support (two vehicles side by side may fit either way); the gate itself is unchanged.
         min_track_frames: a track never seen by two cameras at once is kept only when it moves steadily over at
             least this many frames: its positions within ``max_track_residual`` metres (RMS) of a constant
             velocity (:func:`vfactor.association.associate_scene`); otherwise it is a detector's flicker, as false
@@ -112,6 +115,7 @@ class AssociationOptions:
     leftover_rise: float = 1.0
     leftover_cost: float = 6.0
     hint_relax: float = 2.0
+    hint_bonus: float = 0.5
     min_track_frames: int = 3
     max_track_residual: float = 1.5
     min_hit_ratio: float = 0.6
@@ -126,7 +130,7 @@ class AssociationOptions:
 
     def __post_init__(self):
         for name in ("gate_distance", "gate_cost", "gate_cost_weak", "strong_keypoints", "min_keypoints",
-                     "leftover_rise", "leftover_cost", "hint_relax", "min_track_frames", "max_track_residual", "min_hit_ratio",
+                     "leftover_rise", "leftover_cost", "hint_relax", "hint_bonus", "min_track_frames", "max_track_residual", "min_hit_ratio",
                      "link_distance", "max_speed",
                      "max_acceleration", "max_missed", "track_bonus", "single_view_weight", "tentative_missed"):
             value = getattr(self, name)
@@ -208,7 +212,10 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
         gate = options.gate_cost if min(seen[i], seen[j]) >= options.strong_keypoints else options.gate_cost_weak
         rise = max((_cost(own[k], result, options) - baseline[k]) / seen[k] for k in (i, j)) \
             if result.ok else math.inf
-        pairs[(i, j)] = (rise <= gate, rise / gate)  # scored against its gate: strong and weak pairs comparable
+        score = rise / gate  # scored against its gate: strong and weak pairs comparable
+        if hints and i in hints and hints.get(j) == hints[i]:
+            score -= options.hint_bonus  # the cameras' trackers say they have shown one vehicle
+        pairs[(i, j)] = (rise <= gate, score)
 
     # greedy merging, best pair first, keeping one detection per camera and every pair compatible
     group_of = {i: i for i in strong}
@@ -346,26 +353,12 @@ def _attach_leftovers(det: list[Detection], weak: list[int], own: dict, groups: 
             if g == home or not group or not result.ok or any(det[m].camera == det[k].camera for m in group):
                 continue
             hinted = k in hints and any(hints.get(m) == hints[k] for m in group)
-            relax = options.hint_relax if hinted else 1.0
-            if not hinted:
-                predicted, depth = camera.project(result.keypoints_world)
-                predicted = predicted[depth > 0]
-                if len(predicted) == 0:
-                    continue
-                lo, hi = predicted.min(0), predicted.max(0)
-                grow = 0.5 * (hi - lo)
-                if not np.all((uv >= lo - grow) & (uv <= hi + grow)):
-                    continue
-            together = _solve([det[m] for m in group] + [det[k]], cameras, options, f"g{g}+d{k}")
-            if not together.ok:
+            if not hinted and not _projects_near(uv, camera, result):
                 continue
-            rises = [(_cost(own[m], together, options) - _cost(own[m], result, options)) / max(int(det[m].seen.sum()), 1)
-                     for m in group]
-            mine = _cost(own[k], together, options) / max(int(det[k].seen.sum()), 1)
-            if max(rises) <= relax * options.leftover_rise and mine <= relax * options.leftover_cost:
-                score = sum(rises) + mine
-                if best is None or score < best[0]:
-                    best = (score, g, together)
+            joined = join_test(det, k, group, result, own, cameras, options,
+                               options.hint_relax if hinted else 1.0, f"g{g}+d{k}")
+            if joined is not None and (best is None or joined[0] < best[0]):
+                best = (joined[0], g, joined[1])
         if best is not None:
             _, g, together = best
             groups[g] = sorted(groups[g] + [k])
@@ -379,6 +372,47 @@ def _attach_leftovers(det: list[Detection], weak: list[int], own: dict, groups: 
     keep = [g for g, group in enumerate(groups) if group]
     groups[:] = [groups[g] for g in keep]
     results[:] = [results[g] for g in keep]
+
+
+def _projects_near(uv: np.ndarray, camera: Camera, result: VehicleResult) -> bool:
+    """Whether pixels ``uv`` (n, 2) lie within the box of a solved vehicle's keypoints projected into ``camera``,
+    grown by half its size."""
+    predicted, depth = camera.project(result.keypoints_world)
+    predicted = predicted[depth > 0]
+    if len(predicted) == 0:
+        return False
+    lo, hi = predicted.min(0), predicted.max(0)
+    grow = 0.5 * (hi - lo)
+    return bool(np.all((uv >= lo - grow) & (uv <= hi + grow)))
+
+
+def join_test(det: list[Detection], k: int, group: list[int], result: VehicleResult, own: dict,
+              cameras: dict[str, Camera], options: AssociationOptions, relax: float = 1.0,
+              name: str = "joined") -> tuple[float, VehicleResult] | None:
+    """The second pass's test of detection ``k`` joining ``group`` (solved as ``result``; no detection of
+    ``k``'s camera), with both gates ``relax`` times wider.
+
+    The group and the detection are solved together; the detection joins when that solve is sane, each of the
+    group's detections' cost per keypoint rises by at most ``leftover_rise`` and the detection's own keypoints cost
+    at most ``leftover_cost`` each.
+
+    Args:
+        det: the frame's detections.
+        own: detection index -> its observations at the detector's sigmas (``k`` and the group's).
+
+    Returns:
+        (score: the sum of the rises and the detection's own cost per keypoint, the joint solve), or None when
+        it does not join.
+    """
+    together = _solve([det[m] for m in group] + [det[k]], cameras, options, name)
+    if not together.ok:
+        return None
+    rises = [(_cost(own[m], together, options) - _cost(own[m], result, options)) / max(int(det[m].seen.sum()), 1)
+             for m in group]
+    mine = _cost(own[k], together, options) / max(int(det[k].seen.sum()), 1)
+    if max(rises) <= relax * options.leftover_rise and mine <= relax * options.leftover_cost:
+        return sum(rises) + mine, together
+    return None
 
 
 def _may_meet(p_i: np.ndarray, camera_i: Camera, p_j: np.ndarray, camera_j: Camera,

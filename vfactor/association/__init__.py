@@ -18,9 +18,10 @@ from typing import Callable
 
 import numpy as np
 
-from vfactor.association.cross_camera import AssociationOptions, FrameGroups, _observations, associate_frame, join_test
+from vfactor.association.cross_camera import AssociationOptions, FrameGroups, associate_frame, join_test
 from vfactor.association.linking import Track, TrackLinker, constant_velocity
 from vfactor.observations import UNASSIGNED, Frame, Scene
+from vfactor.result import VehicleResult
 from vfactor.track import frame_order
 
 __all__ = ["AssociationOptions", "Association", "FrameGroups", "Track", "TrackLinker", "associate_frame",
@@ -97,7 +98,7 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
     weak: set[tuple[int, int]] = set()
     followed: dict[tuple[str, str], str] = {}  # (camera, camera track id) -> the vehicle it last showed
     path: dict[str, list[tuple[float, np.ndarray, int]]] = {}  # vehicle id -> (t, world x-y, n) of its solved frames
-    solved: list[dict[str, object]] = [{} for _ in frames]  # per frame, vehicle id -> its joint solve
+    solved: list[dict[str, VehicleResult]] = [{} for _ in frames]  # per frame, vehicle id -> its joint solve
     order = frame_order(scene)
     for n, f in enumerate(order):
         frame = frames[f]
@@ -157,10 +158,7 @@ def _join_by_later_tracks(scene: Scene, frames: list[Frame], order: list[int], g
             result = solved[f].get(target)
             if result is None or not result.ok or any(frame.detections[m].camera == d.camera for m in group):
                 continue
-            own = {m: _observations(frame.detections[m], scene.cameras, options) for m in group + [j]}
-            if own[j] is None:
-                continue
-            joined = join_test(frame.detections, j, group, result, own, scene.cameras, options, options.hint_relax,
+            joined = join_test(frame.detections, j, group, result, scene.cameras, options, options.hint_relax,
                                f"{target}+d{j}")
             if joined is None:
                 continue

@@ -355,8 +355,8 @@ def _attach_leftovers(det: list[Detection], weak: list[int], own: dict, groups: 
             hinted = k in hints and any(hints.get(m) == hints[k] for m in group)
             if not hinted and not _projects_near(uv, camera, result):
                 continue
-            joined = join_test(det, k, group, result, own, cameras, options,
-                               options.hint_relax if hinted else 1.0, f"g{g}+d{k}")
+            joined = join_test(det, k, group, result, cameras, options, options.hint_relax if hinted else 1.0,
+                               f"g{g}+d{k}", own)
             if joined is not None and (best is None or joined[0] < best[0]):
                 best = (joined[0], g, joined[1])
         if best is not None:
@@ -386,9 +386,9 @@ def _projects_near(uv: np.ndarray, camera: Camera, result: VehicleResult) -> boo
     return bool(np.all((uv >= lo - grow) & (uv <= hi + grow)))
 
 
-def join_test(det: list[Detection], k: int, group: list[int], result: VehicleResult, own: dict,
-              cameras: dict[str, Camera], options: AssociationOptions, relax: float = 1.0,
-              name: str = "joined") -> tuple[float, VehicleResult] | None:
+def join_test(det: list[Detection], k: int, group: list[int], result: VehicleResult, cameras: dict[str, Camera],
+              options: AssociationOptions, relax: float = 1.0, name: str = "joined",
+              own: dict | None = None) -> tuple[float, VehicleResult] | None:
     """The second pass's test of detection ``k`` joining ``group`` (solved as ``result``; no detection of
     ``k``'s camera), with both gates ``relax`` times wider.
 
@@ -398,12 +398,19 @@ def join_test(det: list[Detection], k: int, group: list[int], result: VehicleRes
 
     Args:
         det: the frame's detections.
-        own: detection index -> its observations at the detector's sigmas (``k`` and the group's).
+        own: detection index -> its observations at the detector's sigmas, where already made (the others, of
+            ``k`` and the group, are made here).
 
     Returns:
         (score: the sum of the rises and the detection's own cost per keypoint, the joint solve), or None when
-        it does not join.
+        it does not join (or has no keypoint to test).
     """
+    own = dict(own or {})
+    for m in [*group, k]:
+        if m not in own:
+            own[m] = _observations(det[m], cameras, options)
+    if own[k] is None or len(own[k]) == 0:
+        return None  # no keypoint to test
     together = _solve([det[m] for m in group] + [det[k]], cameras, options, name)
     if not together.ok:
         return None

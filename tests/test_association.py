@@ -122,6 +122,24 @@ def test_linking_keeps_ids_through_a_miss_and_uses_camera_tracks():
     assert b[1] == a[0]
 
 
+def test_a_single_view_metres_off_continues_the_track_its_camera_track_held():
+    """A vehicle seen by two cameras, then for a frame by cam0 alone, its single-view position 6 m on in 0.1 s
+    (a single view's depth is metres off): with cam0's track id it continues the track (gate, track_bonus and
+    single_view_reach); without it, or seen by two cameras that far off, it starts a new one."""
+    options = AssociationOptions()
+    gate = options.link_distance + options.max_speed * 0.1  # a track of one position: its speed unknown
+    assert gate + options.track_bonus < 6.0 <= gate + options.track_bonus + options.single_view_reach
+
+    def second_frame(tracks, single_view):
+        linker = TrackLinker(options)
+        first = linker.link(0.0, [np.array([0.0, 0.0])], [{("cam0", "7"), ("cam1", "2")}])
+        return linker.link(0.1, [np.array([6.0, 0.0])], [tracks], [single_view])[0] == first[0]
+
+    assert second_frame({("cam0", "7")}, single_view=True)
+    assert not second_frame(set(), single_view=True)
+    assert not second_frame({("cam0", "7"), ("cam1", "2")}, single_view=False)
+
+
 def test_ids_made_never_clash_with_the_scene_s(multi):
     linker = TrackLinker(AssociationOptions(), taken={"t1", "t2"})
     assert linker.link(0.0, [np.zeros(2), np.ones(2) * 10], [set(), set()]) == ["t3", "t4"]

@@ -75,6 +75,9 @@ class AssociationOptions:
             track held before: a camera's own 2D tracker as evidence, never as a rule.
         single_view_weight: weight of a position seen by one camera only in a track's velocity fit (1 for
             several cameras): a single view's depth is metres off.
+        single_view_reach: metres added to the link gate of a vehicle seen by one camera only whose camera track
+            id the track held: its position may be metres off along its camera's ray, and its camera's own
+            tracker says it is the track's vehicle.
         tentative_missed: seconds a track of fewer than ``min_track_frames`` positions waits for its vehicle.
         gate_cost: the largest rise, per seen keypoint, of the robust reprojection cost of a detection's
             keypoints from its single-view solve to a pair's joint solve, for two detections of at least
@@ -125,6 +128,7 @@ class AssociationOptions:
     max_missed: float = 1.0
     track_bonus: float = 1.0
     single_view_weight: float = 0.1
+    single_view_reach: float = 4.0
     tentative_missed: float = 0.3
     solve: SolveOptions = field(default_factory=lambda: SolveOptions(covariance=False))
 
@@ -132,7 +136,7 @@ class AssociationOptions:
         for name in ("gate_distance", "gate_cost", "gate_cost_weak", "strong_keypoints", "min_keypoints",
                      "leftover_rise", "leftover_cost", "hint_relax", "hint_bonus", "min_track_frames", "max_track_residual", "min_hit_ratio",
                      "link_distance", "max_speed",
-                     "max_acceleration", "max_missed", "track_bonus", "single_view_weight", "tentative_missed"):
+                     "max_acceleration", "max_missed", "track_bonus", "single_view_weight", "single_view_reach", "tentative_missed"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise InputError(f"AssociationOptions.{name}", f"expected a finite number >= 0, got {value!r}")

@@ -120,7 +120,10 @@ class TrackLinker:
                     continue
                 distance = float(np.linalg.norm(p - predicted))
                 shared = bool(track.camera_tracks & camera_tracks[b])
-                if distance <= gate + (self.options.track_bonus if shared else 0.0):
+                reach = gate + (self.options.track_bonus if shared else 0.0)
+                if shared and single_view[b]:
+                    reach += self.options.single_view_reach  # its depth is metres off; its camera's tracker agrees
+                if distance <= reach:
                     cost[a, b] = distance - (self.options.track_bonus if shared else 0.0)
         ids: list[str | None] = [None] * len(positions)
         if live and positions:

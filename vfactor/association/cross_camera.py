@@ -52,7 +52,7 @@ from vfactor.observations import Detection, Frame
 from vfactor.result import VehicleResult
 from vfactor.solve import SolveOptions, solve_observations
 
-__all__ = ["AssociationOptions", "FrameGroups", "associate_frame"]
+__all__ = ["AssociationOptions", "FrameGroups", "associate_frame", "join_test"]
 
 
 @dataclass(frozen=True)
@@ -134,9 +134,9 @@ class AssociationOptions:
 
     def __post_init__(self):
         for name in ("gate_distance", "gate_cost", "gate_cost_weak", "strong_keypoints", "min_keypoints",
-                     "leftover_rise", "leftover_cost", "hint_relax", "hint_bonus", "min_track_frames", "max_track_residual", "min_hit_ratio",
-                     "link_distance", "max_speed",
-                     "max_acceleration", "max_missed", "track_bonus", "single_view_weight", "single_view_reach", "tentative_missed"):
+                     "leftover_rise", "leftover_cost", "hint_relax", "hint_bonus", "min_track_frames",
+                     "max_track_residual", "min_hit_ratio", "link_distance", "max_speed", "max_acceleration",
+                     "max_missed", "track_bonus", "single_view_weight", "single_view_reach", "tentative_missed"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise InputError(f"AssociationOptions.{name}", f"expected a finite number >= 0, got {value!r}")
@@ -183,9 +183,10 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
         cameras: camera name -> camera.
         options: the association's settings.
         indices: the detections to group (indices into ``frame.detections``); default: all.
-        hints: detection index -> the vehicle its camera's own track (``Detection.track``) showed last: a
-            detection left alone is tried with a group holding a detection of the same hint with gates
-            ``hint_relax`` times wider, the cameras' trackers agreeing that they follow one vehicle.
+        hints: detection index -> the vehicle its camera's own track (``Detection.track``) showed last: a pair
+            of detections of the same hint has ``hint_bonus`` taken off its score, and a detection left alone
+            is tried with a group holding a detection of the same hint with gates ``hint_relax`` times wider,
+            the cameras' trackers agreeing that they follow one vehicle.
 
     Returns:
         The groups, each group's joint solve, the pairs tested and notes.

@@ -293,3 +293,35 @@ def test_camera_tracks_favour_their_pairs_but_never_make_a_pair_the_geometry_ref
     assert not crossed.pairs.get((min(a, b), max(a, b)), (False, 0))[0]
     assert sorted(crossed.groups) == sorted(plain.groups)
     assert all(len({truth[j] for j in g}) == 1 for g in plain.groups + right.groups)
+
+
+def test_a_vehicle_seen_in_two_halves_is_merged_and_two_vehicles_are_not():
+    """association_4cam seed 6, frame 38: v12, seen by four cameras, given as two pairs of views (as the
+    association left it in frames 37-39 before this step) is merged into one vehicle of four views; v12's half
+    and another vehicle's pair are left apart even with the distance gate opened wide: the joint solve's
+    rises refuse them."""
+    from vfactor.association.cross_camera import _merge_split_vehicles, _observations, _solve
+
+    sim = simulate(load_scenario("association_4cam"), seed=6, num_frames=60)
+    frame = sim.scene.frames[38]
+    det = frame.detections
+    options = AssociationOptions()
+    views = {d.camera: j for j, d in enumerate(det) if d.vehicle == "v12"}
+    assert sorted(views) == ["cam0", "cam1", "cam2", "cam3"]
+    halves = [sorted([views["cam1"], views["cam3"]]), sorted([views["cam0"], views["cam2"]])]
+    own = {j: _observations(det[j], sim.scene.cameras, options) for j in range(len(det))}
+    groups = [list(g) for g in halves]
+    results = [_solve([det[m] for m in g], sim.scene.cameras, options, "half") for g in groups]
+    assert all(r.ok for r in results)
+    _merge_split_vehicles(det, own, groups, results, sim.scene.cameras, options)
+    assert groups == [sorted(views.values())] and results[0].ok
+
+    other = next(v for v in sorted({d.vehicle for d in det} - {"v12"})
+                 if {"cam0", "cam2"} <= {d.camera for d in det if d.vehicle == v})
+    pair = sorted(j for j, d in enumerate(det) if d.vehicle == other and d.camera in ("cam0", "cam2"))
+    groups = [list(halves[0]), pair]
+    results = [_solve([det[m] for m in g], sim.scene.cameras, options, "g") for g in groups]
+    assert all(r.ok for r in results)
+    _merge_split_vehicles(det, own, groups, results, sim.scene.cameras,
+                          dataclasses.replace(options, link_distance=1000.0))
+    assert groups == [halves[0], pair]

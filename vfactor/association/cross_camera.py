@@ -27,7 +27,10 @@ that test:
    while that raises the groups' agreement (:func:`_improve`: a wrong best pair
    first kept a third camera's view out of its vehicle);
 4. each group of three or more detections is solved once more as a whole, and
-   a camera that disagrees there is split off into a vehicle of its own;
+   a camera that disagrees there is split off into a vehicle of its own; two
+   groups of several views, of different cameras, that put the vehicle in one
+   place are solved together and merged when every view still fits
+   (:func:`_merge_split_vehicles`: one vehicle seen in two halves);
 5. each detection still alone, and then each one too weak to be solved alone, is tried once
    more with each group that projects near it, solved together with it: it
    joins when the group's detections fit the joint vehicle about as well as
@@ -260,6 +263,7 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
                 continue
         groups.append(group)
         results.append(result)
+    _merge_split_vehicles(det, own, groups, results, cameras, options)
     _attach_leftovers(det, weak, own, groups, results, cameras, options, hints or {})
     order = sorted(range(len(groups)), key=lambda g: groups[g][0])
     return FrameGroups([groups[g] for g in order], [results[g] for g in order], pairs, messages)
@@ -377,6 +381,39 @@ def _attach_leftovers(det: list[Detection], weak: list[int], own: dict, groups: 
     keep = [g for g, group in enumerate(groups) if group]
     groups[:] = [groups[g] for g in keep]
     results[:] = [results[g] for g in keep]
+
+
+def _merge_split_vehicles(det: list[Detection], own: dict, groups: list[list[int]], results: list[VehicleResult],
+                          cameras: dict[str, Camera], options: AssociationOptions) -> None:
+    """Two groups of several detections each, of different cameras, whose joint solves put their vehicles within
+    ``link_distance`` of each other, are one vehicle seen in two halves (the merging needs every pair compatible,
+    and a pair of views far apart in angle may fail its test where each half is sure) when solved together they
+    pass :func:`join_test`'s gates for every detection: the closest such two first, in place, until none is left.
+    """
+    while True:
+        candidates = []
+        for a, b in itertools.combinations(range(len(groups)), 2):
+            if len(groups[a]) < 2 or len(groups[b]) < 2 or not results[a].ok or not results[b].ok:
+                continue
+            if {det[m].camera for m in groups[a]} & {det[m].camera for m in groups[b]}:
+                continue
+            gap = float(np.linalg.norm(results[a].world_T_vehicle.translation()[:2]
+                                       - results[b].world_T_vehicle.translation()[:2]))
+            if gap <= options.link_distance:
+                candidates.append((gap, a, b))
+        for _, a, b in sorted(candidates):
+            together = _solve([det[m] for m in groups[a] + groups[b]], cameras, options, f"g{a}+g{b}",
+                              initial=results[a] if len(groups[a]) >= len(groups[b]) else results[b])
+            if not together.ok:
+                continue
+            rises = [(_cost(own[m], together, options) - _cost(own[m], results[g], options))
+                     / max(int(det[m].seen.sum()), 1) for g in (a, b) for m in groups[g]]
+            if max(rises) <= options.leftover_rise:
+                groups[a], results[a] = sorted(groups[a] + groups[b]), together
+                del groups[b], results[b]
+                break
+        else:
+            return
 
 
 def _projects_near(uv: np.ndarray, camera: Camera, result: VehicleResult) -> bool:

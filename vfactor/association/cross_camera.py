@@ -226,6 +226,7 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
         pairs[(i, j)] = (rise <= gate, score)
 
     # greedy merging, best pair first, keeping one detection per camera and every pair compatible
+    camera = {i: det[i].camera for i in strong}
     group_of = {i: i for i in strong}
     members = {i: [i] for i in strong}
     for (i, j), (ok, _) in sorted(pairs.items(), key=lambda item: item[1][1]):
@@ -234,14 +235,12 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
         a, b = group_of[i], group_of[j]
         if a == b:
             continue
-        if {det[k].camera for k in members[a]} & {det[k].camera for k in members[b]}:
-            continue
-        if not all(pairs.get((min(p, q), max(p, q)), (False, 0))[0] for p in members[a] for q in members[b]):
-            continue
+        if any(_agreement(k, members[a], pairs, camera) == -math.inf for k in members[b]):
+            continue  # a camera in both, or a pair across them not compatible
         members[a] = sorted(members[a] + members[b])
         for k in members.pop(b):
             group_of[k] = a
-    _improve(members, group_of, pairs, {i: det[i].camera for i in strong})
+    _improve(members, group_of, pairs, camera)
 
     groups, results, messages = [], [], []
     pending = sorted(members.values(), key=lambda g: g[0])
@@ -269,6 +268,22 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
     return FrameGroups([groups[g] for g in order], [results[g] for g in order], pairs, messages)
 
 
+def _agreement(k: int, group, pairs: dict, camera: dict[int, str]) -> float:
+    """Detection ``k``'s agreement with the others of ``group``: the sum of ``1 - score`` over its pairs with them;
+    ``-inf`` where one is of its camera or a pair is not compatible (it may not be in that group)."""
+    total = 0.0
+    for m in group:
+        if m == k:
+            continue
+        if camera[m] == camera[k]:
+            return -math.inf
+        ok, score = pairs.get((min(k, m), max(k, m)), (False, math.inf))
+        if not ok:
+            return -math.inf
+        total += 1.0 - score
+    return total
+
+
 def _improve(members: dict[int, list[int]], group_of: dict[int, int], pairs: dict, camera: dict[int, str],
              max_rounds: int = 20) -> None:
     """Moves and swaps of single detections between the greedy groups, in place, while they raise the groups'
@@ -281,17 +296,7 @@ def _improve(members: dict[int, list[int]], group_of: dict[int, int], pairs: dic
     detection of another group where both agree better after the swap.
     """
     def gain(k: int, group) -> float:
-        total = 0.0
-        for m in group:
-            if m == k:
-                continue
-            if camera[m] == camera[k]:
-                return -math.inf
-            ok, score = pairs.get((min(k, m), max(k, m)), (False, math.inf))
-            if not ok:
-                return -math.inf
-            total += 1.0 - score
-        return total
+        return _agreement(k, group, pairs, camera)
 
     for _ in range(max_rounds):
         changed = False
@@ -385,10 +390,11 @@ def _attach_leftovers(det: list[Detection], weak: list[int], own: dict, groups: 
 
 def _merge_split_vehicles(det: list[Detection], own: dict, groups: list[list[int]], results: list[VehicleResult],
                           cameras: dict[str, Camera], options: AssociationOptions) -> None:
-    """Two groups of several detections each, of different cameras, whose joint solves put their vehicles within
-    ``link_distance`` of each other, are one vehicle seen in two halves (the merging needs every pair compatible,
-    and a pair of views far apart in angle may fail its test where each half is sure) when solved together they
-    pass :func:`join_test`'s gates for every detection: the closest such two first, in place, until none is left.
+    """Merges, in place, two groups of two or more detections each, of different cameras, whose joint solves put
+    their vehicles within ``link_distance`` of each other, when solved together no detection's cost rises by more
+    than ``leftover_rise`` per keypoint: one vehicle seen in two halves (the greedy merging needs every pair
+    compatible, and a pair of views far apart in angle may fail its test where each half is sure). The closest
+    two first, again until no two merge.
     """
     while True:
         candidates = []
@@ -406,8 +412,7 @@ def _merge_split_vehicles(det: list[Detection], own: dict, groups: list[list[int
                               initial=results[a] if len(groups[a]) >= len(groups[b]) else results[b])
             if not together.ok:
                 continue
-            rises = [(_cost(own[m], together, options) - _cost(own[m], results[g], options))
-                     / max(int(det[m].seen.sum()), 1) for g in (a, b) for m in groups[g]]
+            rises = [_rise(own[m], det[m], results[g], together, options) for g in (a, b) for m in groups[g]]
             if max(rises) <= options.leftover_rise:
                 groups[a], results[a] = sorted(groups[a] + groups[b]), together
                 del groups[b], results[b]
@@ -456,8 +461,7 @@ def join_test(det: list[Detection], k: int, group: list[int], result: VehicleRes
     together = _solve([det[m] for m in group] + [det[k]], cameras, options, name)
     if not together.ok:
         return None
-    rises = [(_cost(own[m], together, options) - _cost(own[m], result, options)) / max(int(det[m].seen.sum()), 1)
-             for m in group]
+    rises = [_rise(own[m], det[m], result, together, options) for m in group]
     mine = _cost(own[k], together, options) / max(int(det[k].seen.sum()), 1)
     if max(rises) <= relax * options.leftover_rise and mine <= relax * options.leftover_cost:
         return sum(rises) + mine, together
@@ -501,6 +505,12 @@ def _cost(obs, result: VehicleResult, options: AssociationOptions) -> float:
         return 0.0
     e = whitened_residuals(obs, result.world_T_vehicle, result.wireframe.vehicle_p_keypoints)
     return float(np.sum(options.solve.graph.loss.rho(np.linalg.norm(e, axis=1))))
+
+
+def _rise(obs, detection: Detection, before: VehicleResult, after: VehicleResult, options: AssociationOptions) -> float:
+    """How much a detection's cost (:func:`_cost` of its observations ``obs``) rises from the vehicle it was part
+    of (``before``) to a joint one (``after``), per seen keypoint."""
+    return (_cost(obs, after, options) - _cost(obs, before, options)) / max(int(detection.seen.sum()), 1)
 
 
 def _blamed_cameras(result: VehicleResult) -> set[str]:

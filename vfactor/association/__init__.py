@@ -147,7 +147,7 @@ def _join_by_later_tracks(scene: Scene, frames: list[Frame], order: list[int], g
         f = order[n]
         frame, frame_groups = frames[f], groups[f]
         for vid, g in list(frame_groups.items()):
-            if len(g) != 1 or vid not in frame_groups:
+            if len(g) != 1:
                 continue
             j = g[0]
             d = frame.detections[j]

@@ -120,11 +120,12 @@ class TrackLinker:
                     continue
                 distance = float(np.linalg.norm(p - predicted))
                 shared = bool(track.camera_tracks & camera_tracks[b])
-                reach = gate + (self.options.track_bonus if shared else 0.0)
+                bonus = self.options.track_bonus if shared else 0.0
+                reach = gate + bonus
                 if shared and single_view[b]:
                     reach += self.options.single_view_reach  # its depth is metres off; its camera's tracker agrees
                 if distance <= reach:
-                    cost[a, b] = distance - (self.options.track_bonus if shared else 0.0)
+                    cost[a, b] = distance - bonus
         ids: list[str | None] = [None] * len(positions)
         if live and positions:
             from scipy.optimize import linear_sum_assignment  # scipy.optimize costs ~0.3 s to import: only when used

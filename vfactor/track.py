@@ -174,6 +174,8 @@ class _TrackState:
     notes: dict = field(default_factory=dict)  # pose key -> message of every result of it (a new segment)
     swaps: dict = field(default_factory=dict)  # pose key -> the frame's relabelled left/right pairs (vfactor.label_swaps)
     jumps: list = field(default_factory=list)  # (frame index, t, what) of each jump beyond the motion model
+    # (frame index, id) -> the final result of each pose of the segments the track ended (Tracker._retire)
+    retired: dict = field(default_factory=dict)
 
     def restart(self) -> None:
         """Drops the smoother and the young-track state: the track starts again from its next solvable frame."""
@@ -265,6 +267,7 @@ class Tracker:
                 failed = True
             track = self._tracks.get(vid)
             if failed and track is not None:  # restart this track from its next solvable frame
+                self._retire(track, leave_out=index)
                 track.restart()
             vehicles[-1].extras["detections"] = frame.indices_of(vid)
         return FrameResult(frame.t, vehicles)
@@ -272,11 +275,16 @@ class Tracker:
     def estimates(self, covariance: bool = False) -> dict[tuple[int, str], VehicleResult]:
         """Current estimates of every pose still held by the smoothers: (frame index, id) -> result.
 
+        The poses of a segment a track ended (a jump, a gap beyond ``max_gap``, a frame that failed) keep the
+        estimates their smoother gave them at that point, smoothed over the whole segment (:meth:`_retire`).
+
         Args:
-            covariance: also compute each pose's marginal covariance (one query per pose).
+            covariance: also compute each pose's marginal covariance (one query per pose; the ended segments'
+                poses have one where ``options.covariance`` is set).
         """
         out = {}
         for track in self._tracks.values():
+            out.update(track.retired)
             if track.smoother is None:
                 continue
             estimate = track.smoother.calculateEstimate()
@@ -426,6 +434,7 @@ class Tracker:
         track.frames_seen += 1
         gap = t - track.poses[-1][1] if track.smoother is not None and track.poses else 0.0
         if gap > self.options.max_gap:  # beyond the motion model: a new segment, from a new smoother
+            self._retire(track)
             track.restart()
             track.notes[self.keys.pose_key(track.index, frame_index)] = _segment_message(gap, self.options.max_gap)
         if track.smoother is None:
@@ -450,6 +459,7 @@ class Tracker:
                              velocity_known=len(track.poses) >= 2)
                 if jump and starts[0].cost < _JUMP_COST_RATIO * predicted_cost:
                     # the keypoints are those of a vehicle elsewhere: the id does not follow one vehicle here
+                    self._retire(track)
                     track.restart()
                     track.jumps.append((frame_index, t, jump))
                     track.notes[key] = f"a new segment of the track: {jump}; the detections' id may not follow one vehicle"
@@ -496,6 +506,26 @@ class Tracker:
             before = after
             if moved < self.options.update_tolerance:
                 break
+
+    def _retire(self, track: _TrackState, leave_out: int | None = None) -> None:
+        """Keeps the final results of a track's segment before the track restarts (its smoother is dropped):
+        the segment converged fully, each of its poses smoothed by all of the segment's frames (with its
+        covariance where ``options.covariance``), but for the pose of frame ``leave_out`` (one that failed).
+        Without this a restarted segment's poses would keep their online (filtered) estimates."""
+        if track.smoother is None or not track.poses:
+            return
+        self._settle(track, 50, recent=None)
+        smoother = track.smoother
+        estimate = smoother.calculateEstimate()
+        wireframe = self._wireframe(estimate, track)
+        for frame_index, _, key in track.poses:
+            if frame_index == leave_out or not estimate.exists(key):
+                continue
+            cov = smoother.marginalCovariance(key) if self.options.covariance else None
+            result = self._result(track, estimate, key, wireframe, cov)
+            if cov is not None:
+                result.extras["covariance"] = "smoothed"  # from every frame of the segment
+            track.retired[(frame_index, track.id)] = result
 
     def finish(self, max_updates: int = 50) -> None:
         """Converges every track fully (call at the end of a stream before reading :meth:`estimates`)."""

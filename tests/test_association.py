@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from vfactor.association import AssociationOptions, TrackLinker, associate_frame, associate_scene
+from vfactor.association.linking import ray_distance
 from vfactor.cli import main
 from vfactor.errors import InputError
 from vfactor.observations import UNASSIGNED, Detection, Frame
@@ -122,22 +123,33 @@ def test_linking_keeps_ids_through_a_miss_and_uses_camera_tracks():
     assert b[1] == a[0]
 
 
-def test_a_single_view_metres_off_continues_the_track_its_camera_track_held():
-    """A vehicle seen by two cameras, then for a frame by cam0 alone, its single-view position 6 m on in 0.1 s
-    (a single view's depth is metres off): with cam0's track id it continues the track (gate, track_bonus and
-    single_view_reach); without it, or seen by two cameras that far off, it starts a new one."""
+def test_a_single_view_metres_off_along_its_ray_continues_the_track():
+    """A vehicle seen by two cameras, then for a frame by one alone, its single-view position 6 m on in 0.1 s:
+    along that camera's ray (a single view's depth is metres off), with the camera's track id, it continues the
+    track; the same offset across the ray, without the camera's track id, or seen by two cameras, starts a new
+    one."""
     options = AssociationOptions()
     gate = options.link_distance + options.max_speed * 0.1  # a track of one position: its speed unknown
-    assert gate + options.track_bonus < 6.0 <= gate + options.track_bonus + options.single_view_reach
+    assert gate + options.track_bonus < 6.0
 
-    def second_frame(tracks, single_view):
+    def second_frame(viewpoint, tracks=frozenset({("cam0", "7")})):
         linker = TrackLinker(options)
         first = linker.link(0.0, [np.array([0.0, 0.0])], [{("cam0", "7"), ("cam1", "2")}])
-        return linker.link(0.1, [np.array([6.0, 0.0])], [tracks], [single_view])[0] == first[0]
+        return linker.link(0.1, [np.array([6.0, 0.0])], [set(tracks)], [viewpoint])[0] == first[0]
 
-    assert second_frame({("cam0", "7")}, single_view=True)
-    assert not second_frame(set(), single_view=True)
-    assert not second_frame({("cam0", "7"), ("cam1", "2")}, single_view=False)
+    assert second_frame(np.array([30.0, 0.0]))  # cam0 looks along x: the 6 m are depth
+    assert not second_frame(np.array([30.0, 0.0]), tracks=set())  # a detection cam0's tracker does not tie to it
+    assert not second_frame(np.array([6.0, 30.0]))  # cam0 looks along y: the 6 m are across its ray
+    assert not second_frame(None)  # seen by several cameras: 6 m is 6 m
+
+
+def test_ray_distance_shortens_the_offset_along_the_ray_only():
+    options = AssociationOptions(link_distance=2.0, single_view_depth=0.1)
+    position, viewpoint = np.array([0.0, 20.0]), np.array([0.0, 0.0])  # 20 m from the camera: along-ray x 0.5
+    assert ray_distance(np.array([0.0, 3.0]), position, viewpoint, options) == pytest.approx(1.5)
+    assert ray_distance(np.array([3.0, 0.0]), position, viewpoint, options) == pytest.approx(3.0)
+    assert ray_distance(np.array([3.0, 4.0]), position, viewpoint, options) == pytest.approx(np.hypot(3.0, 2.0))
+    assert ray_distance(np.array([3.0, 4.0]), position, None, options) == pytest.approx(5.0)
 
 
 def test_ids_made_never_clash_with_the_scene_s(multi):
@@ -218,8 +230,9 @@ def test_a_single_view_position_weighs_little_in_a_track_s_velocity():
     the next prediction stays near the true line (a two-point velocity would put it 3.5 m astray)."""
     linker = TrackLinker(AssociationOptions())
     for k in range(4):
-        (vid,) = linker.link(0.1 * k, [np.array([1.0 * k, 0.0])], [set()], [False])
-    assert linker.link(0.4, [np.array([4.0 + 1.2, 1.35])], [set()], [True]) == [vid]  # within the gate: 1.8 m off
+        (vid,) = linker.link(0.1 * k, [np.array([1.0 * k, 0.0])], [set()])
+    camera = np.array([4.0 + 1.2 * 10, 1.35 * 10])  # its single view's depth is 1.8 m off, along this camera's ray
+    assert linker.link(0.4, [np.array([4.0 + 1.2, 1.35])], [set()], [camera]) == [vid]  # within the gate
     predicted = linker.tracks[0].predict(0.5)
     assert np.linalg.norm(predicted - [5.0, 0.0]) < 1.0, predicted
 

@@ -111,7 +111,9 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
             positions = [r.world_T_vehicle.translation()[:2] if r.ok else None for r in found.results]
             camera_tracks = [{(frame.detections[j].camera, frame.detections[j].track) for j in g
                               if frame.detections[j].track is not None} for g in found.groups]
-            ids = linker.link(frame.t, positions, camera_tracks, [len(g) == 1 for g in found.groups])
+            viewpoints = [scene.cameras[frame.detections[g[0]].camera].center[:2] if len(g) == 1 else None
+                          for g in found.groups]
+            ids = linker.link(frame.t, positions, camera_tracks, viewpoints)
             for vid, xy in zip(ids, positions):
                 if xy is not None:
                     path.setdefault(vid, []).append((frame.t, xy, n))

@@ -78,9 +78,10 @@ class AssociationOptions:
             track held before: a camera's own 2D tracker as evidence, never as a rule.
         single_view_weight: weight of a position seen by one camera only in a track's velocity fit (1 for
             several cameras): a single view's depth is metres off.
-        single_view_reach: metres added to the link gate of a vehicle seen by one camera only whose camera track
-            id the track held: its position may be metres off along its camera's ray, and its camera's own
-            tracker says it is the track's vehicle.
+        single_view_depth: the share of its distance from the camera by which a vehicle seen by one camera
+            only may be off along that camera's ray: the linking counts such an offset
+            ``link_distance / (link_distance + single_view_depth * depth)`` of its length
+            (:func:`vfactor.association.linking.ray_distance`).
         tentative_missed: seconds a track of fewer than ``min_track_frames`` positions waits for its vehicle.
         gate_cost: the largest rise, per seen keypoint, of the robust reprojection cost of a detection's
             keypoints from its single-view solve to a pair's joint solve, for two detections of at least
@@ -131,7 +132,7 @@ class AssociationOptions:
     max_missed: float = 1.0
     track_bonus: float = 1.0
     single_view_weight: float = 0.1
-    single_view_reach: float = 4.0
+    single_view_depth: float = 0.1
     tentative_missed: float = 0.3
     solve: SolveOptions = field(default_factory=lambda: SolveOptions(covariance=False))
 
@@ -139,7 +140,7 @@ class AssociationOptions:
         for name in ("gate_distance", "gate_cost", "gate_cost_weak", "strong_keypoints", "min_keypoints",
                      "leftover_rise", "leftover_cost", "hint_relax", "hint_bonus", "min_track_frames",
                      "max_track_residual", "min_hit_ratio", "link_distance", "max_speed", "max_acceleration",
-                     "max_missed", "track_bonus", "single_view_weight", "single_view_reach", "tentative_missed"):
+                     "max_missed", "track_bonus", "single_view_weight", "single_view_depth", "tentative_missed"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise InputError(f"AssociationOptions.{name}", f"expected a finite number >= 0, got {value!r}")

@@ -9,7 +9,15 @@ vehicles are assigned to the live tracks by the Hungarian method
 (:func:`scipy.optimize.linear_sum_assignment`) on the distance between
 prediction and position, minus ``track_bonus`` where the vehicle holds a
 camera track id (``Detection.track``) that the track held, and gated at
-``link_distance`` plus what the motion allows over the step. An unassigned
+``link_distance`` plus what the motion allows over the step. The distance to
+a vehicle seen by one camera only, whose camera track id the track held, is
+shaped like its uncertainty (:func:`ray_distance`): its depth, along its
+camera's ray, is metres off (about a tenth of the distance), its direction is
+not, so the offset along the ray counts ``link_distance / (link_distance +
+single_view_depth * depth)`` of its length and the offset across it in full.
+A single view its camera's tracker does not tie to the track is measured as
+it is: a false detection that happens to lie along a track's ray would
+continue it otherwise. An unassigned
 vehicle starts a track; a track without a vehicle for ``max_missed`` seconds
 ends, and one that finds its vehicle again within them keeps its id.
 """
@@ -22,7 +30,7 @@ import numpy as np
 
 from vfactor.association.cross_camera import AssociationOptions
 
-__all__ = ["Track", "TrackLinker", "constant_velocity"]
+__all__ = ["Track", "TrackLinker", "constant_velocity", "ray_distance"]
 
 _FAR = 1e9  # cost of a link outside the gate
 _FIT_POSITIONS = 5  # positions of a track its velocity is fitted to
@@ -43,6 +51,31 @@ def constant_velocity(times: np.ndarray, xy: np.ndarray, weights: np.ndarray | N
     design = np.stack([np.ones(len(times)), np.asarray(times, dtype=float) - times[-1]], axis=1) * w[:, None]
     coefficients, *_ = np.linalg.lstsq(design, np.asarray(xy, dtype=float) * w[:, None], rcond=None)
     return coefficients[0], coefficients[1]
+
+
+def ray_distance(offset: np.ndarray, position: np.ndarray, viewpoint: np.ndarray | None,
+                 options: AssociationOptions) -> float:
+    """The linking's distance (metres) of an ``offset`` from a vehicle's ``position`` (world x, y, metres).
+
+    For a vehicle seen by several cameras (``viewpoint`` None) the offset's length. For one seen by one camera
+    only, whose centre lies at ``viewpoint`` (world x, y), the offset along the ray from the camera through the
+    position is shortened by ``link_distance / (link_distance + single_view_depth * depth)`` (``depth``: the
+    position's distance from the camera on the road): a single view's depth is uncertain by about
+    ``single_view_depth`` of it, its direction by far less. Across the ray the offset counts in full.
+    """
+    offset = np.asarray(offset, dtype=float)
+    if viewpoint is None:
+        return float(np.linalg.norm(offset))
+    ray = np.asarray(position, dtype=float) - np.asarray(viewpoint, dtype=float)
+    depth = float(np.linalg.norm(ray))
+    if depth < 1e-6:
+        return float(np.linalg.norm(offset))
+    u = ray / depth
+    along = float(offset @ u)
+    across = offset - along * u
+    scale = options.link_distance / (options.link_distance + options.single_view_depth * depth) \
+        if options.link_distance > 0 else 1.0
+    return float(np.sqrt(across @ across + (scale * along) ** 2))
 
 
 @dataclass
@@ -96,7 +129,7 @@ class TrackLinker:
                 return name
 
     def link(self, t: float, positions: list[np.ndarray | None], camera_tracks: list[set],
-             single_view: list[bool] | None = None) -> list[str]:
+             viewpoints: list[np.ndarray | None] | None = None) -> list[str]:
         """The track id of each of a frame's vehicles.
 
         Args:
@@ -104,13 +137,17 @@ class TrackLinker:
             positions: per vehicle its (2,) world x, y (metres), or None where it was not solved (it then starts
                 a track of its own and continues none).
             camera_tracks: per vehicle the (camera, camera track id) pairs of its detections.
-            single_view: per vehicle, whether one camera only saw it (its position weighs
-                ``single_view_weight`` in its track's velocity fit); default: none.
+            viewpoints: per vehicle seen by one camera only, that camera's centre (world x, y, metres): its
+                distance to the prediction of a track that held its camera track id is :func:`ray_distance`'s,
+                and its position weighs
+                ``single_view_weight`` in its track's velocity fit; None for a vehicle of several cameras
+                (default: every vehicle).
 
         Returns:
             Per vehicle the id of the track it continues or starts.
         """
-        single_view = single_view or [False] * len(positions)
+        viewpoints = viewpoints or [None] * len(positions)
+        single_view = [v is not None for v in viewpoints]
         live = [k for k in self.tracks if t - k.times[-1] <= self._reach(k) + 1e-9]
         cost = np.full((len(live), len(positions)), _FAR)
         for a, track in enumerate(live):
@@ -118,13 +155,12 @@ class TrackLinker:
             for b, p in enumerate(positions):
                 if p is None:
                     continue
-                distance = float(np.linalg.norm(p - predicted))
                 shared = bool(track.camera_tracks & camera_tracks[b])
+                # a single view's depth is metres off; measured along its ray only where its camera's tracker ties
+                # it to the track (a false detection along a track's ray would continue it otherwise)
+                distance = ray_distance(predicted - p, p, viewpoints[b] if shared else None, self.options)
                 bonus = self.options.track_bonus if shared else 0.0
-                reach = gate + bonus
-                if shared and single_view[b]:
-                    reach += self.options.single_view_reach  # its depth is metres off; its camera's tracker agrees
-                if distance <= reach:
+                if distance <= gate + bonus:
                     cost[a, b] = distance - bonus
         ids: list[str | None] = [None] * len(positions)
         if live and positions:

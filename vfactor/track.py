@@ -267,16 +267,18 @@ class Tracker:
                 failed = True
             track = self._tracks.get(vid)
             if failed and track is not None:  # restart this track from its next solvable frame
-                self._retire(track, leave_out=index)
+                # (its earlier poses keep the estimates they had: its smoother now holds the failed frame too)
                 track.restart()
             vehicles[-1].extras["detections"] = frame.indices_of(vid)
         return FrameResult(frame.t, vehicles)
 
     def estimates(self, covariance: bool = False) -> dict[tuple[int, str], VehicleResult]:
-        """Current estimates of every pose still held by the smoothers: (frame index, id) -> result.
+        """Current estimates of every pose still held by the smoothers, and of the segments ended: (frame index,
+        id) -> result.
 
-        The poses of a segment a track ended (a jump, a gap beyond ``max_gap``, a frame that failed) keep the
-        estimates their smoother gave them at that point, smoothed over the whole segment (:meth:`_retire`).
+        The poses of a segment a track ended by a jump or a gap beyond ``max_gap`` keep the estimates their
+        smoother gave them at that point, smoothed over the whole segment (:meth:`_retire`); those of a segment
+        ended by a frame that failed the sanity check keep their last estimates before it (online, without a lag).
 
         Args:
             covariance: also compute each pose's marginal covariance (one query per pose; the ended segments'
@@ -507,19 +509,19 @@ class Tracker:
             if moved < self.options.update_tolerance:
                 break
 
-    def _retire(self, track: _TrackState, leave_out: int | None = None) -> None:
+    def _retire(self, track: _TrackState, max_updates: int = 50) -> None:
         """Keeps the final results of a track's segment before the track restarts (its smoother is dropped):
-        the segment converged fully, each of its poses smoothed by all of the segment's frames (with its
-        covariance where ``options.covariance``), but for the pose of frame ``leave_out`` (one that failed).
-        Without this a restarted segment's poses would keep their online (filtered) estimates."""
+        the segment converged fully (as :meth:`finish` does), each of its poses smoothed by all of the segment's
+        frames (with its covariance where ``options.covariance``). Without this a restarted segment's poses
+        would keep their online (filtered) estimates."""
         if track.smoother is None or not track.poses:
             return
-        self._settle(track, 50, recent=None)
+        self._settle(track, max_updates, recent=None)
         smoother = track.smoother
         estimate = smoother.calculateEstimate()
         wireframe = self._wireframe(estimate, track)
         for frame_index, _, key in track.poses:
-            if frame_index == leave_out or not estimate.exists(key):
+            if not estimate.exists(key):
                 continue
             cov = smoother.marginalCovariance(key) if self.options.covariance else None
             result = self._result(track, estimate, key, wireframe, cov)

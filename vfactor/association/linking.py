@@ -139,9 +139,8 @@ class TrackLinker:
             camera_tracks: per vehicle the (camera, camera track id) pairs of its detections.
             viewpoints: per vehicle seen by one camera only, that camera's centre (world x, y, metres): its
                 distance to the prediction of a track that held its camera track id is :func:`ray_distance`'s,
-                and its position weighs
-                ``single_view_weight`` in its track's velocity fit; None for a vehicle of several cameras
-                (default: every vehicle).
+                and its position weighs ``single_view_weight`` in its track's velocity fit; None for a vehicle
+                of several cameras (default: every vehicle).
 
         Returns:
             Per vehicle the id of the track it continues or starts.

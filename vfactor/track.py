@@ -287,16 +287,23 @@ class Tracker:
         out = {}
         for track in self._tracks.values():
             out.update(track.retired)
-            if track.smoother is None:
-                continue
-            estimate = track.smoother.calculateEstimate()
-            wireframe = self._wireframe(estimate, track)
-            for frame_index, _, key in track.poses:
-                if estimate.exists(key):
-                    cov = track.smoother.marginalCovariance(key) if covariance else None
-                    out[(frame_index, track.id)] = result = self._result(track, estimate, key, wireframe, cov)
-                    if cov is not None:
-                        result.extras["covariance"] = "smoothed"  # from every frame the smoother holds
+            out.update(self._segment_estimates(track, covariance))
+        return out
+
+    def _segment_estimates(self, track: _TrackState, covariance: bool) -> dict[tuple[int, str], VehicleResult]:
+        """The estimates of every pose the track's smoother holds (none without a smoother): (frame index, id) ->
+        result, with its marginal covariance if asked (labelled ``smoothed``: from every frame the smoother holds)."""
+        out = {}
+        if track.smoother is None:
+            return out
+        estimate = track.smoother.calculateEstimate()
+        wireframe = self._wireframe(estimate, track)
+        for frame_index, _, key in track.poses:
+            if estimate.exists(key):
+                cov = track.smoother.marginalCovariance(key) if covariance else None
+                out[(frame_index, track.id)] = result = self._result(track, estimate, key, wireframe, cov)
+                if cov is not None:
+                    result.extras["covariance"] = "smoothed"
         return out
 
     def forget(self, t: float) -> list[str]:
@@ -517,17 +524,7 @@ class Tracker:
         if track.smoother is None or not track.poses:
             return
         self._settle(track, max_updates, recent=None)
-        smoother = track.smoother
-        estimate = smoother.calculateEstimate()
-        wireframe = self._wireframe(estimate, track)
-        for frame_index, _, key in track.poses:
-            if not estimate.exists(key):
-                continue
-            cov = smoother.marginalCovariance(key) if self.options.covariance else None
-            result = self._result(track, estimate, key, wireframe, cov)
-            if cov is not None:
-                result.extras["covariance"] = "smoothed"  # from every frame of the segment
-            track.retired[(frame_index, track.id)] = result
+        track.retired.update(self._segment_estimates(track, self.options.covariance))
 
     def finish(self, max_updates: int = 50) -> None:
         """Converges every track fully (call at the end of a stream before reading :meth:`estimates`)."""

@@ -73,8 +73,8 @@ def ray_distance(offset: np.ndarray, position: np.ndarray, viewpoint: np.ndarray
     u = ray / depth
     along = float(offset @ u)
     across = offset - along * u
-    scale = options.link_distance / (options.link_distance + options.single_view_depth * depth) \
-        if options.link_distance > 0 else 1.0
+    spread = options.link_distance + options.single_view_depth * depth
+    scale = options.link_distance / spread if spread > 0 else 1.0
     return float(np.sqrt(across @ across + (scale * along) ** 2))
 
 

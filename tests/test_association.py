@@ -143,6 +143,28 @@ def test_a_single_view_metres_off_along_its_ray_continues_the_track():
     assert not second_frame(None)  # seen by several cameras: 6 m is 6 m
 
 
+def test_a_track_that_may_be_a_false_detection_s_continues_only_with_its_camera_track():
+    """A vehicle seen by one camera only (to the linker, maybe a false detection) and 0.3 s later a vehicle of two
+    cameras 5 m from it, inside a one-position track's wide gate: whose camera track ids are all others' it starts
+    a track of its own (association_4cam seed 7: a false detection's track took over a van entering the view);
+    with the view's camera track id, without camera track ids on either side, or where the first position was
+    seen by two cameras, it continues the track."""
+    options = AssociationOptions()
+    assert 5.0 < options.link_distance + options.max_speed * 0.3
+
+    def continued(first_tracks, later_tracks, first_viewpoint=np.array([-30.0, 0.0])):
+        linker = TrackLinker(options)
+        (first,) = linker.link(0.0, [np.array([0.0, 0.0])], [set(first_tracks)], [first_viewpoint])
+        (later,) = linker.link(0.3, [np.array([0.0, -5.0])], [set(later_tracks)])
+        return later == first
+
+    assert not continued({("cam1", "18")}, {("cam1", "21"), ("cam2", "23")})
+    assert not continued({("cam1", "18")}, {("cam2", "23")})
+    assert continued({("cam1", "18")}, {("cam1", "18"), ("cam2", "23")})
+    assert continued(set(), set())
+    assert continued({("cam1", "18")}, {("cam1", "21"), ("cam2", "23")}, first_viewpoint=None)
+
+
 def test_ray_distance_shortens_the_offset_along_the_ray_only():
     options = AssociationOptions(link_distance=2.0, single_view_depth=0.1)
     position, viewpoint = np.array([0.0, 20.0]), np.array([0.0, 0.0])  # 20 m from the camera: along-ray x 0.5

@@ -17,7 +17,11 @@ not, so the offset along the ray counts ``link_distance / (link_distance +
 single_view_depth * depth)`` of its length and the offset across it in full.
 A single view its camera's tracker does not tie to the track is measured as
 it is: a false detection that happens to lie along a track's ray would
-continue it otherwise. An unassigned
+continue it otherwise. A track that may itself be a false detection's (fewer
+than ``min_track_frames`` positions, none seen by two cameras at once) is not
+continued by a vehicle whose camera track ids are all others': its gate is wide
+(its speed unknown), and geometry alone would let a false detection's track
+take over a vehicle coming into view. An unassigned
 vehicle starts a track; a track without a vehicle for ``max_missed`` seconds
 ends, and one that finds its vehicle again within them keeps its id.
 """
@@ -87,6 +91,7 @@ class Track:
     positions: list[np.ndarray] = field(default_factory=list)  # (2,) world x, y, metres
     weights: list[float] = field(default_factory=list)  # of each position in the velocity fit
     camera_tracks: set = field(default_factory=set)  # (camera, camera track id) pairs seen last
+    seen_together: bool = False  # whether any of its positions was seen by two cameras at once
 
     def predict(self, t: float) -> np.ndarray:
         """The position at ``t`` seconds: constant velocity fitted to the last five positions (weighted)."""
@@ -155,6 +160,8 @@ class TrackLinker:
                 if p is None:
                     continue
                 shared = bool(track.camera_tracks & camera_tracks[b])
+                if not shared and self._unconfirmed(track) and track.camera_tracks and camera_tracks[b]:
+                    continue  # geometry alone does not continue a track that may be a false detection's
                 # a single view's depth is metres off; measured along its ray only where its camera's tracker ties
                 # it to the track (a false detection along a track's ray would continue it otherwise)
                 distance = ray_distance(predicted - p, p, viewpoints[b] if shared else None, self.options)
@@ -173,6 +180,7 @@ class TrackLinker:
                     live[a].positions.append(np.asarray(positions[b], dtype=float))
                     live[a].weights.append(self.options.single_view_weight if single_view[b] else 1.0)
                     live[a].camera_tracks = set(camera_tracks[b])
+                    live[a].seen_together |= not single_view[b]
         for b, p in enumerate(positions):
             if ids[b] is None:
                 track = Track(self._new_id())
@@ -181,10 +189,16 @@ class TrackLinker:
                     track.positions.append(np.asarray(p, dtype=float))
                     track.weights.append(self.options.single_view_weight if single_view[b] else 1.0)
                     track.camera_tracks = set(camera_tracks[b])
+                    track.seen_together = not single_view[b]
                     self.tracks.append(track)
                 ids[b] = track.id
         self.tracks = [k for k in self.tracks if t - k.times[-1] <= self._reach(k) + 1e-9 or k.id in ids]
         return ids
+
+    def _unconfirmed(self, track: Track) -> bool:
+        """Whether a track may be a false detection's: fewer than ``min_track_frames`` positions, none seen by two
+        cameras at once."""
+        return len(track.positions) < self.options.min_track_frames and not track.seen_together
 
     def _reach(self, track: Track) -> float:
         """Seconds a track waits for its vehicle: ``max_missed``, or ``tentative_missed`` while it has fewer than

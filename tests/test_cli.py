@@ -111,6 +111,24 @@ def test_eval_prints_the_comparison(tmp_path, capsys):
     assert "vfactor eval --frames 3" in md.read_text()
 
 
+def test_eval_association_at_a_noise_level_beside_the_true_ids(tmp_path, capsys):
+    """``vfactor eval association --levels hard`` replaces the scenario's keypoint noise and says so in its tables
+    and in the command it echoes; a noise level of an experiment that has none is a named input error."""
+    md = tmp_path / "assoc.md"
+    assert main(["eval", "association", "--scenario", "intersection_2cam_track", "--frames", "6", "--levels", "hard",
+                 "--markdown", str(md)]) == 0
+    out = capsys.readouterr().out
+    assert "keypoint noise hard" in out and "| intersection_2cam_track (hard) | 0 | 6 |" in out
+    row = next(line for line in out.splitlines() if line.startswith("| intersection_2cam_track (hard)"))
+    precision, recall = (float(x) for x in row.split("|")[5:7])
+    assert 0.9 <= precision <= 1.0 and 0.9 <= recall <= 1.0, row
+    assert "vfactor eval association --scenario intersection_2cam_track --frames 6 --levels hard" in md.read_text()
+    assert main(["eval", "tracks", "--levels", "hard"]) == 2
+    assert "--levels" in capsys.readouterr().err
+    assert main(["eval", "association", "--levels", "harder"]) == 2
+    assert "--levels" in capsys.readouterr().err
+
+
 def test_eval_tracks_over_noise_draws(capsys):
     assert main(["eval", "tracks", "--scenario", "intersection_2cam_track", "--frames", "6", "--draws", "2"]) == 0
     out = capsys.readouterr().out

@@ -37,7 +37,7 @@ DEFAULT_NOISE = {"track_switch_rate": 0.02, "miss_rate": 0.05, "false_rate": 0.3
 class AssociationRun:
     """One scenario and seed of :func:`evaluate_association`."""
 
-    scenario: str
+    scenario: str  # with the noise level in brackets where one replaced the scenario's
     seed: int
     cameras: int
     frames: int
@@ -81,27 +81,38 @@ def _matched_errors(results, truth, max_distance: float) -> dict:
 
 def evaluate_association(scenario: str, seeds, num_frames: int | None = None, noise: dict | None = None,
                          options: AssociationOptions = AssociationOptions(), max_distance: float = 2.0,
-                         progress=None, engine=None) -> list[AssociationRun]:
+                         progress=None, engine=None, level: str | None = None) -> list[AssociationRun]:
     """Runs the experiment of the module docstring on ``scenario`` for each seed (the simulation's and the
     anonymiser's).
 
     Args:
+        noise: the anonymiser's settings (default :data:`DEFAULT_NOISE`).
+        level: a keypoint noise level of :data:`vfactor.evaluation.NOISE_LEVELS` in place of the scenario's own
+            (default: the scenario's, the paper's noise for the association scenarios).
         progress: called as ``progress(done, total)`` with the seeds done.
         engine: where the seeds run (:mod:`vfactor.parallel`; default: in this process); the figures do not
             depend on it, but for the association's time per frame.
     """
     from vfactor.parallel import InProcess
 
-    units = [(scenario, seed, num_frames, noise, options, max_distance) for seed in seeds]
+    from vfactor.evaluation import NOISE_LEVELS
+
+    if level is not None and level not in NOISE_LEVELS:
+        raise ValueError(f"noise level: expected one of {list(NOISE_LEVELS)}, got {level!r}")
+    units = [(scenario, seed, num_frames, noise, options, max_distance, level) for seed in seeds]
     return list((engine or InProcess()).map(_association_unit, units, progress=progress))
 
 
 def _association_unit(unit: tuple) -> AssociationRun:
     """One seed of :func:`evaluate_association`."""
+    from vfactor.evaluation import NOISE_LEVELS, noise_variant
     from vfactor.sim import anonymise, load_scenario, simulate
 
-    scenario, seed, num_frames, noise, options, max_distance = unit
-    sim = simulate(load_scenario(scenario), seed=seed, num_frames=num_frames)
+    scenario, seed, num_frames, noise, options, max_distance, level = unit
+    variant = load_scenario(scenario)
+    if level is not None:
+        variant = noise_variant(variant, **NOISE_LEVELS[level])
+    sim = simulate(variant, seed=seed, num_frames=num_frames)
     anon = anonymise(sim, seed=seed, **(DEFAULT_NOISE if noise is None else noise))
     t0 = time.perf_counter()
     found = associate_scene(anon.scene, options)
@@ -114,7 +125,7 @@ def _association_unit(unit: tuple) -> AssociationRun:
     with_ids = track_scene(_with_true_ids(anon.scene, anon.truth_ids), TrackOptions(covariance=False)).frames
     truth = truth_positions(sim.truth)
     return AssociationRun(
-        scenario, seed, len(sim.scene.cameras), len(anon.scene.frames), sum(len(c) for c in cameras),
+        scenario if level is None else f"{scenario} ({level})", seed, len(sim.scene.cameras), len(anon.scene.frames), sum(len(c) for c in cameras),
         sum(v is None for ids in anon.truth_ids for v in ids), pairs,
         clear_mot(truth, positions_from_results(tracked), max_distance),
         clear_mot(truth, positions_from_results(with_ids), max_distance),

@@ -265,8 +265,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sweep-frames", type=int, default=30, help="paper: vehicles per point of the plots (default: 30)")
     p.add_argument("--scenario", help="scenario (default: library_2cam for frames, tracks_3veh for tracks, "
                    "accuracy_2cam for images, association_4cam and association_3cam for association)")
-    p.add_argument("--levels", default="clean,paper,hard",
-                   help="frames: noise levels, comma-separated, of clean, paper, hard (default: all three)")
+    p.add_argument("--levels",
+                   help="frames, association: keypoint noise levels, comma-separated, of clean, paper, hard "
+                   "(default: all three for frames; the scenario's own, the paper's, for association)")
     p.add_argument("--frames", type=int, help="number of scenes or frames (default: the scenario's)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     p.add_argument("--seeds", type=int, default=1,

@@ -23,6 +23,8 @@ def evaluate(args) -> int:
         raise InputError("--draws", f"expected an integer >= 0, got {args.draws}")
     if not (np.isfinite(args.lag) and args.lag > 0):
         raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
+    if args.levels is not None and args.experiment not in ("frames", "association"):
+        raise InputError("--levels", f"eval {args.experiment} has no noise levels (frames and association have)")
     if args.experiment in ("images", "paper") and (args.workers is not None or args.scheduler is not None):
         raise InputError("--workers" if args.workers is not None else "--scheduler",
                          f"eval {args.experiment} runs in this process (frames, tracks and association take a cluster)")
@@ -31,13 +33,14 @@ def evaluate(args) -> int:
 
         with open_engine(args.workers, args.scheduler) as engine:
             if args.experiment == "frames":
-                sections = _eval_frames(args.scenario or "library_2cam", frames, args.seed, _levels(args.levels),
-                                        args.seeds, engine)
+                sections = _eval_frames(args.scenario or "library_2cam", frames, args.seed,
+                                        _levels(args.levels or "clean,paper,hard"), args.seeds, engine)
             elif args.experiment == "tracks":
                 sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws,
                                         args.lag, engine)
             else:
-                sections = _eval_association(args.scenario, frames, args.seed, args.seeds, engine)
+                sections = _eval_association(args.scenario, frames, args.seed, args.seeds, engine,
+                                             _levels(args.levels) if args.levels else (None,))
     elif args.experiment == "images":
         sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed)
     else:
@@ -53,7 +56,8 @@ def evaluate(args) -> int:
         (f" --frames {args.frames}" if args.frames else "") + (f" --seed {args.seed}" if args.seed else "") + \
         (f" --seeds {args.seeds}" if args.seeds != 1 else "") + (f" --draws {args.draws}" if args.draws else "") + \
         (f" --lag {args.lag:g}" if args.experiment == "tracks" and args.lag != 0.5 else "") + \
-        (f" --levels {args.levels}" if args.experiment == "frames" and args.levels != "clean,paper,hard" else "") + \
+        (f" --levels {args.levels}" if args.levels and not (args.experiment == "frames" and
+                                                             args.levels == "clean,paper,hard") else "") + \
         (f" --figures {args.figures}" if args.figures else "") + \
         (f" --sweep-frames {args.sweep_frames}" if args.experiment == "paper" and args.sweep_frames != 30 else "")
     echo = output(args)
@@ -103,7 +107,7 @@ def _eval_images(scenario_name: str, frames, seed: int) -> list[str]:
     return [images_report(evaluate_images(scenario_name, frames, seed, progress=progress("rendering")))]
 
 
-def _eval_association(scenario_name, frames, seed: int, seeds: int, engine=None) -> list[str]:
+def _eval_association(scenario_name, frames, seed: int, seeds: int, engine=None, levels=(None,)) -> list[str]:
     import importlib.util
 
     if importlib.util.find_spec("motmetrics") is None:  # CLEAR-MOT's counts
@@ -111,10 +115,12 @@ def _eval_association(scenario_name, frames, seed: int, seeds: int, engine=None)
     from vfactor.association.evaluate import DEFAULT_NOISE, association_report, body_type_report, evaluate_association
 
     scenarios = [scenario_name] if scenario_name else ["association_4cam", "association_3cam"]
-    runs = [run for name in scenarios
+    runs = [run for level in levels for name in scenarios
             for run in evaluate_association(name, range(seed, seed + seeds), frames, progress=progress("associating"),
-                                            engine=engine)]
+                                            engine=engine, level=level)]
     noise = ", ".join(f"{k} {v:g}" for k, v in DEFAULT_NOISE.items())
+    if levels != (None,):
+        noise += "; keypoint noise " + ", ".join(levels)
     return [f"### Association without ids ({noise}), beside the true ids\n\n{association_report(runs)}\n",
             f"Pose errors per body type and camera count (vehicles tracked within 2 m of a true one):\n\n"
             f"{body_type_report(runs)}\n"]

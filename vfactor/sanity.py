@@ -9,11 +9,14 @@ finds its estimate
 * finite (pose and wireframe),
 * within :data:`MAX_DISTANCE` of the nearest camera that sees it,
 * in front of every camera that sees it (the keypoints' centroid at a positive
-  depth), and
+  depth),
+* with its front hubs ahead of its back hubs (body x forward: a shape turned
+  front to back explains the same pixels, :mod:`vfactor.factors.body_frame`;
+  the solvers turn such a solution back, so this catches what they could not), and
 * with a pose covariance when one was asked for (GTSAM's marginals fail only
   when the linear system is indeterminate: some direction is not observed);
 
-otherwise it is ``failed`` (non-finite, or behind a camera that sees it) or
+otherwise it is ``failed`` (non-finite, behind a camera that sees it, or turned front to back) or
 ``degenerate`` (too far, or no covariance), with a one-line message. The
 solvers call :func:`checked` on every result they return (``solve_observations``,
 the tracker, batch smoothing).
@@ -32,6 +35,7 @@ from typing import Iterable
 import numpy as np
 
 from vfactor.camera import Camera
+from vfactor.factors.body_frame import turned_front_to_back
 from vfactor.result import Status, VehicleResult
 
 __all__ = ["MAX_DISTANCE", "check_estimate", "checked", "summarise_error", "one_line"]
@@ -100,6 +104,9 @@ def check_estimate(result: VehicleResult, cameras: Iterable[Camera], covariance:
     world_p = np.asarray(result.wireframe.vehicle_p_keypoints, dtype=float)
     if not (np.all(np.isfinite(T)) and np.all(np.isfinite(world_p))):
         return Status.FAILED, "the estimate is not finite (NaN or infinity in the pose or the shape)"
+    if turned_front_to_back(world_p[:4].ravel()):
+        return Status.FAILED, ("the shape is turned front to back (its front hubs behind its back hubs): the views "
+                               "did not tell the vehicle's front from its back")
     world_p = world_p @ T[:3, :3].T + T[:3, 3]
     centre = world_p.mean(axis=0)
     cameras = list(cameras)

@@ -21,6 +21,7 @@ import numpy.ma  # noqa: F401  numpy 2 imports it lazily, on a solve's first np.
 from vfactor.box import BoxModel, vehicle_box
 from vfactor.camera import Camera
 from vfactor.errors import InputError
+from vfactor.factors.body_frame import canonical_gauge
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.factors.projection import KeypointObservations, projection_factor, whitened_residuals
 from vfactor.factors.robust import RobustLoss
@@ -494,7 +495,8 @@ def _same_prior(a: ShapePrior, b: ShapePrior, mean_tol: float = 0.02, sigma_tol:
 
 
 def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc):
-    """LM on ``graph``; with ``hwc="lazy"``, again with the HWC factor when the shape breaks HWC.
+    """LM on ``graph``; with ``hwc="lazy"``, again with the HWC factor when the shape breaks HWC; and once more from
+    :func:`~vfactor.factors.body_frame.canonical_gauge` when the solution's body frame is turned front to back.
 
     Args:
         terms: the HWC terms (:func:`vfactor.graph.hwc_terms`).
@@ -507,23 +509,30 @@ def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc)
         error is half the squared norm of the HWC residuals the check computed.
     """
     config = options.graph
-    optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.lm_params())
-    estimate = optimizer.optimize()
-    hit_limit = optimizer.iterations() >= options.max_iterations
-    iterations = optimizer.iterations()
-    cost = optimizer.error()  # graph.error(estimate)
-    if config.hwc == "lazy":
-        residuals = hwc_residuals(wireframe_from_values(estimate, keys), terms)
-        if float(np.abs(residuals).max()) > config.hwc_tolerance:
-            graph = copy_graph(graph)
-            graph.add(hwc)
-            optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.lm_params())
-            estimate = optimizer.optimize()
-            hit_limit = optimizer.iterations() >= options.max_iterations
-            iterations += optimizer.iterations()
-            cost = optimizer.error()
-        else:
-            cost += 0.5 * float(residuals @ residuals)  # hwc.error(estimate), from the residuals of the check
+    iterations, with_hwc = 0, config.hwc != "lazy"
+    for attempt in range(2):  # the second only from the canonical gauge, when the first ended turned front to back
+        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.lm_params())
+        estimate = optimizer.optimize()
+        hit_limit = optimizer.iterations() >= options.max_iterations
+        iterations += optimizer.iterations()
+        cost = optimizer.error()  # graph.error(estimate)
+        if not with_hwc:
+            residuals = hwc_residuals(wireframe_from_values(estimate, keys), terms)
+            if float(np.abs(residuals).max()) > config.hwc_tolerance:
+                graph, with_hwc = copy_graph(graph), True
+                graph.add(hwc)
+                optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.lm_params())
+                estimate = optimizer.optimize()
+                hit_limit = optimizer.iterations() >= options.max_iterations
+                iterations += optimizer.iterations()
+                cost = optimizer.error()
+            else:
+                cost += 0.5 * float(residuals @ residuals)  # hwc.error(estimate), from the residuals of the check
+        # the same pixels with the body frame turned half a turn (vfactor.factors.body_frame): solve on from the
+        # convention's frame, where the shape prior costs less
+        values = canonical_gauge(estimate, (keys.pose_key(),), keys.layer_keys(0)) if attempt == 0 else None
+        if values is None:
+            break
     return estimate, cost, iterations, hit_limit, graph
 
 

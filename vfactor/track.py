@@ -30,6 +30,7 @@ import numpy as np
 from vfactor.box import vehicle_box
 from vfactor.camera import Camera
 from vfactor.errors import InputError
+from vfactor.factors.body_frame import canonical_gauge
 from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomic_factor
 from vfactor.factors.projection import KeypointObservations
 from vfactor.factors.robust import RobustLoss
@@ -430,6 +431,9 @@ class Tracker:
         if track.multiview_frames >= _REANCHOR_FRAMES:  # well seen now: plain incremental updates from here
             track.young, track.young_frames = False, []
         solved = gtsam.LevenbergMarquardtOptimizer(graph, estimate, self.options.solve.lm_params()).optimize()
+        turned = canonical_gauge(solved, [key for *_, key in track.poses], self.keys.layer_keys(track.index))
+        if turned is not None:  # the body frame turned front to back (vfactor.factors.body_frame): on from the convention's
+            solved = gtsam.LevenbergMarquardtOptimizer(graph, turned, self.options.solve.lm_params()).optimize()
         track.smoother = self._new_smoother()
         stamps = {key: stamp for _, stamp, key in track.poses}
         stamps.update({k: t for k in self.keys.layer_keys(track.index)})
@@ -839,6 +843,10 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         if config.hwc == "lazy" and hwc_violation(shape, terms) > config.hwc_tolerance:
             graph.add(hwc_factor(keys, index, terms=terms))
             optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.solve.lm_params())
+            estimate = optimizer.optimize()
+        turned = canonical_gauge(estimate, [key for *_, key in posed], keys.layer_keys(index))
+        if turned is not None:  # the body frame turned front to back (vfactor.factors.body_frame): on from the convention's
+            optimizer = gtsam.LevenbergMarquardtOptimizer(graph, turned, options.solve.lm_params())
             estimate = optimizer.optimize()
         marginals = gtsam.Marginals(graph, estimate) if options.covariance else None
     except RuntimeError as exc:

@@ -10,6 +10,7 @@ The functions here are also the API for adding vehicles to a graph of your own
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import gtsam
 import numpy as np
@@ -229,15 +230,23 @@ def add_shape_factors(
     Add these once per vehicle (the shape is shared by all its frames). With
     ``"lazy"``, add :func:`hwc_factor` yourself when :func:`hwc_violation` says so.
     """
-    layer_keys = keys.layer_keys(vehicle)
-    graph.add(body_frame_factor(layer_keys[0], config.body_frame_sigma))
-    for key in layer_keys:
-        graph.add(symmetry_factor(key, config.symmetry_sigma))
-    graph.add(rectangle_factor(layer_keys[0], config.rectangle_sigma))
+    layer_keys = tuple(keys.layer_keys(vehicle))
+    for factor in _gauge_and_symmetry_factors(layer_keys, config.body_frame_sigma, config.symmetry_sigma,
+                                              config.rectangle_sigma):
+        graph.add(factor)
     graph.add(shape_prior_factor(layer_keys, prior or default_shape_prior(), config.shape_prior_weight,
                                  config.shape_prior_loss))
     if config.hwc == "always":
         graph.add(hwc_factor(keys, vehicle, config, bounds))
+
+
+@lru_cache(maxsize=4096)
+def _gauge_and_symmetry_factors(layer_keys: tuple, body_frame_sigma: float, symmetry_sigma: float,
+                                rectangle_sigma: float) -> tuple:
+    """The body-frame, symmetry and rectangle factors of one vehicle's layer keys: made once, shared by every graph
+    that holds them (GTSAM factors are immutable; each graph of a solve or a track used to build its own)."""
+    return (body_frame_factor(layer_keys[0], body_frame_sigma), *(symmetry_factor(k, symmetry_sigma) for k in layer_keys),
+            rectangle_factor(layer_keys[0], rectangle_sigma))
 
 
 def hwc_factor(keys: KeyScheme, vehicle: int = 0, config: GraphConfig = GraphConfig(), bounds: HwcBounds | None = None,

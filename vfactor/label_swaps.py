@@ -25,7 +25,7 @@ judges each camera with its labels as given.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import gtsam
 import numpy as np
@@ -111,7 +111,7 @@ def relabel_swaps(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehic
     """
     if len(obs) == 0:
         return obs, []
-    mirrored = replace(obs, keypoint_index=MIRROR_PERMUTATION[obs.keypoint_index])
+    mirrored = obs.relabelled(MIRROR_PERMUTATION[obs.keypoint_index])
     as_given = loss.rho(np.linalg.norm(whitened_residuals(obs, world_T_vehicle, vehicle_p_keypoints), axis=1))
     as_swapped = loss.rho(np.linalg.norm(whitened_residuals(mirrored, world_T_vehicle, vehicle_p_keypoints), axis=1))
     swap = np.zeros(len(obs), dtype=bool)
@@ -129,7 +129,7 @@ def relabel_swaps(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehic
                                         int(rows.sum()), gain))
     if not findings:
         return obs, []
-    return replace(obs, keypoint_index=np.where(swap, mirrored.keypoint_index, obs.keypoint_index)), findings
+    return obs.relabelled(np.where(swap, mirrored.keypoint_index, obs.keypoint_index)), findings
 
 
 def apply_swaps(obs: KeypointObservations, findings: list[SwapFinding]) -> KeypointObservations:
@@ -143,4 +143,4 @@ def apply_swaps(obs: KeypointObservations, findings: list[SwapFinding]) -> Keypo
     swap = np.zeros(len(obs), dtype=bool)
     for finding in findings:
         swap |= (obs.camera_index == names.index(finding.camera)) & np.isin(obs.keypoint_index, finding.pair)
-    return replace(obs, keypoint_index=np.where(swap, MIRROR_PERMUTATION[obs.keypoint_index], obs.keypoint_index))
+    return obs.relabelled(np.where(swap, MIRROR_PERMUTATION[obs.keypoint_index], obs.keypoint_index))

@@ -75,6 +75,9 @@ class ShapePrior:
         floor = np.repeat(np.broadcast_to(np.asarray(floor_sigma, dtype=float), (12,)), 3)
         return cls(mean=mean, covariance=inflation * np.cov(flat, rowvar=False) + np.diag(floor**2))
 
+    def __getstate__(self):  # the factors made from it (vfactor.factors.shape_prior) stay in their process
+        return {k: v for k, v in self.__dict__.items() if k != "_factors"}
+
     @property
     def wireframe(self) -> Wireframe:
         return Wireframe(self.mean)

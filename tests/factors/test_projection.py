@@ -277,3 +277,40 @@ def test_scaled_observations_equal_freshly_built_ones():
             np.testing.assert_allclose(scaled._sigma_table, fresh._sigma_table)
             np.testing.assert_allclose(scaled.sqrt_information, obs.sqrt_information / np.maximum(
                 0.37, obs.min_sigma * np.linalg.norm(obs.sqrt_information, ord=2, axis=(1, 2)))[:, None, None])
+
+
+def _tables(obs: KeypointObservations) -> dict:
+    """Every array KeypointObservations holds, by name (the kernel's tables included)."""
+    out = {name: value for name, value in obs.__dict__.items() if isinstance(value, np.ndarray)}
+    out.update({f"_intrinsics{i}": column for i, column in enumerate(obs._intrinsics)})
+    return out
+
+
+@pytest.mark.parametrize("cameras", [CAMERAS, LENS_CAMERAS, CAMERAS[:1]], ids=["plain+distorted", "every lens", "plain"])
+def test_subset_and_relabelled_equal_freshly_built_observations(cameras):
+    """subset and relabelled take their tables from the observations; a new object would build the same, to the bit."""
+    rng = np.random.default_rng(5)
+    obs = observations(cameras=cameras)
+    n = len(obs)
+    window = np.where(rng.random((n, 1)) < 0.5, np.array([[-0.5, -0.5, 1279.5, 719.5]]), np.nan)
+    calibrated = rng.random(n) < 0.5
+    obs = KeypointObservations(obs.cameras, obs.camera_index, obs.keypoint_index, obs.uv,
+                               obs.sqrt_information * rng.uniform(0.5, 2.0, (n, 1, 1)), window, 1.0, calibrated)
+    for mask in (rng.random(n) < 0.6, obs.camera_index != 0, np.zeros(n, dtype=bool), np.flatnonzero(rng.random(n) < 0.3)):
+        got = obs.subset(mask)
+        fresh = KeypointObservations(obs.cameras, obs.camera_index[mask], obs.keypoint_index[mask], obs.uv[mask],
+                                     obs.sqrt_information[mask], window[mask], 1.0, calibrated[mask])
+        expected, found = _tables(fresh), _tables(got)
+        assert expected.keys() == found.keys()
+        for name in expected:
+            np.testing.assert_array_equal(found[name], expected[name], err_msg=name)
+            assert found[name].dtype == expected[name].dtype, name
+        assert (got._fisheye is False) == (fresh._fisheye is False) and (got._dist is None) == (fresh._dist is None)
+    labels = np.array([1, 0, 3, 2, 5, 4, 7, 6, 9, 8, 11, 10])[obs.keypoint_index]
+    got = obs.relabelled(labels)
+    fresh = KeypointObservations(obs.cameras, obs.camera_index, labels, obs.uv, obs.sqrt_information, window, 1.0,
+                                 calibrated)
+    for name, value in _tables(fresh).items():
+        np.testing.assert_array_equal(_tables(got)[name], value, err_msg=name)
+    with pytest.raises(ValueError, match="integer labels"):
+        obs.relabelled(labels[:-1])

@@ -173,3 +173,31 @@ def test_every_preset_satisfies_hwc(name):
 def test_hinge_is_zero_inside_and_linear_outside():
     q = np.array([0.5, 1.0, 1.5, 2.5])
     assert np.allclose(hinge(q, 1.0, 2.0), [-0.5, 0.0, 0.0, 0.5])
+
+
+def test_a_priors_factor_is_made_once_and_stays_out_of_its_pickle():
+    """shape_prior_factor keeps the factor on its prior (a solve builds its graph several times); a pickled prior, as
+    Dask sends it to a worker, carries no GTSAM object."""
+    import pickle
+
+    from vfactor.shape_model import ShapePrior
+
+    prior = ShapePrior(default_shape_prior().mean, default_shape_prior().covariance)
+    first = shape_prior_factor(KEYS, prior, 1.0)
+    assert shape_prior_factor(list(KEYS), prior, 1.0) is first
+    assert shape_prior_factor(KEYS, prior, 2.0) is not first
+    assert shape_prior_factor(KEYS, prior, 1.0, RobustLoss("cauchy", 6.0)) is not first
+    copy = pickle.loads(pickle.dumps(prior))
+    assert "_factors" not in copy.__dict__
+    values = layer_values(PRESETS["bmw_x5"].wireframe())
+    assert shape_prior_factor(KEYS, copy, 1.0).error(values) == pytest.approx(first.error(values), rel=1e-12)
+
+
+def test_the_short_median_is_numpys_to_the_bit():
+    from vfactor.shape_evidence import _median
+
+    rng = np.random.default_rng(11)
+    for n in range(1, 80):
+        q = rng.gamma(1.0, 2.0, n) * 10.0 ** rng.uniform(-6, 6)
+        assert _median(q) == float(np.median(q))
+    assert np.isnan(_median(np.array([1.0, np.nan, 2.0])))

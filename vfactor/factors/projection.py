@@ -133,11 +133,34 @@ class KeypointObservations:
         return len(self.camera_index)
 
     def subset(self, mask: np.ndarray) -> "KeypointObservations":
-        return KeypointObservations(
-            self.cameras, self.camera_index[mask], self.keypoint_index[mask], self.uv[mask], self.sqrt_information[mask],
-            None if self.window is None else self.window[mask], self.min_sigma,
-            None if self.calibrated is None else self.calibrated[mask],
-        )
+        """The observations selected by ``mask`` (booleans or indices), their tables taken from these rather than
+        made again."""
+        out = object.__new__(KeypointObservations)
+        out.__dict__.update(self.__dict__)
+        for name in ("camera_index", "keypoint_index", "uv", "sqrt_information", "_window_table", "_sigma_table", "_R_cw",
+                     "_t_cw", "_intrinsics_table", "_lens_table", "_dist_table"):
+            object.__setattr__(out, name, np.ascontiguousarray(getattr(self, name)[mask]))
+        for name in ("window", "calibrated"):
+            if getattr(self, name) is not None:
+                object.__setattr__(out, name, getattr(self, name)[mask])
+        object.__setattr__(out, "_intrinsics", tuple(column[mask] for column in self._intrinsics))
+        if self._fisheye is not False:
+            fisheye = self._fisheye[mask]
+            object.__setattr__(out, "_fisheye", fisheye if fisheye.any() else False)
+        if self._dist is not None:  # the NumPy projection's columns: 5 for the common lens, as __post_init__ picks them
+            width = 5 if np.all(out._lens_table == LENS_PLAIN) else 14
+            object.__setattr__(out, "_dist", np.ascontiguousarray(out._dist_table[:, :width]))
+        return out
+
+    def relabelled(self, keypoint_index: np.ndarray) -> "KeypointObservations":
+        """The same observations under other keypoint labels (n,), every pixel, sigma and table kept with its row."""
+        keypoint_index = np.asarray(keypoint_index)
+        if keypoint_index.shape != self.keypoint_index.shape or keypoint_index.dtype.kind not in "iu":
+            raise ValueError(f"KeypointObservations.relabelled: expected {len(self)} integer labels")
+        out = object.__new__(KeypointObservations)
+        out.__dict__.update(self.__dict__)
+        object.__setattr__(out, "keypoint_index", np.ascontiguousarray(keypoint_index, dtype=np.int64))
+        return out
 
     def scaled(self, noise_scale) -> "KeypointObservations":
         """The same observations with every pixel sigma multiplied by ``noise_scale`` (> 0).

@@ -31,6 +31,16 @@ def shape_prior_factor(layer_keys, prior: ShapePrior, weight: float = 1.0, loss:
     """
     if weight <= 0:
         raise ValueError(f"shape prior weight: expected > 0, got {weight}")
+    cache = prior.__dict__.setdefault("_factors", {})  # a prior's factor is made once per keys, weight and loss
+    key = (tuple(layer_keys), float(weight), loss)
+    if key not in cache:
+        if len(cache) >= 64:
+            cache.clear()
+        cache[key] = _shape_prior_factor(tuple(layer_keys), prior, float(weight), loss)
+    return cache[key]
+
+
+def _shape_prior_factor(layer_keys, prior: ShapePrior, weight: float, loss: RobustLoss):
     R = prior.sqrt_information() * np.sqrt(weight)
     b = R @ np.asarray(prior.mean).ravel()
     if loss.name == "none":

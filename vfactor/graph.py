@@ -163,7 +163,7 @@ def observations_from_detections(
     """
     names = list(cameras)
     cam_idx, kp_idx, uv, sqrt_info, window, calibrated = [], [], [], [], [], []
-    for d in detections:
+    for d in detections:  # each detection's seen keypoints as arrays (one NumPy pass per detection, not per keypoint)
         if d.camera not in cameras:
             raise InputError("camera", f"unknown camera {d.camera!r}; known: {', '.join(names)}")
         seen = np.flatnonzero(d.confidence > 0)
@@ -171,28 +171,30 @@ def observations_from_detections(
             continue
         edges = _truncation_window(cameras[d.camera], d.keypoints[seen]) if config.truncation else None
         base_sigma = max(config.min_pixel_sigma, config.relative_pixel_sigma * d.box_diagonal())
-        for k in seen:
-            cov = None if d.covariance is None else d.covariance[k]
-            given = cov is not None and np.all(np.isfinite(cov))
-            if given:
-                L = np.linalg.cholesky(np.linalg.inv(cov)).T
-            else:
-                L = np.eye(2) * (d.confidence[k] / base_sigma)
-            calibrated.append(bool(given and d.covariance_calibrated))
-            cam_idx.append(names.index(d.camera))
-            kp_idx.append(k)
-            uv.append(d.keypoints[k])
-            sqrt_info.append(L)
-            window.append(edges if edges is not None else _NO_WINDOW)
+        L = np.asarray(d.confidence[seen], dtype=float)[:, None, None] / base_sigma * np.eye(2)
+        given = np.zeros(len(seen), dtype=bool)
+        if d.covariance is not None:
+            given = np.all(np.isfinite(d.covariance[seen]), axis=(1, 2))
+            if given.any():
+                L[given] = np.swapaxes(np.linalg.cholesky(np.linalg.inv(d.covariance[seen][given])), 1, 2)
+        calibrated.append(given & bool(d.covariance_calibrated))
+        cam_idx.append(np.full(len(seen), names.index(d.camera)))
+        kp_idx.append(seen)
+        uv.append(d.keypoints[seen])
+        sqrt_info.append(L)
+        window.append(np.tile(edges if edges is not None else _NO_WINDOW, (len(seen), 1)))
+    stacked = (lambda parts, shape, dtype: np.concatenate(parts).astype(dtype, copy=False) if parts
+               else np.zeros(shape, dtype=dtype))
+    calibrated = stacked(calibrated, (0,), bool)
     return KeypointObservations(
         cameras=tuple(cameras.values()),
-        camera_index=np.array(cam_idx, dtype=int),
-        keypoint_index=np.array(kp_idx, dtype=int),
-        uv=np.array(uv, dtype=float).reshape(-1, 2),
-        sqrt_information=np.array(sqrt_info, dtype=float).reshape(-1, 2, 2),
-        window=np.array(window, dtype=float).reshape(-1, 4),
+        camera_index=stacked(cam_idx, (0,), int),
+        keypoint_index=stacked(kp_idx, (0,), int),
+        uv=stacked(uv, (0, 2), float).reshape(-1, 2),
+        sqrt_information=stacked(sqrt_info, (0, 2, 2), float).reshape(-1, 2, 2),
+        window=stacked(window, (0, 4), float).reshape(-1, 4),
         min_sigma=config.min_pixel_sigma,
-        calibrated=np.array(calibrated, dtype=bool) if any(calibrated) else None,
+        calibrated=calibrated if calibrated.any() else None,
     )
 
 

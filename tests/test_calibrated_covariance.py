@@ -95,3 +95,29 @@ def test_the_flag_round_trips_through_a_scene_file(tmp_path):
     (tmp_path / "bad.json").write_text(bad)
     with pytest.raises(SceneError, match="covariances_calibrated"):
         load_scene(tmp_path / "bad.json")
+
+
+def test_each_keypoint_takes_its_own_covariance_or_the_confidence_sigma():
+    """observations_from_detections, keypoint by keypoint: a finite 2x2 covariance gives its own square-root
+    information (and the detection's calibration flag), a NaN one the confidence-weighted sigma of the box."""
+    sim, f, vid = _vehicles(frames=1)[0]
+    a, b = sim.scene.frames[f].detections_of(vid)[:2]
+    rng = np.random.default_rng(3)
+    A = rng.normal(0.0, 2.0, (12, 2, 2))
+    cov = A @ np.swapaxes(A, 1, 2) + np.eye(2)
+    cov[[1, 5, 6]] = np.nan  # keypoints without a covariance of their own
+    dets = [dataclasses.replace(a, covariance=cov, covariance_calibrated=True), b]
+    config = SolveOptions().graph
+    obs = observations_from_detections(dets, sim.scene.cameras, config)
+    for det in dets:
+        seen = np.flatnonzero(det.confidence > 0)
+        rows = obs.camera_index == list(sim.scene.cameras).index(det.camera)
+        np.testing.assert_array_equal(obs.keypoint_index[rows], seen)
+        np.testing.assert_array_equal(obs.uv[rows], det.keypoints[seen])
+        base = max(config.min_pixel_sigma, config.relative_pixel_sigma * det.box_diagonal())
+        for L, k, calibrated in zip(obs.sqrt_information[rows], seen, obs.calibrated[rows]):
+            own = det.covariance is not None and np.isfinite(det.covariance[k]).all()
+            expected = np.linalg.cholesky(np.linalg.inv(det.covariance[k])).T if own else \
+                np.eye(2) * (det.confidence[k] / base)
+            np.testing.assert_array_equal(L, expected)
+            assert calibrated == own

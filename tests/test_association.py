@@ -259,6 +259,25 @@ def test_a_single_view_position_weighs_little_in_a_track_s_velocity():
     assert np.linalg.norm(predicted - [5.0, 0.0]) < 1.0, predicted
 
 
+def test_a_track_of_a_two_camera_position_and_a_single_view_takes_no_velocity_from_the_single_view():
+    """Two positions define a velocity exactly, whatever their weights: a vehicle seen by two cameras, then by one
+    whose depth is 6.7 m off along its ray, predicted a 73 m/s vehicle (association_3cam at hard noise, seed 6),
+    and the next, accurate two-camera position fell outside the track's gate. The single view waits for more
+    positions; until then the track's speed is unknown, its gate that of a track of one position."""
+    options = AssociationOptions()
+    linker = TrackLinker(options)
+    camera = np.array([-1.76 + 3.63 * 10, 17.08 + 6.67 * 10])  # the single view's error lies along this camera's ray
+    tracks = {("cam0", "3"), ("cam1", "5")}
+    (vid,) = linker.link(0.1, [np.array([-1.76, 17.08])], [tracks])
+    assert linker.link(0.2, [np.array([1.87, 23.75])], [{("cam1", "5")}], [camera]) == [vid]
+    track = linker.tracks[0]
+    np.testing.assert_allclose(track.predict(0.3), [-1.76, 17.08])  # was (9.14, 37.1)
+    assert track.gate(0.3, options) == pytest.approx(options.link_distance + options.max_speed * 0.2)
+    assert linker.link(0.3, [np.array([-1.75, 14.97])], [tracks]) == [vid]  # 2.1 m in 0.2 s: the same vehicle
+    # with a third position the weights decide: the single view weighs single_view_weight
+    assert len(track._fitted()[0]) == 3
+
+
 def test_a_wrong_best_pair_gives_its_views_back_to_the_vehicles_they_agree_with():
     """Two vehicles side by side: the best-scoring pair (7, 12) is wrong and the greedy merging took it first,
     keeping 12 out of the vehicle of 10 and 16 (both agree with it) and 7 away from 1. The moves put them back."""

@@ -261,7 +261,7 @@ def test_a_single_view_position_weighs_little_in_a_track_s_velocity():
 
 def test_a_track_of_a_two_camera_position_and_a_single_view_takes_no_velocity_from_the_single_view():
     """Two positions define a velocity exactly, whatever their weights: a vehicle seen by two cameras, then by one
-    whose depth is 6.7 m off along its ray, predicted a 73 m/s vehicle (association_3cam at hard noise, seed 6),
+    whose position is 7.6 m on along its ray, predicted a 73 m/s vehicle (association_3cam at hard noise, seed 6),
     and the next, accurate two-camera position fell outside the track's gate. The single view waits for more
     positions; until then the track's speed is unknown, its gate that of a track of one position."""
     options = AssociationOptions()

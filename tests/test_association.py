@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from vfactor.association import AssociationOptions, TrackLinker, associate_frame, associate_scene
+from vfactor.association.linking import constant_velocity
 from vfactor.association.linking import ray_distance
 from vfactor.cli import main
 from vfactor.errors import InputError
@@ -275,7 +276,8 @@ def test_a_track_of_a_two_camera_position_and_a_single_view_takes_no_velocity_fr
     assert track.gate(0.3, options) == pytest.approx(options.link_distance + options.max_speed * 0.2)
     assert linker.link(0.3, [np.array([-1.75, 14.97])], [tracks]) == [vid]  # 2.1 m in 0.2 s: the same vehicle
     # with a third position the weights decide: the single view weighs single_view_weight
-    assert len(track._fitted()[0]) == 3
+    position, velocity = constant_velocity(np.array(track.times), np.array(track.positions), np.array(track.weights))
+    np.testing.assert_allclose(track.predict(0.4), position + 0.1 * velocity)  # all three in the fit, weighted
 
 
 def test_a_wrong_best_pair_gives_its_views_back_to_the_vehicles_they_agree_with():

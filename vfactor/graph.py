@@ -183,22 +183,25 @@ def observations_from_detections(
         uv.append(d.keypoints[seen])
         sqrt_info.append(L)
         window.append(np.tile(edges if edges is not None else _NO_WINDOW, (len(seen), 1)))
-    stacked = (lambda parts, shape, dtype: np.concatenate(parts).astype(dtype, copy=False) if parts
-               else np.zeros(shape, dtype=dtype))
-    calibrated = stacked(calibrated, (0,), bool)
+    calibrated = _stacked(calibrated, (0,), bool)
     return KeypointObservations(
         cameras=tuple(cameras.values()),
-        camera_index=stacked(cam_idx, (0,), int),
-        keypoint_index=stacked(kp_idx, (0,), int),
-        uv=stacked(uv, (0, 2), float).reshape(-1, 2),
-        sqrt_information=stacked(sqrt_info, (0, 2, 2), float).reshape(-1, 2, 2),
-        window=stacked(window, (0, 4), float).reshape(-1, 4),
+        camera_index=_stacked(cam_idx, (0,), int),
+        keypoint_index=_stacked(kp_idx, (0,), int),
+        uv=_stacked(uv, (0, 2), float).reshape(-1, 2),
+        sqrt_information=_stacked(sqrt_info, (0, 2, 2), float).reshape(-1, 2, 2),
+        window=_stacked(window, (0, 4), float).reshape(-1, 4),
         min_sigma=config.min_pixel_sigma,
         calibrated=calibrated if calibrated.any() else None,
     )
 
 
 _NO_WINDOW = np.full(4, np.nan)
+
+
+def _stacked(parts: list, empty_shape: tuple, dtype) -> np.ndarray:
+    """The detections' arrays of :func:`observations_from_detections` end to end (an empty one of ``empty_shape``)."""
+    return np.concatenate(parts).astype(dtype, copy=False) if parts else np.zeros(empty_shape, dtype=dtype)
 
 
 def _truncation_window(camera: Camera, uv: np.ndarray) -> np.ndarray | None:

@@ -496,7 +496,8 @@ def _same_prior(a: ShapePrior, b: ShapePrior, mean_tol: float = 0.02, sigma_tol:
 
 def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc):
     """LM on ``graph``; with ``hwc="lazy"``, again with the HWC factor when the shape breaks HWC; and once more from
-    :func:`~vfactor.factors.body_frame.canonical_gauge` when the solution's body frame is turned front to back.
+    :func:`~vfactor.factors.body_frame.canonical_gauge` when the solution's body frame is turned front to back (the
+    same pixels, a lower prior cost).
 
     Args:
         terms: the HWC terms (:func:`vfactor.graph.hwc_terms`).
@@ -508,32 +509,36 @@ def _optimise(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc)
         and did not need it compare on the same objective; without the factor that
         error is half the squared norm of the HWC residuals the check computed.
     """
-    config = options.graph
-    iterations, with_hwc = 0, config.hwc != "lazy"
-    for attempt in range(2):  # the second only from the canonical gauge, when the first ended turned front to back
-        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.lm_params())
-        estimate = optimizer.optimize()
-        hit_limit = optimizer.iterations() >= options.max_iterations
-        iterations += optimizer.iterations()
-        cost = optimizer.error()  # graph.error(estimate)
-        if not with_hwc:
-            residuals = hwc_residuals(wireframe_from_values(estimate, keys), terms)
-            if float(np.abs(residuals).max()) > config.hwc_tolerance:
-                graph, with_hwc = copy_graph(graph), True
-                graph.add(hwc)
-                optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.lm_params())
-                estimate = optimizer.optimize()
-                hit_limit = optimizer.iterations() >= options.max_iterations
-                iterations += optimizer.iterations()
-                cost = optimizer.error()
-            else:
-                cost += 0.5 * float(residuals @ residuals)  # hwc.error(estimate), from the residuals of the check
-        # the same pixels with the body frame turned half a turn (vfactor.factors.body_frame): solve on from the
-        # convention's frame, where the shape prior costs less
-        values = canonical_gauge(estimate, (keys.pose_key(),), keys.layer_keys(0)) if attempt == 0 else None
-        if values is None:
-            break
+    estimate, cost, iterations, hit_limit, graph, check = _lm(graph, values, keys, options, terms, hwc,
+                                                               options.graph.hwc == "lazy")
+    turned = canonical_gauge(estimate, (keys.pose_key(),), keys.layer_keys(0))
+    if turned is not None:
+        estimate, cost, more, hit_limit, graph, _ = _lm(graph, turned, keys, options, terms, hwc, check)
+        iterations += more
     return estimate, cost, iterations, hit_limit, graph
+
+
+def _lm(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc, check_hwc: bool):
+    """:func:`_optimise`'s LM: with ``check_hwc``, again with the HWC factor added when the shape breaks HWC.
+
+    Returns:
+        (estimate, cost, iterations, hit the iteration limit, the graph used, whether HWC is still to be checked:
+        ``check_hwc`` unless the factor was added).
+    """
+    optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.lm_params())
+    estimate, iterations, cost = optimizer.optimize(), optimizer.iterations(), optimizer.error()
+    if check_hwc:
+        residuals = hwc_residuals(wireframe_from_values(estimate, keys), terms)
+        if float(np.abs(residuals).max()) > options.graph.hwc_tolerance:
+            graph = copy_graph(graph)
+            graph.add(hwc)
+            optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.lm_params())
+            estimate, cost = optimizer.optimize(), optimizer.error()
+            iterations += optimizer.iterations()
+            check_hwc = False
+        else:
+            cost += 0.5 * float(residuals @ residuals)  # hwc.error(estimate), from the residuals of the check
+    return estimate, cost, iterations, optimizer.iterations() >= options.max_iterations, graph, check_hwc
 
 
 #: A camera is at odds with the others when the joint solution keeps less than this share of its keypoints ...

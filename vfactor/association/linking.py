@@ -96,40 +96,36 @@ class Track:
     camera_tracks: set = field(default_factory=set)  # (camera, camera track id) pairs seen last
     seen_together: bool = False  # whether any of its positions was seen by two cameras at once
 
-    def _fitted(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The times, positions and weights the velocity is fitted to: the last five positions, but of a track of
-        two, one seen by two cameras and one single view, the former alone. Two positions define a velocity
-        exactly, so no weight keeps the single view's depth error (metres along its camera's ray) out of it: on
-        association_3cam at hard noise (seed 6, a tuning seed) that error became 73 m/s for a vehicle driving at
-        10, and its next, accurate position fell outside the track's gate; with three or more the weights do."""
+    def _fit(self) -> tuple[float, np.ndarray, np.ndarray | None]:
+        """The time, position and velocity (None while unknown) of the constant-velocity fit to the last five
+        positions, weighted. Of a track of two, one seen by two cameras and one single view, the former alone: two
+        positions define a velocity exactly, so no weight keeps the single view's depth error (metres along its
+        camera's ray) out of it. On association_3cam at hard noise (seed 6, a tuning seed) that error became 73 m/s
+        for a vehicle driving at 10, and its next, accurate position fell outside the track's gate; with three
+        positions or more the weights do."""
         n = min(len(self.positions), _FIT_POSITIONS)
         times, positions, weights = (np.array(self.times[-n:]), np.array(self.positions[-n:]),
                                      np.array(self.weights[-n:]))
-        several = weights >= 1.0
+        several = weights >= 1.0  # seen by two cameras or more (single views weigh single_view_weight < 1)
         if n == 2 and several.sum() == 1:
             times, positions, weights = times[several], positions[several], weights[several]
-        return times, positions, weights
+        if len(times) < 2 or times[-1] <= times[0]:
+            return float(times[-1]), positions[-1], None
+        position, velocity = constant_velocity(times, positions, weights)
+        return float(times[-1]), position, velocity
 
     def predict(self, t: float) -> np.ndarray:
-        """The position at ``t`` seconds: constant velocity fitted (weighted) to the positions of :meth:`_fitted`;
-        their last when they are one, or all at one time."""
-        times, positions, weights = self._fitted()
-        if len(times) < 2 or times[-1] <= times[0]:
-            return positions[-1]
-        position, velocity = constant_velocity(times, positions, weights)
-        return position + velocity * (t - times[-1])
+        """The position at ``t`` seconds: the fitted position moved on at the fitted velocity (none while unknown)."""
+        t_fit, position, velocity = self._fit()
+        return position if velocity is None else position + velocity * (t - t_fit)
 
     def gate(self, t: float, options: AssociationOptions) -> float:
-        """The largest distance (metres) from :meth:`predict` at which a vehicle may continue the track: ``max_speed``
-        times the time since its last fitted position while no velocity is known (one fitted position),
-        ``max_acceleration`` times the step squared after that."""
-        times = self._fitted()[0]
-        if len(times) < 2 or times[-1] <= times[0]:
-            motion = options.max_speed * max(t - times[-1], 0.0)
-        else:
-            dt = max(t - times[-1], 0.0)
-            motion = options.max_acceleration * dt * dt
-        return options.link_distance + motion
+        """The largest distance (metres) from :meth:`predict` at which a vehicle may continue the track:
+        ``link_distance`` plus ``max_speed`` times the time since the fitted position while the velocity is unknown,
+        ``max_acceleration`` times its square once it is known."""
+        t_fit, _, velocity = self._fit()
+        dt = max(t - t_fit, 0.0)
+        return options.link_distance + (options.max_speed * dt if velocity is None else options.max_acceleration * dt * dt)
 
 
 class TrackLinker:

@@ -132,35 +132,37 @@ class KeypointObservations:
     def __len__(self):
         return len(self.camera_index)
 
+    def _with(self, **tables) -> "KeypointObservations":
+        """A copy holding these tables in place of its own (every other one shared, nothing validated or made
+        again): the derived observations below keep the camera tables that ``__post_init__`` built."""
+        out = object.__new__(KeypointObservations)
+        out.__dict__.update(self.__dict__)
+        out.__dict__.update(tables)
+        return out
+
     def subset(self, mask: np.ndarray) -> "KeypointObservations":
         """The observations selected by ``mask`` (booleans or indices), their tables taken from these rather than
         made again."""
-        out = object.__new__(KeypointObservations)
-        out.__dict__.update(self.__dict__)
-        for name in ("camera_index", "keypoint_index", "uv", "sqrt_information", "_window_table", "_sigma_table", "_R_cw",
-                     "_t_cw", "_intrinsics_table", "_lens_table", "_dist_table"):
-            object.__setattr__(out, name, np.ascontiguousarray(getattr(self, name)[mask]))
-        for name in ("window", "calibrated"):
-            if getattr(self, name) is not None:
-                object.__setattr__(out, name, getattr(self, name)[mask])
-        object.__setattr__(out, "_intrinsics", tuple(column[mask] for column in self._intrinsics))
+        tables = {name: np.ascontiguousarray(getattr(self, name)[mask])
+                  for name in ("camera_index", "keypoint_index", "uv", "sqrt_information", "_window_table",
+                               "_sigma_table", "_R_cw", "_t_cw", "_intrinsics_table", "_lens_table", "_dist_table")}
+        tables.update({name: getattr(self, name)[mask] for name in ("window", "calibrated")
+                       if getattr(self, name) is not None})
+        tables["_intrinsics"] = tuple(column[mask] for column in self._intrinsics)
         if self._fisheye is not False:
             fisheye = self._fisheye[mask]
-            object.__setattr__(out, "_fisheye", fisheye if fisheye.any() else False)
+            tables["_fisheye"] = fisheye if fisheye.any() else False
         if self._dist is not None:  # the NumPy projection's columns: 5 for the common lens, as __post_init__ picks them
-            width = 5 if np.all(out._lens_table == LENS_PLAIN) else 14
-            object.__setattr__(out, "_dist", np.ascontiguousarray(out._dist_table[:, :width]))
-        return out
+            width = 5 if np.all(tables["_lens_table"] == LENS_PLAIN) else 14
+            tables["_dist"] = np.ascontiguousarray(tables["_dist_table"][:, :width])
+        return self._with(**tables)
 
     def relabelled(self, keypoint_index: np.ndarray) -> "KeypointObservations":
         """The same observations under other keypoint labels (n,), every pixel, sigma and table kept with its row."""
         keypoint_index = np.asarray(keypoint_index)
         if keypoint_index.shape != self.keypoint_index.shape or keypoint_index.dtype.kind not in "iu":
             raise ValueError(f"KeypointObservations.relabelled: expected {len(self)} integer labels")
-        out = object.__new__(KeypointObservations)
-        out.__dict__.update(self.__dict__)
-        object.__setattr__(out, "keypoint_index", np.ascontiguousarray(keypoint_index, dtype=np.int64))
-        return out
+        return self._with(keypoint_index=np.ascontiguousarray(keypoint_index, dtype=np.int64))
 
     def scaled(self, noise_scale) -> "KeypointObservations":
         """The same observations with every pixel sigma multiplied by ``noise_scale`` (> 0).
@@ -182,19 +184,13 @@ class KeypointObservations:
             smallest_sigma = 1.0 / np.linalg.norm(L, ord=2, axis=(1, 2))
             factor = np.maximum(factor, self.min_sigma / smallest_sigma)
         # the camera tables stay; only the noise (and the truncation's marginal sigmas) change
-        out = object.__new__(KeypointObservations)
-        out.__dict__.update(self.__dict__)
-        object.__setattr__(out, "sqrt_information", L / factor[:, None, None])
         truncated = np.isfinite(self._window_table[:, 0])
-        object.__setattr__(out, "_sigma_table", np.where(truncated[:, None], self._sigma_table * factor[:, None], 1.0))
-        return out
+        return self._with(sqrt_information=L / factor[:, None, None],
+                          _sigma_table=np.where(truncated[:, None], self._sigma_table * factor[:, None], 1.0))
 
     def with_min_sigma(self, min_sigma: float) -> "KeypointObservations":
         """The same observations with another :attr:`min_sigma` (the sigmas themselves unchanged)."""
-        out = object.__new__(KeypointObservations)
-        out.__dict__.update(self.__dict__)
-        object.__setattr__(out, "min_sigma", float(min_sigma))
-        return out
+        return self._with(min_sigma=float(min_sigma))
 
     def expected_pixels(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """What the detector is expected to measure for predicted pixels ``uv`` (n, 2), and the slope.

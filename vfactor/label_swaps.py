@@ -15,7 +15,12 @@ clearly, never where both labels fit alike (a camera looking along the
 vehicle's axis sees left and right keypoints near each other).
 
 The one-frame solve (:func:`vfactor.solve.solve_observations`) relabels after
-its first solution and solves again from there; the tracker relabels each frame
+its first solution and solves again from there; where the refined solution
+still fits its keypoints worse than their sigmas say, it searches further:
+each pair with a down-weighted keypoint (:func:`suspect_pairs`) is swapped in
+turn and solved again, and the swap that lowers the cost most, by at least the
+margin, is kept (a first solution bent around several swapped pairs judges
+each of them wrongly; re-solved, the right swap shows); the tracker relabels each frame
 at its motion prediction with the track's shape; the known-shape reference does
 the same as the solve, so that it stays a bound for the same data
 (docs/factors.md, "Left/right label swaps"). The camera-disagreement check
@@ -35,7 +40,8 @@ from vfactor.factors.projection import KeypointObservations, whitened_residuals
 from vfactor.factors.robust import RobustLoss
 from vfactor.keypoints import LEFT_RIGHT_PAIRS, MIRROR_PERMUTATION
 
-__all__ = ["SWAP_MARGIN", "SwapFinding", "relabel_swaps", "apply_swaps"]
+__all__ = ["SWAP_MARGIN", "SwapFinding", "relabel_swaps", "apply_swaps", "suspect_pairs", "swapped_rows",
+           "merge_findings"]
 
 #: A pair is swapped when its swapped labels' robust cost is at least this much lower (the units of the cost,
 #: ``rho`` of the whitened residuals: a negative log-likelihood), about the log odds of a 5 % swap rate.
@@ -144,3 +150,47 @@ def apply_swaps(obs: KeypointObservations, findings: list[SwapFinding]) -> Keypo
     for finding in findings:
         swap |= (obs.camera_index == names.index(finding.camera)) & np.isin(obs.keypoint_index, finding.pair)
     return obs.relabelled(np.where(swap, MIRROR_PERMUTATION[obs.keypoint_index], obs.keypoint_index))
+
+
+def suspect_pairs(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehicle_p_keypoints: np.ndarray,
+                  loss: RobustLoss, weight: float = 0.5) -> list[np.ndarray]:
+    """Each camera's left/right pair of which a keypoint is down-weighted by the solution: the swaps worth solving for.
+
+    Args:
+        obs, world_T_vehicle, vehicle_p_keypoints, loss: as for :func:`relabel_swaps`.
+        weight: a keypoint whose robust-loss weight is below this is down-weighted (0.5: its whitened residual beyond
+            the loss's threshold).
+
+    Returns:
+        one boolean row mask of ``obs`` per suspect (camera, pair), in camera then pair order; a pair whose camera gave
+        one label twice is left out (no one-to-one swap).
+    """
+    if len(obs) == 0:
+        return []
+    weights = loss.weight(np.linalg.norm(whitened_residuals(obs, world_T_vehicle, vehicle_p_keypoints), axis=1))
+    groups = obs.camera_index * len(LEFT_RIGHT_PAIRS) + _PAIR_OF[obs.keypoint_index]
+    out = []
+    for group in np.unique(groups[weights < weight]):
+        rows = groups == group
+        if len(np.unique(obs.keypoint_index[rows])) == rows.sum():
+            out.append(rows)
+    return out
+
+
+def swapped_rows(obs: KeypointObservations, rows: np.ndarray) -> tuple[KeypointObservations, SwapFinding]:
+    """The observations with the labels of ``rows`` (one camera's pair, :func:`suspect_pairs`) exchanged, and the
+    finding that says so (its ``gain`` 0 until the caller measures it)."""
+    camera = int(obs.camera_index[rows][0])
+    pair = LEFT_RIGHT_PAIRS[int(_PAIR_OF[obs.keypoint_index[rows][0]])]
+    labels = np.where(rows, MIRROR_PERMUTATION[obs.keypoint_index], obs.keypoint_index)
+    return obs.relabelled(labels), SwapFinding(obs.cameras[camera].name, pair, int(rows.sum()), 0.0)
+
+
+def merge_findings(first: list[SwapFinding], then: list[SwapFinding]) -> list[SwapFinding]:
+    """The swaps of ``first`` followed by those of ``then`` (made on the relabelled observations): a pair swapped
+    twice is back as given and drops out."""
+    merged = {(f.camera, f.pair): f for f in first}
+    for finding in then:
+        if merged.pop((finding.camera, finding.pair), None) is None:
+            merged[(finding.camera, finding.pair)] = finding
+    return list(merged.values())

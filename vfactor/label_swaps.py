@@ -60,7 +60,8 @@ class SwapFinding:
         camera: the camera's name.
         pair: the pair's (left, right) keypoint indices (``vfactor.keypoints.LEFT_RIGHT_PAIRS``).
         seen: how many of the two the camera saw (2: both labels exchanged; 1: the one keypoint took its partner's label).
-        gain: how much lower the robust cost is with the labels swapped (> :data:`SWAP_MARGIN`).
+        gain: how much lower the robust cost is with the labels swapped (>= :data:`SWAP_MARGIN`): at the solution,
+            or, for a swap found by solving for it (:func:`suspect_pairs`), after solving.
     """
 
     camera: str

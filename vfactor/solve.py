@@ -86,8 +86,10 @@ class SolveOptions:
             ``False`` keeps the sigmas of ``graph`` (``relative_pixel_sigma``,
             or the detections' covariances) as they are.
         relabel_swaps: exchange the labels of each camera's left/right pairs that the first solution says are
-            swapped, and solve again (:mod:`vfactor.label_swaps`); the result's ``extras["swapped_keypoints"]``
-            lists them.
+            swapped, and solve again (:mod:`vfactor.label_swaps`); where the refined solution still fits its
+            keypoints worse than their sigmas (noise scale above :data:`SWAP_SEARCH_SCALE`), also solve for each
+            suspect pair swapped and keep the swaps that lower the cost (:func:`_searched_swaps`). The result's
+            ``extras["swapped_keypoints"]`` lists them.
         shape_information: keep the observations' information on the shape in
             the result's ``extras["shape_information"]`` (10 kB a vehicle), for
             :func:`vfactor.shape_evidence.track_shape` over several frames.

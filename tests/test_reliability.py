@@ -469,3 +469,50 @@ def test_a_vehicle_failed_by_the_disagreement_check_gives_exit_3(tmp_path, capsy
     assert code == EXIT_UNSOLVED and "disagree with the other cameras" in err
     assert all(line.startswith("frames[0] vehicle ") for line in err.splitlines() if line.strip())
     assert any(not v.ok for v in load_results(tmp_path / "r.json")[0].vehicles)
+
+
+# ------------------------------------------------------------------ a solution that fits its keypoints poorly
+def _poor_fit_scene():
+    """library_2cam at hard noise, seed 27, scene 49: a Honda Accord whose one-frame solution is turned by 179
+    degrees (one camera with three outliers and two swapped pairs), its keypoints fitting 2.3 times worse than their
+    sigmas."""
+    from vfactor.evaluation import NOISE_LEVELS, noise_variant
+    from vfactor.sim import simulate
+
+    sim = simulate(noise_variant(load_scenario("library_2cam"), **NOISE_LEVELS["hard"]), seed=27, num_frames=50)
+    return dataclasses.replace(sim.scene, frames=[sim.scene.frames[49]]), sim.truth[49]
+
+
+def test_a_solution_fitting_its_keypoints_poorly_is_not_called_converged(tmp_path, capsys):
+    from vfactor.metrics import pose_errors
+    from vfactor.scene import save_scene
+    from vfactor.schema import validate
+    from vfactor.solve import POOR_FIT_SCALE, solve_scene
+
+    scene, truth = _poor_fit_scene()
+    (vehicle,) = solve_scene(scene)[0].vehicles
+    assert vehicle.status == Status.POOR_FIT and vehicle.ok and vehicle.world_T_vehicle is not None
+    assert vehicle.extras["noise_scale"] >= POOR_FIT_SCALE
+    assert vehicle.message.startswith("poor fit: the keypoints fit 2.3 times worse than their sigmas")
+    errors = pose_errors(vehicle.world_T_vehicle, vehicle.keypoints_world, truth[vehicle.id].world_T_vehicle,
+                         truth[vehicle.id].keypoints_world)
+    assert errors["rotation_deg"] > 90.0  # the warning is deserved
+    # the CLI writes the estimate with its status, says so in one line, and exits 0 (it is solved)
+    save_scene(scene, tmp_path / "scene.json")
+    out = tmp_path / "r.json"
+    code, err = run_cli(capsys, "solve", str(tmp_path / "scene.json"), "--out", str(out))
+    assert code == EXIT_OK
+    assert one_line_error(err).startswith(f"frames[0] vehicle '{vehicle.id}': poor_fit: poor fit: the keypoints fit")
+    (read,) = load_results(out)[0].vehicles
+    assert read.status == Status.POOR_FIT and read.message == vehicle.message and read.world_T_vehicle is not None
+    validate(json.loads(out.read_text()), "result")
+
+
+def test_paper_like_noise_is_not_a_poor_fit():
+    from vfactor.evaluation import NOISE_LEVELS, noise_variant
+    from vfactor.sim import simulate
+    from vfactor.solve import solve_scene
+
+    sim = simulate(noise_variant(load_scenario("library_2cam"), **NOISE_LEVELS["paper"]), seed=27, num_frames=12)
+    statuses = {v.status for frame in solve_scene(sim.scene) for v in frame.vehicles}
+    assert statuses == {Status.CONVERGED}

@@ -30,7 +30,7 @@ from vfactor.vehicle_library import BODY_TYPES, vehicle_library
 
 __all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held_out_model", "held_out_scene_model",
            "compare_methods", "covariance_errors", "held_out_box_model", "true_box", "summarise_methods", "accuracy_table", "keypoint_table",
-           "body_type_table", "consistency_table",
+           "body_type_table", "consistency_table", "poor_fit_summary",
            "noise_variant", "run_accuracy", "compare_tracking", "tracking_table", "final_shape_errors",
            "shape_over_noise_draws", "shape_draws_table"]
 
@@ -231,6 +231,23 @@ def accuracy_table(summary: dict[str, dict], reference: str = "known_shape") -> 
             f"{s['keypoint_cm']:.2f} | {s['median_keypoint_cm']:.2f} | {ratio} | {1e3 * s['seconds']:.1f} |"
         )
     return "\n".join(lines)
+
+
+def poor_fit_summary(rows: dict[str, list[dict]], method: str = "factor_graph") -> str:
+    """One line: how many of ``method``'s estimates were reported ``poor_fit`` (:data:`vfactor.solve.POOR_FIT_SCALE`)
+    and their mean errors beside the others' (both are in the tables' means; a poor fit is not a failure)."""
+    solved = [r for r in rows.get(method, []) if "rotation_deg" in r]
+    poor = [r for r in solved if r.get("status") == "poor_fit"]
+    line = f"Reported poor_fit by {method}: {len(poor)} of {len(solved)}"
+    if not poor:
+        return line + "."
+    rest = [r for r in solved if r.get("status") != "poor_fit"]
+
+    def errors(rs):
+        return (f"{np.mean([r['rotation_deg'] for r in rs]):.1f} deg / {np.mean([r['translation_cm'] for r in rs]):.1f} "
+                f"cm (largest rotation {max(r['rotation_deg'] for r in rs):.1f} deg)")
+
+    return line + f"; their mean error {errors(poor)}" + (f", the others' {errors(rest)}." if rest else ".")
 
 
 def keypoint_table(summary: dict[str, dict]) -> str:

@@ -11,7 +11,7 @@ import numpy as np
 from vfactor.box import Box
 from vfactor.wireframe import Wireframe
 
-__all__ = ["Status", "VehicleResult", "FrameResult", "COVARIANCE_KINDS"]
+__all__ = ["Status", "VehicleResult", "FrameResult", "COVARIANCE_KINDS", "ESTIMATE_STATUSES"]
 
 #: What a track result's pose covariance comes from (``VehicleResult.extras["covariance"]``, the result file's
 #: ``pose_covariance_kind``): the frames up to its own, every frame of the track, or the fixed-lag window as it left it.
@@ -19,12 +19,23 @@ COVARIANCE_KINDS = ("filtered", "smoothed", "fixed_lag")
 
 
 class Status(str, enum.Enum):
-    """How a solve ended (the ``status`` field of the result file)."""
+    """How a solve ended (the ``status`` field of the result file).
+
+    ``converged`` and ``max_iterations`` (the optimiser's iteration limit) carry an estimate; so does ``poor_fit``:
+    the one-frame solve converged, but its keypoints fit far worse than their sigmas say (the estimated noise scale
+    at least :data:`vfactor.solve.POOR_FIT_SCALE`), so the estimate may be grossly wrong (a pose turned by tens of
+    degrees, a shape unlike the vehicle) and its covariance too narrow. ``degenerate`` and ``failed`` carry none.
+    """
 
     CONVERGED = "converged"
     MAX_ITERATIONS = "max_iterations"
+    POOR_FIT = "poor_fit"
     DEGENERATE = "degenerate"
     FAILED = "failed"
+
+
+#: The statuses that carry an estimate (a pose and a wireframe): :attr:`VehicleResult.ok`.
+ESTIMATE_STATUSES = (Status.CONVERGED, Status.MAX_ITERATIONS, Status.POOR_FIT)
 
 
 @dataclass
@@ -85,7 +96,8 @@ class VehicleResult:
 
     @property
     def ok(self) -> bool:
-        return self.status in (Status.CONVERGED, Status.MAX_ITERATIONS)
+        """Whether the result carries an estimate (status ``converged``, ``max_iterations`` or ``poor_fit``)."""
+        return self.status in ESTIMATE_STATUSES
 
     @property
     def keypoints_world(self) -> np.ndarray | None:

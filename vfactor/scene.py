@@ -62,7 +62,7 @@ from vfactor.jsonio import describe as _kind, is_int as _is_int, is_number as _i
 from vfactor.keypoints import NUM_KEYPOINTS
 from vfactor.label_swaps import SwapFinding
 from vfactor.observations import DEFAULT_VEHICLE_ID, UNASSIGNED, Detection, Frame, Scene, resolve_path
-from vfactor.result import COVARIANCE_KINDS, FrameResult, Status, VehicleResult
+from vfactor.result import COVARIANCE_KINDS, ESTIMATE_STATUSES, FrameResult, Status, VehicleResult
 from vfactor.wireframe import Wireframe
 
 __all__ = [
@@ -109,7 +109,6 @@ _VEHICLE_KEYS = (
     "detections",
     "swapped_keypoints",
 )
-_OK_STATUSES = (Status.CONVERGED, Status.MAX_ITERATIONS)
 #: Relative tolerance of the symmetry checks of covariance matrices.
 _SYMMETRY_RTOL = 1e-9
 #: keypoints_world must match world_T_vehicle * keypoints_vehicle to within this (metres).
@@ -800,7 +799,7 @@ def _vehicle_to_dict(v: VehicleResult, path: str) -> dict:
         status = Status(v.status)
     except ValueError:
         raise SceneError(f"{path}.status", f"expected one of {[s.value for s in Status]}, got {v.status!r}") from None
-    ok = status in _OK_STATUSES
+    ok = status in ESTIMATE_STATUSES
     if ok and (v.world_T_vehicle is None or v.wireframe is None):
         raise SceneError(f"{path}.world_T_vehicle", f"status {status.value!r} needs a pose and a wireframe, got None")
     out: dict[str, Any] = {"id": str(v.id)}
@@ -858,7 +857,7 @@ def _vehicle_from_dict(data, path: str) -> VehicleResult:
         raise SceneError(
             f"{path}.status", f"expected one of {', '.join(s.value for s in Status)}, got {_kind(status_value)}"
         )
-    ok = status in _OK_STATUSES
+    ok = status in ESTIMATE_STATUSES
     fields = (
         "world_T_vehicle",
         "keypoints_world",

@@ -38,7 +38,7 @@ __all__ = ["main", "build_parser", "EXIT_CODES", "EXIT_OK", "EXIT_INTERNAL", "EX
 
 #: Exit code -> meaning (the epilog of ``vfactor --help`` and docs/reliability.md).
 EXIT_CODES = {
-    EXIT_OK: "success: every vehicle solved",
+    EXIT_OK: "success: every vehicle solved (some may be reported poor_fit: solved, with a warning)",
     EXIT_INTERNAL: "internal error (a bug: run again with --debug for the traceback)",
     EXIT_INPUT: "bad input: a malformed scene, scenario, calibration or option (one line names the field)",
     EXIT_UNSOLVED: "some vehicles could not be solved: reported degenerate or failed (result file and stderr)",
@@ -120,7 +120,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Estimate every vehicle of every frame of SCENE on its own (Levenberg-Marquardt, robust to "
         "outlier keypoints and left/right swaps) and write RESULT with poses, wireframes, 3D boxes, covariances and a "
         "status per vehicle. A vehicle that cannot be solved is reported with status 'degenerate' or 'failed' and a "
-        "message; the others are still solved. Detections given as boxes in the frames' images go through the "
+        "message; the others are still solved. A vehicle whose keypoints fit at least twice worse than their sigmas "
+        "is reported 'poor_fit' with its estimate and a warning. Detections given as boxes in the frames' images go through the "
         "keypoint network first (needs torch). Scene format: docs/scene-format.md (vfactor schema prints its "
         "JSON Schema).",
     )

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from vfactor.errors import InputError
+from vfactor.result import Status
 from vfactor.sanity import one_line
 
 __all__ = ["EXIT_OK", "EXIT_INTERNAL", "EXIT_INPUT", "EXIT_UNSOLVED", "EXIT_INTERRUPTED", "configure_logging", "say",
@@ -139,11 +140,14 @@ def check_out_dir(path: Path) -> Path:
 
 
 def report_unsolved(results, scene, quiet: bool) -> int:
-    """Prints a line per vehicle that was not solved; returns the exit code (3 when any, else 0)."""
+    """Prints a line per vehicle that was not solved or fits its keypoints poorly (status ``poor_fit``: solved, with a
+    warning); returns the exit code (3 when any vehicle was not solved, else 0)."""
     code = EXIT_OK
     camera_index = {name: i for i, name in enumerate(scene.cameras)}
     for f, frame in enumerate(results):
         for v in frame.vehicles:
+            if v.status == Status.POOR_FIT:
+                say(f"frames[{f}] vehicle '{v.id}': {v.status.value}: {v.message}")
             if v.ok:
                 continue
             message = v.message

@@ -82,7 +82,7 @@ def _levels(text: str) -> tuple[str, ...]:
 def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper", "hard"), seeds: int = 1,
                  engine=None) -> list[str]:
     from vfactor.evaluation import (accuracy_table, body_type_table, consistency_table, keypoint_table, run_accuracy,
-                                    summarise_methods)
+                                    poor_fit_summary, summarise_methods)
 
     sections = []
     which = f"seed {seed}" if seeds == 1 else f"seeds {seed}-{seed + seeds - 1}"
@@ -93,7 +93,8 @@ def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper"
                  f"{n.missing_rate:.0%} missing, sigma {n.relative_sigma:.1%} of the box diagonal "
                  f"(x{n.occluded_factor:g} when self-occluded), {which}")
         sections.append(f"{title}\n\n{accuracy_table(summary)}\n\nPer body type (each vehicle solved with a "
-                        f"shape model learnt without it):\n\n{body_type_table(rows)}\n\nConsistency of the factor "
+                        f"shape model learnt without it):\n\n{body_type_table(rows)}\n\n{poor_fit_summary(rows)}\n\n"
+                        f"Consistency of the factor "
                         f"graph's covariances (NEES; consistent: 1.00x and 95 %):\n\n{consistency_table(rows)}\n\n"
                         f"Mean error per keypoint (cm):\n\n{keypoint_table(summary)}\n")
     return sections

@@ -505,8 +505,8 @@ def _refine(first, obs: KeypointObservations, options: SolveOptions, model: Shap
 #: this is reported ``poor_fit`` (:class:`~vfactor.result.Status`), not ``converged``. At hard noise (15 % outliers,
 #: 8 % swaps) on library_2cam seeds 0-8, 20-29 and 53-62 (2436 vehicles) 13 solutions reached it, 12 of them 9-179
 #: degrees off (the other 6; the median solution is 3 degrees off), and none of the other solutions was more than 30
-#: degrees off; at paper-like noise (3 %, 5 % outliers) none of 840 reached 1.4. A detector whose sigmas are half its real errors makes every
-#: vehicle a poor fit: its sigmas are wrong (docs/reliability.md).
+#: degrees off; at paper-like noise (3 %, 5 % outliers) none of 840 reached 1.4. A detector whose sigmas are half its
+#: real errors makes every vehicle a poor fit: its sigmas are wrong (docs/reliability.md).
 POOR_FIT_SCALE = 2.0
 
 

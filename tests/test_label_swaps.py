@@ -285,3 +285,20 @@ def test_a_camera_giving_one_label_twice_is_not_judged(sim):
     assert not any(f.camera == detections[0].camera for f in findings)
     np.testing.assert_array_equal(out.keypoint_index[obs.camera_index == obs.camera_index[0]],
                                   obs.keypoint_index[obs.camera_index == obs.camera_index[0]])
+
+
+def test_the_search_needs_two_cameras():
+    """One camera alone (library_tracks_2cam seed 10, frame 22, v2: ten keypoints, one swapped pair, one outlier):
+    swapped labels have no other view to be judged against, and searching them turned a solve the camera check
+    failed into a 'converged' estimate 129 degrees off. The search does not run for one camera."""
+    sim = simulate(load_scenario("library_tracks_2cam"), seed=10, num_frames=23)
+    frame = sim.scene.frames[22]
+    detections = frame.detections_of("v2")
+    assert len(detections) == 1
+    obs = observations_from_detections(detections, sim.scene.cameras)
+    result = solve_observations(obs, SolveOptions(), "v2", held_out_model(sim.truth[22]["v2"].preset))
+    assert "swap_hypotheses" not in result.extras
+    if result.ok:
+        errors = pose_errors(result.world_T_vehicle, result.keypoints_world, sim.truth[22]["v2"].world_T_vehicle,
+                             sim.truth[22]["v2"].keypoints_world)
+        assert errors["rotation_deg"] < 90.0 or result.status.value == "poor_fit", errors

@@ -88,7 +88,8 @@ class SolveOptions:
             or the detections' covariances) as they are.
         relabel_swaps: exchange the labels of each camera's left/right pairs that the first solution says are
             swapped, and solve again (:mod:`vfactor.label_swaps`); where the refined solution still fits its
-            keypoints worse than their sigmas (noise scale above :data:`SWAP_SEARCH_SCALE`), also solve for each
+            keypoints worse than their sigmas (noise scale above :data:`SWAP_SEARCH_SCALE`) and two or more cameras
+            see the vehicle, also solve for each
             suspect pair swapped and keep the swaps that lower the cost (:func:`_searched_swaps`). The result's
             ``extras["swapped_keypoints"]`` lists them.
         shape_information: keep the observations' information on the shape in
@@ -266,7 +267,8 @@ def solve_observations(
         except (RuntimeError, np.linalg.LinAlgError) as exc:
             extras = {"refinement": f"kept the first solve: {exc}"}
         else:
-            if options.relabel_swaps and extras["noise_scale"] > SWAP_SEARCH_SCALE:
+            if (options.relabel_swaps and extras["noise_scale"] > SWAP_SEARCH_SCALE
+                    and len(np.unique(nominal.camera_index)) >= 2):
                 best, obs, nominal, extras, found = _searched_swaps(best, obs, nominal, extras, prior, options, model,
                                                                     hints, keys, bounds, terms, hwc)
                 swaps = merge_findings(swaps, found)

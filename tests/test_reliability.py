@@ -516,3 +516,19 @@ def test_paper_like_noise_is_not_a_poor_fit():
     sim = simulate(noise_variant(load_scenario("library_2cam"), **NOISE_LEVELS["paper"]), seed=27, num_frames=12)
     statuses = {v.status for frame in solve_scene(sim.scene) for v in frame.vehicles}
     assert statuses == {Status.CONVERGED}
+
+
+def test_eval_says_how_many_poor_fits_and_how_far_off():
+    from vfactor.evaluation import poor_fit_summary
+
+    rows = {"factor_graph": [
+        {"status": "converged", "rotation_deg": 2.0, "translation_cm": 5.0, "pose_nees": 6.0},
+        {"status": "converged", "rotation_deg": 4.0, "translation_cm": 7.0, "pose_nees": 20.0},
+        {"status": "poor_fit", "rotation_deg": 90.0, "translation_cm": 60.0, "pose_nees": 900.0},
+        {"status": "failed"},
+    ]}
+    line = poor_fit_summary(rows)
+    assert line.startswith("Reported poor_fit by factor_graph: 1 of 3; their mean error 90.0 deg / 60.0 cm")
+    assert "the others' 3.0 deg / 6.0 cm (largest rotation 4.0 deg)" in line
+    assert "The others' pose NEES 2.17x, 50.0 % under" in line
+    assert poor_fit_summary({"factor_graph": rows["factor_graph"][:2]}) == "Reported poor_fit by factor_graph: 0 of 2."

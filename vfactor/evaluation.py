@@ -234,8 +234,9 @@ def accuracy_table(summary: dict[str, dict], reference: str = "known_shape") -> 
 
 
 def poor_fit_summary(rows: dict[str, list[dict]], method: str = "factor_graph") -> str:
-    """One line: how many of ``method``'s estimates were reported ``poor_fit`` (:data:`vfactor.solve.POOR_FIT_SCALE`)
-    and their mean errors beside the others' (both are in the tables' means; a poor fit is not a failure)."""
+    """One line: how many of ``method``'s estimates were reported ``poor_fit`` (:data:`vfactor.solve.POOR_FIT_SCALE`),
+    their mean errors beside the others', and the others' pose NEES (both are in the tables' means and NEES; a poor
+    fit is not a failure)."""
     solved = [r for r in rows.get(method, []) if "rotation_deg" in r]
     poor = [r for r in solved if r.get("status") == "poor_fit"]
     line = f"Reported poor_fit by {method}: {len(poor)} of {len(solved)}"
@@ -247,7 +248,12 @@ def poor_fit_summary(rows: dict[str, list[dict]], method: str = "factor_graph") 
         return (f"{np.mean([r['rotation_deg'] for r in rs]):.1f} deg / {np.mean([r['translation_cm'] for r in rs]):.1f} "
                 f"cm (largest rotation {max(r['rotation_deg'] for r in rs):.1f} deg)")
 
-    return line + f"; their mean error {errors(poor)}" + (f", the others' {errors(rest)}." if rest else ".")
+    line += f"; their mean error {errors(poor)}" + (f", the others' {errors(rest)}." if rest else ".")
+    nees = [r["pose_nees"] for r in rest if "pose_nees" in r]
+    if nees:
+        pose = nees_summary(nees, 6)
+        line += f" The others' pose NEES {pose['ratio']:.2f}x, {100 * pose['under_95']:.1f} % under the chi2 95 % bound."
+    return line
 
 
 def keypoint_table(summary: dict[str, dict]) -> str:

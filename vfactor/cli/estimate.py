@@ -13,6 +13,7 @@ from vfactor.cli.scenes import scene_jobs
 from vfactor.cli.stream import is_stream, track_stream_command
 from vfactor.cli.interop import name_file_pairs
 from vfactor.errors import InputError
+from vfactor.result import Status
 
 __all__ = ["solve", "track", "load_input", "associate", "write_output"]
 
@@ -139,9 +140,10 @@ def _solve_one(args, engine: _Engine) -> int:
     write_output(args, frames(), scene)
     vehicles = [v for fr in results for v in fr.vehicles]
     solved = sum(v.ok for v in vehicles)
+    poor = sum(v.status == Status.POOR_FIT for v in vehicles)
     if not args.quiet:
-        print(f"solved {solved} of {len(vehicles)} vehicles in {len(results)} frames "
-              f"({time.perf_counter() - t0:.2f} s); wrote {args.out}")
+        print(f"solved {solved} of {len(vehicles)} vehicles" + (f" ({poor} a poor fit)" if poor else "")
+              + f" in {len(results)} frames ({time.perf_counter() - t0:.2f} s); wrote {args.out}")
     return report_unsolved(results, scene, args.quiet)
 
 

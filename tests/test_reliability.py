@@ -492,7 +492,7 @@ def test_a_solution_fitting_its_keypoints_poorly_is_not_called_converged(tmp_pat
     scene, truth = _poor_fit_scene()
     (vehicle,) = solve_scene(scene)[0].vehicles
     assert vehicle.status == Status.POOR_FIT and vehicle.ok and vehicle.world_T_vehicle is not None
-    assert vehicle.extras["noise_scale"] >= POOR_FIT_SCALE
+    assert vehicle.extras["fit_noise_scale"] >= POOR_FIT_SCALE
     assert vehicle.message.startswith("poor fit: the keypoints fit 2.3 times worse than their sigmas")
     errors = pose_errors(vehicle.world_T_vehicle, vehicle.keypoints_world, truth[vehicle.id].world_T_vehicle,
                          truth[vehicle.id].keypoints_world)

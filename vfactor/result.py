@@ -65,7 +65,9 @@ class VehicleResult:
             probability; ``"noise_scale"``: the estimated pixel-noise scale
             (multiplies the detector's sigmas); ``"inlier_weights"``: (n,) robust-loss weight in
             [0, 1] of each observation, in the order of
-            :func:`vfactor.graph.observations_from_detections` (near 0: rejected);
+            :func:`vfactor.graph.observations_from_detections` (near 0: rejected; 0: left out of the fit);
+            ``"outliers_left_out"``: indices of the observations the one-frame solve left out as gross outliers
+            (docs/factors.md); ``"fit_noise_scale"``: the noise scale over every observation before that;
             ``"disagreeing_cameras"``: on a ``failed`` vehicle, the cameras whose keypoints the joint solve
             rejected while they agree among themselves (docs/reliability.md);
             ``"detections"``: the indices, in the frame's ``detections``, of the detections the vehicle was

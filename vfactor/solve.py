@@ -540,8 +540,9 @@ def _refitted_without_gross_outliers(refined, scaled: KeypointObservations, nomi
     :data:`REFIT_SCALE`), the observations beyond
     :data:`GROSS_OUTLIER_SIGMAS` of the solution (at the refined sigmas) are
     left out (none of a camera of which that would leave out more than half: a
-    camera at odds with the others is the camera check's to judge), LM runs from the refined solution, and the noise scale and the
-    body type are estimated again (:func:`_refine`). Not done with the loss
+    camera at odds with the others is the camera check's to judge), and the
+    rest solved again from the refined solution (:func:`_rerefined`: LM, then
+    the noise scale and the body type estimated again). Not done with the loss
     ``none`` (plain least squares, as asked).
 
     Returns:

@@ -188,9 +188,9 @@ def observations_from_detections(
         cameras=tuple(cameras.values()),
         camera_index=_stacked(cam_idx, (0,), int),
         keypoint_index=_stacked(kp_idx, (0,), int),
-        uv=_stacked(uv, (0, 2), float).reshape(-1, 2),
-        sqrt_information=_stacked(sqrt_info, (0, 2, 2), float).reshape(-1, 2, 2),
-        window=_stacked(window, (0, 4), float).reshape(-1, 4),
+        uv=_stacked(uv, (0, 2), float),
+        sqrt_information=_stacked(sqrt_info, (0, 2, 2), float),
+        window=_stacked(window, (0, 4), float),
         min_sigma=config.min_pixel_sigma,
         calibrated=calibrated if calibrated.any() else None,
     )

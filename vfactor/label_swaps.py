@@ -123,17 +123,11 @@ def relabel_swaps(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehic
     as_swapped = loss.rho(np.linalg.norm(whitened_residuals(mirrored, world_T_vehicle, vehicle_p_keypoints), axis=1))
     swap = np.zeros(len(obs), dtype=bool)
     findings = []
-    groups = obs.camera_index * len(LEFT_RIGHT_PAIRS) + _PAIR_OF[obs.keypoint_index]
-    for group in np.unique(groups):
-        rows = groups == group
-        if len(np.unique(obs.keypoint_index[rows])) != rows.sum():
-            continue  # the camera gave one label twice (two detections of it): no one-to-one swap to judge
+    for rows in _pairs(obs):
         gain = float(as_given[rows].sum() - as_swapped[rows].sum())
         if gain >= margin:
             swap |= rows
-            camera = int(group // len(LEFT_RIGHT_PAIRS))
-            findings.append(SwapFinding(obs.cameras[camera].name, LEFT_RIGHT_PAIRS[int(group % len(LEFT_RIGHT_PAIRS))],
-                                        int(rows.sum()), gain))
+            findings.append(_finding(obs, rows, gain))
     if not findings:
         return obs, []
     return obs.relabelled(np.where(swap, mirrored.keypoint_index, obs.keypoint_index)), findings
@@ -169,22 +163,31 @@ def suspect_pairs(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehic
     if len(obs) == 0:
         return []
     weights = loss.weight(np.linalg.norm(whitened_residuals(obs, world_T_vehicle, vehicle_p_keypoints), axis=1))
-    groups = obs.camera_index * len(LEFT_RIGHT_PAIRS) + _PAIR_OF[obs.keypoint_index]
-    out = []
-    for group in np.unique(groups[weights < weight]):
-        rows = groups == group
-        if len(np.unique(obs.keypoint_index[rows])) == rows.sum():
-            out.append(rows)
-    return out
+    return [rows for rows in _pairs(obs) if (weights[rows] < weight).any()]
 
 
 def swapped_rows(obs: KeypointObservations, rows: np.ndarray) -> tuple[KeypointObservations, SwapFinding]:
     """The observations with the labels of ``rows`` (one camera's pair, :func:`suspect_pairs`) exchanged, and the
     finding that says so (its ``gain`` 0 until the caller measures it)."""
+    finding = _finding(obs, rows, 0.0)
+    return apply_swaps(obs, [finding]), finding
+
+
+def _pairs(obs: KeypointObservations):
+    """Each (camera, left/right pair) the observations hold, as a boolean row mask, in camera then pair order; a
+    pair whose camera gave one label twice (two detections of it) is left out: no one-to-one swap to judge."""
+    groups = obs.camera_index * len(LEFT_RIGHT_PAIRS) + _PAIR_OF[obs.keypoint_index]
+    for group in np.unique(groups):
+        rows = groups == group
+        if len(np.unique(obs.keypoint_index[rows])) == rows.sum():
+            yield rows
+
+
+def _finding(obs: KeypointObservations, rows: np.ndarray, gain: float) -> SwapFinding:
+    """The finding that ``rows`` (one camera's pair, :func:`_pairs`) are swapped."""
     camera = int(obs.camera_index[rows][0])
-    pair = LEFT_RIGHT_PAIRS[int(_PAIR_OF[obs.keypoint_index[rows][0]])]
-    labels = np.where(rows, MIRROR_PERMUTATION[obs.keypoint_index], obs.keypoint_index)
-    return obs.relabelled(labels), SwapFinding(obs.cameras[camera].name, pair, int(rows.sum()), 0.0)
+    return SwapFinding(obs.cameras[camera].name, LEFT_RIGHT_PAIRS[int(_PAIR_OF[obs.keypoint_index[rows][0]])],
+                       int(rows.sum()), gain)
 
 
 def merge_findings(first: list[SwapFinding], then: list[SwapFinding]) -> list[SwapFinding]:

@@ -255,7 +255,7 @@ def solve_observations(
         )
     if best is None:
         return VehicleResult(vehicle_id, Status.FAILED, message=f"optimisation failed: {failure}")
-    swaps, as_given, left_out, fit_scale = [], obs, None, None
+    swaps, as_given, left_out, fit_scale, hypotheses = [], obs, None, None, None
     if options.relabel_swaps:
         best, obs, swaps = _relabelled(best, obs, options, first_prior, keys, bounds, terms, hwc)
     extras = {}
@@ -269,11 +269,11 @@ def solve_observations(
         else:
             if (options.relabel_swaps and extras["noise_scale"] > SWAP_SEARCH_SCALE
                     and len(np.unique(nominal.camera_index)) >= 2):
-                best, obs, nominal, extras, prior, found = _searched_swaps(best, obs, nominal, extras, prior, options,
-                                                                           model, hints, keys, bounds, terms, hwc)
+                best, obs, nominal, extras, prior, found, hypotheses = _searched_swaps(
+                    best, obs, nominal, extras, prior, options, model, hints, keys, bounds, terms, hwc)
                 swaps = merge_findings(swaps, found)
             fit_scale = extras["noise_scale"]  # how well every keypoint fits (the refit below fits those left)
-            if extras["noise_scale"] > REFIT_SCALE and options.graph.loss.name != "none":  # least squares asked: as it is
+            if fit_scale > REFIT_SCALE and options.graph.loss.name != "none":  # least squares asked: as it is
                 best, obs, nominal, extras, prior, left_out = _refitted_without_gross_outliers(
                     best, obs, nominal, extras, prior, options, model, hints, keys, bounds, terms, hwc)
     estimate, error, iterations, hit_limit, graph = best
@@ -295,6 +295,8 @@ def solve_observations(
     result.extras.update(extras)
     if fit_scale is not None:
         result.extras["fit_noise_scale"] = fit_scale
+    if hypotheses is not None:
+        result.extras["swap_hypotheses"] = hypotheses
     if swaps:
         result.extras["swapped_keypoints"] = swaps
     if left_out is None:
@@ -565,8 +567,6 @@ def _refitted_without_gross_outliers(refined, scaled: KeypointObservations, nomi
                                                             terms, hwc)
     except (RuntimeError, np.linalg.LinAlgError):
         return refined, scaled, nominal, extras, prior, None
-    if "swap_hypotheses" in extras:
-        more["swap_hypotheses"] = extras["swap_hypotheses"]
     return outcome, kept_scaled, kept, more, kept_prior, np.flatnonzero(~keep)
 
 
@@ -586,9 +586,9 @@ def _rerefined(refined, obs: KeypointObservations, options: SolveOptions, model:
 #: A solution whose estimated noise scale (the keypoints' residuals against their sigmas, :func:`_refine`; over every
 #: keypoint, before :func:`_refitted_without_gross_outliers` leaves any out: ``extras["fit_noise_scale"]``) is at
 #: least this is reported ``poor_fit`` (:class:`~vfactor.result.Status`), not ``converged``. At hard noise (15 %
-#: outliers, 8 % swaps) on library_2cam seeds 0-8, 20-29 and 53-62 (2436 vehicles) 13 solutions reached it, 12 of them 9-179
-#: degrees off (the other 6; the median solution is 3 degrees off), and none of the other solutions was more than 30
-#: degrees off; at paper-like noise (3 %, 5 % outliers) none of 840 reached 1.4. A detector whose sigmas are half its
+#: outliers, 8 % swaps) on library_2cam seeds 0-8, 20-29 and 53-62 (2436 vehicles) 13 solutions reached it, 12 of
+#: them 9-179 degrees off (the other 6; the median solution is 3 degrees off), and none of the other solutions was
+#: more than 30 degrees off; at paper-like noise (3 %, 5 % outliers) none of 840 reached 1.4. A detector whose sigmas are half its
 #: real errors makes every vehicle a poor fit: its sigmas are wrong (docs/reliability.md).
 POOR_FIT_SCALE = 2.0
 
@@ -625,8 +625,8 @@ def _searched_swaps(refined, scaled: KeypointObservations, nominal: KeypointObse
 
     Returns:
         (outcome, scaled observations, nominal observations, extras, the prior the outcome's graph holds, the swaps
-        found: each finding's ``gain`` the fall in cost). ``extras["swap_hypotheses"]`` counts the solves tried. When
-        no swap is kept, or the refinement after it fails numerically, the refined solution as it was.
+        found: each finding's ``gain`` the fall in cost, the number of solves tried). When no swap is kept, or the
+        refinement after it fails numerically, the refined solution as it was.
     """
     outcome, found, tried = refined, [], 0
     searched, searched_nominal = scaled, nominal
@@ -645,22 +645,21 @@ def _searched_swaps(refined, scaled: KeypointObservations, nominal: KeypointObse
                 continue
             gain = outcome[1] - candidate[1]
             if gain >= SWAP_MARGIN and (best is None or gain > best[0]):
-                best = (gain, rows, swapped, finding, candidate)
+                best = (gain, swapped, finding, candidate)
         if best is None:
             break
-        gain, rows, searched, finding, candidate = best
-        searched_nominal = swapped_rows(searched_nominal, rows)[0]
+        gain, searched, finding, candidate = best
+        searched_nominal = apply_swaps(searched_nominal, [finding])
         found = merge_findings(found, [dataclasses.replace(finding, gain=gain)])
         outcome = (candidate[0], candidate[1], outcome[2] + candidate[2], outcome[3] or candidate[3], candidate[4])
-    extras = dict(extras, swap_hypotheses=tried)
     if not found:
-        return refined, scaled, nominal, extras, prior, []
+        return refined, scaled, nominal, extras, prior, [], tried
     try:
         outcome, searched, more, searched_prior = _rerefined(outcome, searched_nominal, options, model, prior, hints,
                                                              keys, bounds, terms, hwc)
     except (RuntimeError, np.linalg.LinAlgError):
-        return refined, scaled, nominal, extras, prior, []
-    return outcome, searched, searched_nominal, dict(more, swap_hypotheses=tried), searched_prior, found
+        return refined, scaled, nominal, extras, prior, [], tried
+    return outcome, searched, searched_nominal, more, searched_prior, found, tried
 
 
 def _same_prior(a: ShapePrior, b: ShapePrior, mean_tol: float = 0.02, sigma_tol: float = 0.2) -> bool:

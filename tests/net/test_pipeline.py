@@ -205,7 +205,28 @@ def test_eval_images_tracks_a_multi_frame_scenario(rendered):
     assert set(evaluation["tracking"]["errors"]) == {"frame_by_frame", "isam2_online", "isam2", "isam2_lag", "batch"}
     isam2 = [r for r in evaluation["tracking"]["errors"]["isam2"] if "rotation_deg" in r]
     assert len(isam2) == 3 and np.mean([r["rotation_deg"] for r in isam2]) < 5.0
-    assert "Tracking from the network's keypoints" in images_report(evaluation)
+    report = images_report(evaluation)
+    assert "Tracking from the network's keypoints" in report
+    k = evaluation["keypoints"]  # the calibration check per body type: every detection counted in one class
+    assert set(k["by_body_type"]) and sum(g["d2_count"] for g in k["by_body_type"].values()) == k["d2_count"] > 0
+    assert 0.2 < k["d2_mean"] < 20.0 and "mean d2 of PCK-correct keypoints" in report
+
+
+def test_keypoint_accuracy_d2_is_the_mahalanobis_distance_of_the_pck_correct_keypoints():
+    """A 3-4-5 error under a covariance of 25 px^2 has d2 = 1; a keypoint beyond PCK@0.1 and one without a covariance
+    do not count; per class the figures of that class's detections alone."""
+    from vfactor.net.end_to_end import _accuracy
+
+    truth = np.zeros((2, 12, 2))
+    pred = truth.copy()
+    pred[:, :, 0], pred[:, :, 1] = 3.0, 4.0
+    pred[0, 0] = [50.0, 0.0]  # beyond 0.1 * 100 px: a PCK failure
+    cov = np.tile(25.0 * np.eye(2), (2, 12, 1, 1))
+    cov[1, 5] = np.nan  # no covariance
+    mask = np.ones((2, 12), dtype=bool)
+    out = _accuracy(pred, truth, mask, ~mask, np.array([100.0, 100.0]), cov)
+    assert out["d2_count"] == 22 and out["d2_mean"] == pytest.approx(1.0)
+    assert out["pck_visible"] == pytest.approx(23 / 24)
 
 
 def test_rendered_scenes_report_only_boxes_the_network_takes():

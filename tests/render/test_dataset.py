@@ -16,6 +16,7 @@ from vfactor.render.dataset import (
     roi_from_box,
     sample_rng,
 )
+from vfactor.vehicle_library import BODY_TYPES, library_ids, library_vehicle
 
 
 @pytest.fixture(scope="module")
@@ -59,11 +60,16 @@ def test_held_out_split_draws_other_shapes_colours_and_views(gl_context):
         m = s.meta
         assert m["split"] == "held_out"
         source = m["source"]
-        assert source in HELD_OUT.presets or int(source.split(":")[1]) in HELD_OUT.pascal_models
+        assert (source in HELD_OUT.presets or source in HELD_OUT.library_models
+                or int(source.split(":")[1]) in HELD_OUT.pascal_models)
         assert HELD_OUT.azimuth_ok(m["azimuth_deg"]) and not TRAIN.azimuth_ok(m["azimuth_deg"])
         assert HELD_OUT.elevation_ok(m["elevation_deg"]) and not TRAIN.elevation_ok(m["elevation_deg"])
     assert not set(HELD_OUT.presets) & set(TRAIN.presets)
     assert not set(HELD_OUT.pascal_models) & set(TRAIN.pascal_models)
+    assert not set(HELD_OUT.library_models) & set(TRAIN.library_models)
+    assert set(HELD_OUT.library_models) | set(TRAIN.library_models) == set(library_ids())
+    for split in (TRAIN, HELD_OUT):  # every body type in both halves of the library
+        assert {library_vehicle(v).body_type for v in split.library_models} == set(BODY_TYPES)
     assert TRAIN.hue_ok(5.0) and HELD_OUT.hue_ok(25.0) and not TRAIN.hue_ok(25.0)
 
 

@@ -23,31 +23,53 @@ from pathlib import Path
 
 import numpy as np
 
-from vfactor.evaluation import (accuracy_table, body_type_table, compare_methods, compare_tracking, consistency_table,
-                                summarise_methods, tracking_table)
+from vfactor.evaluation import (accuracy_table, body_type_of, body_type_table, compare_methods, compare_tracking,
+                                consistency_table, summarise_methods, tracking_table)
 from vfactor.net.evaluate import pck
 from vfactor.net.pipeline import detect_scene
 from vfactor.sim import load_scenario, simulate
+from vfactor.vehicle_library import BODY_TYPES
 from vfactor.solve import SolveOptions
 
-__all__ = ["evaluate_images", "keypoint_accuracy", "images_report"]
+__all__ = ["evaluate_images", "keypoint_accuracy", "calibration_table", "images_report", "network_saw"]
 
 
-def keypoint_accuracy(detected, rendered, crop_box) -> dict:
-    """Pixel accuracy of the network's keypoints on full camera images.
+def network_saw(model: str) -> bool:
+    """Whether the training split of the keypoint network (:data:`vfactor.render.dataset.TRAIN`, which the shipped
+    weights were trained on) draws the vehicle model ``model`` (a row's ``"preset"``: a preset name, a library id or
+    ``"pascal3d_<index>"``)."""
+    from vfactor.render.dataset import TRAIN
+
+    if model.startswith("pascal3d_"):
+        return int(model.split("_", 1)[1]) in TRAIN.pascal_models
+    return model in TRAIN.presets or model in TRAIN.library_models
+
+
+def _unseen(rows: dict[str, list[dict]]) -> dict[str, list[dict]]:
+    """``rows`` of the vehicles whose model the network never saw in training (:func:`network_saw`)."""
+    return {m: [r for r in v if not network_saw(r["preset"])] for m, v in rows.items()}
+
+
+def keypoint_accuracy(detected, rendered, crop_box, body_types=None) -> dict:
+    """Pixel accuracy of the network's keypoints on full camera images, and how well their covariances cover it.
 
     Args:
         detected: the scene after :func:`detect_scene`.
         rendered: the :class:`~vfactor.render.scenes.RenderedScene` (true keypoints and visibility).
         crop_box: callable ROI -> the box the detector crops (``KeypointDetector.crop_box``).
+        body_types: optional ``{(frame index, vehicle id): class}`` (e.g. the truth's body type): the same
+            figures per class under ``"by_body_type"``.
 
     Returns:
         ``pck_visible``, ``pck_self_occluded`` (PCK@0.1 of the crop's side, as in
         training), ``median_px_visible`` (pixels), ``median_rel_visible`` (fraction of
         the crop's side), counts ``visible``, ``self_occluded``, and ``missed``
-        (in-image keypoints the network found nothing for).
+        (in-image keypoints the network found nothing for); ``d2_mean`` and ``d2_count``: the mean squared
+        Mahalanobis distance ``e^T S^-1 e`` of the PCK-correct in-image keypoints under the detections' pixel
+        covariances ``S`` (image px^2; chi-square(2), mean 2, if they are calibrated; NaN without covariances).
+        With ``body_types``, ``by_body_type``: class -> those figures for its detections.
     """
-    pred, truth, vis, occ, sides = [], [], [], [], []
+    pred, truth, vis, occ, sides, cov, classes = [], [], [], [], [], [], []
     for f, frame in enumerate(detected.frames):
         for det in frame.detections:
             key = (det.camera, det.vehicle)
@@ -62,20 +84,57 @@ def keypoint_accuracy(detected, rendered, crop_box) -> dict:
             vis.append(visible)
             occ.append(inside & ~visible)
             sides.append(max(x1 - x0, y1 - y0))
-    pred, truth, vis, occ, sides = map(np.asarray, (pred, truth, vis, occ, sides))
+            cov.append(det.covariance if det.covariance is not None else np.full((len(uv), 2, 2), np.nan))
+            classes.append(None if body_types is None else body_types.get((f, det.vehicle)))
+    arrays = tuple(map(np.asarray, (pred, truth, vis, occ, sides, cov)))
+    out = _accuracy(*arrays)
+    if body_types is not None:
+        classes = np.array(classes, dtype=object)
+        out["by_body_type"] = {c: _accuracy(*(a[classes == c] for a in arrays))
+                               for c in dict.fromkeys(c for c in classes if c is not None)}
+    return out
+
+
+def _accuracy(pred, truth, vis, occ, sides, cov) -> dict:
+    """The figures of :func:`keypoint_accuracy` for stacked detections: (N, 12, 2) pixels, (N, 12) masks, (N,) crop
+    sides, (N, 12, 2, 2) covariances."""
     p_vis, n_vis = pck(pred, truth, vis, sides)
     p_occ, n_occ = pck(pred, truth, occ, sides)
-    dist = np.linalg.norm(pred - truth, axis=-1)
+    error = pred - truth
+    dist = np.linalg.norm(error, axis=-1)
     found = np.isfinite(dist)
+    correct = (vis | occ) & found & (np.where(found, dist, np.inf) <= 0.1 * sides[:, None])
+    correct &= np.all(np.isfinite(cov), axis=(-2, -1))
+    d2 = np.einsum("ni,nij,nj->n", error[correct], np.linalg.inv(cov[correct]), error[correct]) if correct.any() \
+        else np.zeros(0)
     return {
         "pck_visible": p_vis,
         "pck_self_occluded": p_occ,
-        "median_px_visible": float(np.median(dist[vis & found])),
-        "median_rel_visible": float(np.median((dist / sides[:, None])[vis & found])),
+        "median_px_visible": float(np.median(dist[vis & found])) if (vis & found).any() else float("nan"),
+        "median_rel_visible": float(np.median((dist / sides[:, None])[vis & found])) if (vis & found).any()
+        else float("nan"),
         "visible": n_vis,
         "self_occluded": n_occ,
         "missed": int(((vis | occ) & ~found).sum()),
+        "d2_mean": float(d2.mean()) if len(d2) else float("nan"),
+        "d2_count": int(len(d2)),
     }
+
+
+def calibration_table(keypoints: dict) -> str:
+    """Markdown, per body type, of :func:`keypoint_accuracy`'s ``by_body_type``: PCK, median error and the mean d2 of
+    the PCK-correct keypoints under their covariances (calibrated: 2)."""
+    lines = ["| body type | PCK@0.1 visible | PCK@0.1 self-occluded | median error of visible keypoints (% of crop) "
+             "| mean d2 of PCK-correct keypoints (calibrated: 2) | keypoints |", "| --- " * 6 + "|"]
+    groups = keypoints.get("by_body_type", {})
+    for c in [t for t in (*BODY_TYPES, "pascal3d") if t in groups] + [t for t in groups if t not in (*BODY_TYPES,
+                                                                                                    "pascal3d")]:
+        k = groups[c]
+        lines.append(f"| {c} | {k['pck_visible']:.3f} | {k['pck_self_occluded']:.3f} | "
+                     f"{100 * k['median_rel_visible']:.2f} | {k['d2_mean']:.2f} | {k['d2_count']} |")
+    lines.append(f"| all | {keypoints['pck_visible']:.3f} | {keypoints['pck_self_occluded']:.3f} | "
+                 f"{100 * keypoints['median_rel_visible']:.2f} | {keypoints['d2_mean']:.2f} | {keypoints['d2_count']} |")
+    return "\n".join(lines)
 
 
 def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, seed: int = 0, detector=None,
@@ -112,7 +171,9 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
         folder = Path(work_dir) if work_dir is not None else Path(tmp)
         rendered = render_simulation(sim, folder, seed=seed, progress=progress)
         detected = detect_scene(rendered.scene, detector, heatmaps_dir=folder / "heatmaps" if work_dir else None)
-    keypoints = keypoint_accuracy(detected, rendered, detector.crop_box)
+    body_types = {(f, vid): body_type_of(sim.truth[f][vid].preset) for f in range(len(sim.scene.frames))
+                  for vid in sim.truth[f]}
+    keypoints = keypoint_accuracy(detected, rendered, detector.crop_box, body_types)
     rows = compare_methods(dataclasses.replace(sim, scene=detected), options)
     rows["factor_graph_simulated_noise"] = compare_methods(sim, options, methods=("factor_graph",))["factor_graph"]
     tracked = sim.scenario.motion is not None
@@ -131,7 +192,9 @@ def images_report(evaluation: dict) -> str:
         f"{k['pck_self_occluded']:.3f} self-occluded or hidden ({k['self_occluded']}); median error of visible "
         f"keypoints {k['median_px_visible']:.1f} px ({100 * k['median_rel_visible']:.1f} % of the crop side); "
         f"{k['missed']} not found.\n\n"
-        f"{accuracy_table(evaluation['summary'])}\n\n"
+        + (f"The network's keypoints per body type, and how their calibrated covariances cover their errors:\n\n"
+           f"{calibration_table(k)}\n\n" if k.get("by_body_type") else "")
+        + f"{accuracy_table(evaluation['summary'])}\n\n"
         "factor_graph_simulated_noise: the factor graph on the simulator's keypoints (paper-like noise) of the "
         "same vehicles, for comparison with the network's keypoints.\n"
         + (f"\nPer body type, from the network's keypoints (each vehicle solved with a shape model learnt without "
@@ -139,6 +202,12 @@ def images_report(evaluation: dict) -> str:
            f"the network's keypoints and their heatmap covariances (NEES; consistent: 1.00x and 95 %):\n\n"
            f"{consistency_table(evaluation['rows'])}\n\nThe same from the simulator's keypoints:\n\n"
            f"{consistency_table(evaluation['rows'], 'factor_graph_simulated_noise')}\n" if evaluation.get("rows") else "")
+        + (f"\nThe vehicles whose model the network never saw in training (`vfactor.net.end_to_end.network_saw`: "
+           f"the held-out half of the vehicle library, the hatchback and SUV presets, PASCAL3D+ models 7-8), per "
+           f"body type:\n\n{body_type_table(_unseen(evaluation['rows']))}\n\nTheir covariances' consistency:\n\n"
+           f"{consistency_table(_unseen(evaluation['rows']))}\n"
+           if evaluation.get("rows") and any(not network_saw(r["preset"]) for r in evaluation["rows"]["factor_graph"])
+           else "")
         + (f"\nTracking from the network's keypoints:\n\n{tracking_table(evaluation['tracking'])}\n"
            if evaluation.get("tracking") else "")
     )

@@ -9,8 +9,10 @@ full-resolution image is ever drawn). All 12 keypoints are annotated, the
 self-occluded ones too, as the paper does.
 
 The held-out split (:data:`HELD_OUT`) uses shapes, colours and viewpoints that
-the training split (:data:`TRAIN`) never draws: other presets and other
-PASCAL3D+ models, and interleaved bins of paint hue / grey level, of the
+the training split (:data:`TRAIN`) never draws: other presets, other
+PASCAL3D+ models and the other half of the vehicle library's models
+(:func:`library_split`: every body type in both halves), and interleaved bins
+of paint hue / grey level, of the
 camera's azimuth around the vehicle and of its elevation angle (see
 :class:`SplitSpec`). Held-out viewpoints therefore lie between training
 viewpoints: the split tests interpolation to unseen views, not extrapolation to
@@ -46,11 +48,14 @@ from vfactor.render.mesh import (
 )
 from vfactor.render.renderer import Ground, Light, Renderer, VehicleInstance, keypoint_annotations, road_texture
 from vfactor.sim.rig import intrinsics_from_hfov, look_at
-from vfactor.sim.vehicles import footprint, footprints_overlap, road_pose, symmetrised, within_hwc_bounds
+from vfactor.sim.vehicles import (RandomShape, draw_vehicle, footprint, footprints_overlap, road_pose, symmetrised,
+                                  within_hwc_bounds)
+from vfactor.vehicle_library import BODY_TYPES, library_ids
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
 
 __all__ = [
     "SplitSpec",
+    "library_split",
     "TRAIN",
     "HELD_OUT",
     "SampleOptions",
@@ -80,7 +85,11 @@ class SplitSpec:
         name: "train" or "held_out" (free text for custom splits).
         presets: names in :data:`vfactor.wireframe.PRESETS` the split uses.
         pascal_models: indices (0-8) of the PASCAL3D+ models its random shapes start from.
-        preset_probability: chance that a vehicle is a preset rather than a random PASCAL3D+ shape.
+        preset_probability: chance that a vehicle is a preset rather than a random PASCAL3D+ shape (of the
+            vehicles that are not library ones).
+        library_models: ids of :mod:`vfactor.vehicle_library` vehicles the split uses (each with the simulator's
+            3 cm keypoint jitter, :func:`vfactor.sim.vehicles.draw_vehicle`).
+        library_probability: chance that a vehicle is one of ``library_models``.
         parity: 0 or 1: the bins (below) the split keeps: ``floor(value / bin) % 2 == parity``.
         hue_bin_deg: paint hue bins (degrees) for coloured paints.
         grey_bin: grey-level bins for achromatic paints (white, silver, grey, black).
@@ -93,6 +102,8 @@ class SplitSpec:
     presets: tuple
     pascal_models: tuple
     preset_probability: float = 0.35
+    library_models: tuple = ()
+    library_probability: float = 0.0
     parity: int = 0
     hue_bin_deg: float = 20.0
     grey_bin: float = 0.1
@@ -115,11 +126,22 @@ class SplitSpec:
         return self.keeps(elevation_deg, self.elevation_bin_deg)
 
 
-#: The training split: five presets (the paper's three cars, the pickup and the van) and PASCAL3D+ models 0-6.
+def library_split(parity: int) -> tuple[str, ...]:
+    """Half of the vehicle library's models: of each body type's ids (in the library's order), those at even
+    (``parity`` 0: the network's training half) or odd (1: its held-out half) positions."""
+    return tuple(v for t in BODY_TYPES for i, v in enumerate(library_ids(t)) if i % 2 == parity)
+
+
+#: The training split: five presets (the paper's three cars, the pickup and the van), PASCAL3D+ models 0-6 and half
+#: of the vehicle library (:func:`library_split` 0: 33 models, five or six of each body type), a library vehicle
+#: half of the time.
 TRAIN = SplitSpec("train", presets=("lincoln_mkz", "toyota_prius", "bmw_x5", "pickup", "van"),
-                  pascal_models=(0, 1, 2, 3, 4, 5, 6), parity=0)
-#: The held-out split: the hatchback and the SUV presets, PASCAL3D+ models 7-8, the other colour and view bins.
-HELD_OUT = SplitSpec("held_out", presets=("hatchback", "suv"), pascal_models=(7, 8), parity=1)
+                  pascal_models=(0, 1, 2, 3, 4, 5, 6), library_models=library_split(0), library_probability=0.5,
+                  parity=0)
+#: The held-out split: the hatchback and the SUV presets, PASCAL3D+ models 7-8, the library's other half, the other
+#: colour and view bins.
+HELD_OUT = SplitSpec("held_out", presets=("hatchback", "suv"), pascal_models=(7, 8), library_models=library_split(1),
+                     library_probability=0.5, parity=1)
 
 
 # --------------------------------------------------------------------------- options and samples
@@ -258,14 +280,18 @@ def crop_camera(camera: Camera, roi, size) -> Camera:
 
 
 def random_vehicle(rng: np.random.Generator, split: SplitSpec = TRAIN, max_tries: int = 50):
-    """A vehicle shape of the split: a preset, or a random PASCAL3D+ car (wheelbase 2.45-3.05 m, jittered).
+    """A vehicle shape of the split: a library vehicle, a preset, or a random PASCAL3D+ car (wheelbase 2.45-3.05 m,
+    jittered).
 
     Returns:
-        (wireframe, wheel_radius, source) where source is the preset name or ``"pascal3d:<index>"``.
+        (wireframe, wheel_radius, source) where source is the library id, the preset name or ``"pascal3d:<index>"``.
     """
     shapes = pascal3d_shapes()
     for _ in range(max_tries):
-        if split.presets and (not split.pascal_models or rng.uniform() < split.preset_probability):
+        if split.library_models and rng.uniform() < split.library_probability:
+            vehicle_id = split.library_models[rng.integers(len(split.library_models))]
+            wf, radius, source = draw_vehicle(vehicle_id, rng, RandomShape(jitter=0.03))
+        elif split.presets and (not split.pascal_models or rng.uniform() < split.preset_probability):
             name = split.presets[rng.integers(len(split.presets))]
             p = PRESETS[name]
             wf, radius, source = p.wireframe(), p.wheel_radius, name

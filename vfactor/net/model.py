@@ -64,7 +64,7 @@ WEIGHTS_FORMAT = "vfactor-stacked-hourglass"
 _WEIGHTS_VERSION = 1
 #: :func:`weights_digest` of the shipped weights (:func:`default_weights_path`), checked on every load of
 #: that file: update it (``weights_digest`` of the new file) when the shipped network is replaced.
-SHIPPED_WEIGHTS_SHA256 = "ec30efc20f58f4e7304158c74939fd6e2aceace201d88371e6e41c801153ae9c"
+SHIPPED_WEIGHTS_SHA256 = "69c352a8b59e73c206995d4bd8c223bc0652c13ac7bbfc8a5730296383e7fe46"
 #: The stem downsamples by this factor: heatmaps are ``input_size / STRIDE`` pixels.
 STRIDE = 4
 

@@ -41,6 +41,17 @@ def test_train_command_reports_bad_input(tmp_path, capsys):
     assert main(["train", "--data", str(tmp_path / "nothing"), "--out", str(tmp_path)]) == 2
     assert main(["train", "--data", str(tmp_path), "--epochs", "0", "--out", str(tmp_path)]) == 2
     assert "epochs" in capsys.readouterr().err
+    KeypointDataset(*blob_dataset(8, 32, seed=0)).save_npz(tmp_path / "train" / "shard_00000.npz")
+    assert main(["train", "--data", str(tmp_path / "train"), "--init", str(tmp_path / "none.pt"), "--out",
+                 str(tmp_path / "run")]) == 2
+    assert "--init" in capsys.readouterr().err
+    (tmp_path / "bad.pt").write_bytes(b"not weights")
+    assert main(["train", "--data", str(tmp_path / "train"), "--init", str(tmp_path / "bad.pt"), "--out",
+                 str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --init") and len(err.strip().splitlines()) == 1
+    assert main(["train", "--render", "2", "--library-share", "1.5", "--out", str(tmp_path / "run")]) == 2
+    assert "--library-share" in capsys.readouterr().err
 
 
 def test_detect_command_writes_keypoints_and_heatmaps(tmp_path, capsys):

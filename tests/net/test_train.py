@@ -115,3 +115,18 @@ def test_evaluate_a_model_that_outputs_the_truth():
     scores = evaluate_model(net, KeypointDataset(images, kp, vis, occ))
     assert scores["pck_visible"] == 1.0 and scores["pck_self_occluded"] == 1.0
     assert scores["n_visible"] == int(vis.sum())
+
+
+def test_fine_tuning_starts_from_the_given_weights(blobs, tmp_path):
+    data, val = blobs
+    first = train(TrainConfig(epochs=2, **TINY), data, val, out_dir=tmp_path / "a", progress=False)
+    # one epoch at a tiny learning rate stays near the start (the batch-norm statistics still move a little)
+    tuned = train(TrainConfig(epochs=1, **{**TINY, "lr": 1e-7}), data, val, out_dir=tmp_path / "b", progress=False,
+                  init_weights=first.weights_path)
+    fresh = train(TrainConfig(epochs=1, **{**TINY, "lr": 1e-7}), data, val, out_dir=tmp_path / "c", progress=False)
+    assert tuned.history[0]["val_loss"] < 0.9 * fresh.history[0]["val_loss"]
+    assert abs(tuned.history[0]["val_loss"] - first.history[-1]["val_loss"]) < 0.05 * first.history[-1]["val_loss"]
+    other = {**TINY, "channels": 8}
+    with pytest.raises(ValueError, match="init_weights.*architecture"):
+        train(TrainConfig(epochs=1, **other), data, out_dir=tmp_path / "d", progress=False,
+              init_weights=first.weights_path)

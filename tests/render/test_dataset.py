@@ -101,6 +101,21 @@ def test_dataset_round_trips_through_npz(gl_context, tmp_path):
     assert len(single) == 2 and np.array_equal(single.images[1], ds.images[3])
 
 
+def test_a_custom_split_draws_only_its_vehicles(gl_context, tmp_path):
+    from dataclasses import replace
+
+    from vfactor.render.dataset import TRAIN
+
+    library_only = replace(TRAIN, name="library_only", library_probability=1.0)
+    make_dataset(3, seed=4, size=32, path=tmp_path / "lib", split=library_only)
+    ds = load_dataset(tmp_path / "lib")
+    assert ds.info["split"] == "library_only" and ds.info["split_spec"]["library_probability"] == 1.0
+    assert all(m["source"] in TRAIN.library_models for m in ds.meta), [m["source"] for m in ds.meta]
+    no_library = replace(TRAIN, library_probability=0.0)
+    make_dataset(3, seed=4, size=32, path=tmp_path / "rest", split=no_library)
+    assert not any(m["source"] in TRAIN.library_models for m in load_dataset(tmp_path / "rest").meta)
+
+
 def test_command_line(gl_context, tmp_path, capsys):
     from vfactor.render.dataset import main
 

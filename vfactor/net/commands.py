@@ -95,6 +95,11 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
                        help=f"TrainConfig.{field}")
     p.add_argument("--optimizer", choices=("adam", "rmsprop"), dest="cfg_optimizer", help="TrainConfig.optimizer")
     p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in OUT")
+    p.add_argument("--init", metavar="WEIGHTS",
+                   help="start from these weights instead of random ones (fine-tuning; the architecture must match)")
+    p.add_argument("--library-share", type=float, metavar="P",
+                   help="the share of vehicle-library vehicles among the --render training crops (default: the "
+                   "training split's, 0.5); the rest are presets and PASCAL3D+ shapes")
     p.add_argument("--export", metavar="PATH",
                    help="also copy the weights to PATH: those of the epoch with the best validation PCK when there "
                    "are validation crops (OUT/weights_best.pt), else the final ones")
@@ -156,7 +161,7 @@ def run_train(args: argparse.Namespace) -> int:
     train_paths, val_paths = [Path(p) for p in args.data], [Path(p) for p in args.val]
     if args.render:
         train_paths.append(_render(out / "data" / "train", args.render, config.seed, S, False, args.render_workers,
-                                   not args.quiet))
+                                   not args.quiet, _training_split(args.library_share)))
     if args.render_val:
         val_paths.append(_render(out / "data" / "val", args.render_val, config.seed, S, True, args.render_workers,
                                  not args.quiet))
@@ -169,9 +174,11 @@ def run_train(args: argparse.Namespace) -> int:
         raise InputError("--data", "no training data: give --data, --render or --pascal3d")
     data = KeypointDataset.concatenate([p.resized(S) for p in parts])
     val = KeypointDataset.concatenate([_load(p, "--val", S).resized(S) for p in val_paths]) if val_paths else None
-    with _file_of("--resume"):  # a damaged checkpoint
+    if args.init is not None and not Path(args.init).is_file():
+        raise InputError("--init", f"{args.init}: no such weights file")
+    with _file_of("--init" if args.init is not None and not args.resume else "--resume"):  # a damaged file
         result = train(config, as_dataset(data), val, out_dir=out, resume=args.resume, progress=not args.quiet,
-                       device=args.device)
+                       device=args.device, init_weights=args.init)
     exported = result.best_weights_path or result.weights_path
     if args.export:
         dest = Path(args.export)
@@ -201,7 +208,21 @@ def _train_config(args):
         raise InputError("--config", str(exc)) from None
 
 
-def _render(path: Path, n: int, seed: int, size: int, held_out: bool, workers: int, verbose: bool) -> Path:
+def _training_split(library_share: float | None):
+    """The training split with ``library_share`` library vehicles (None: :data:`vfactor.render.dataset.TRAIN`)."""
+    if library_share is None:
+        return None
+    if not 0.0 <= library_share <= 1.0:
+        raise InputError("--library-share", f"expected a share in [0, 1], got {library_share}")
+    from dataclasses import replace  # noqa: PLC0415
+
+    from vfactor.render.dataset import TRAIN  # noqa: PLC0415
+
+    return replace(TRAIN, library_probability=float(library_share))
+
+
+def _render(path: Path, n: int, seed: int, size: int, held_out: bool, workers: int, verbose: bool,
+            split=None) -> Path:
     from vfactor.render import make_dataset  # noqa: PLC0415
 
     if any(path.glob("*.npz")):
@@ -210,7 +231,7 @@ def _render(path: Path, n: int, seed: int, size: int, held_out: bool, workers: i
         return path
     if verbose:
         print(f"rendering {n} {'held-out ' if held_out else ''}crops of {size} px into {path}", file=sys.stderr)
-    make_dataset(n, seed=seed, size=size, path=path, held_out=held_out, workers=workers)
+    make_dataset(n, seed=seed, size=size, path=path, held_out=held_out, workers=workers, split=split)
     return path
 
 

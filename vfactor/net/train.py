@@ -40,7 +40,8 @@ from vfactor.errors import check_numbers
 from vfactor.net.data import AugmentConfig, KeypointDataset, as_dataset, augment, sample_rng
 from vfactor.net.evaluate import decode_batch, score_predictions
 from vfactor.net.model import (
-    StackedHourglass, WeightsError, check_state_dict, count_parameters, read_torch_file, save_weights, weights_digest)
+    StackedHourglass, WeightsError, check_state_dict, count_parameters, load_weights, read_torch_file, save_weights,
+    weights_digest)
 from vfactor.net.targets import heatmap_targets, keypoint_weights
 from vfactor.progress import Progress
 
@@ -190,6 +191,7 @@ def train(
     resume: bool = False,
     progress: bool = True,
     device: str | torch.device | None = None,
+    init_weights: str | Path | None = None,
 ) -> TrainResult:
     """Trains the keypoint network; see the module docstring.
 
@@ -206,9 +208,16 @@ def train(
             and ``num_threads``); starts afresh when there is none.
         progress: show a progress bar and a line per epoch on stderr.
         device: "cuda", "cpu", ...; None: CUDA when available, else the CPU.
+        init_weights: a weights file (:func:`vfactor.net.model.load_weights`) to start from instead of random
+            weights, to fine-tune a trained network on other data; its architecture must be ``config``'s.
+            Ignored when resuming from a checkpoint.
 
     Returns:
         :class:`TrainResult`.
+
+    Raises:
+        ValueError: ``init_weights`` of another architecture than ``config``'s (or a damaged file:
+            :class:`vfactor.net.model.WeightsError`).
     """
     if not isinstance(config, TrainConfig):
         raise TypeError(f"config: expected a TrainConfig, got {type(config).__name__}")
@@ -229,6 +238,8 @@ def train(
         random.seed(config.seed)
         np_rng = np.random.default_rng(config.seed)
         model = StackedHourglass(**config.model_kwargs())
+        if init_weights is not None:
+            _start_from(model, init_weights, config)
         model.to(device)
         optimizer = _make_optimizer(config, model)
         history: list[dict] = []
@@ -283,6 +294,15 @@ def train(
         weights_path = save_weights(model, out / "weights.pt", _weights_meta(config, final))
         _write_history(out / "history.json", history)
     return TrainResult(model, history, weights_path, best_path, out)
+
+
+def _start_from(model: StackedHourglass, path, config: TrainConfig) -> None:
+    """Copies the weights of ``path`` into ``model`` (fine-tuning); the architectures must match."""
+    trained = load_weights(path)
+    if trained.config.to_dict() != model.config.to_dict():
+        raise ValueError(f"init_weights: {path} holds a network of another architecture ({trained.config.to_dict()}) "
+                         f"than the config's ({model.config.to_dict()})")
+    model.load_state_dict(trained.state_dict())
 
 
 def evaluate_model(model: StackedHourglass, dataset, config: TrainConfig | None = None, device=None,

@@ -760,6 +760,7 @@ def make_dataset(
     options: SampleOptions = SampleOptions(),
     progress=None,
     workers: int = 1,
+    split: SplitSpec | None = None,
 ) -> list[Path]:
     """Renders ``n`` samples into ``path/shard_XXXXX.npz`` files plus ``path/dataset.json``.
 
@@ -778,6 +779,9 @@ def make_dataset(
         progress: optional callable ``progress(done, n)``, called after every sample (``workers=1``)
             or every shard.
         workers: processes rendering shards in parallel (each opens its own OpenGL context).
+        split: a custom :class:`SplitSpec` to draw from (e.g. :data:`TRAIN` with another
+            ``library_probability``); None: :data:`TRAIN` or :data:`HELD_OUT` by ``held_out``. The samples'
+            random streams are still keyed by ``held_out``.
 
     Returns:
         The shard paths.
@@ -786,7 +790,8 @@ def make_dataset(
         raise ValueError(f"n >= 0, shard_size >= 1 and workers >= 1 expected, got {n}, {shard_size}, {workers}")
     out = Path(path)
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [(seed, held_out, size, options, start, min(n, start + shard_size), str(out / f"shard_{k:05d}.npz"))
+    split = (HELD_OUT if held_out else TRAIN) if split is None else split
+    jobs = [(seed, held_out, size, options, start, min(n, start + shard_size), str(out / f"shard_{k:05d}.npz"), split)
             for k, start in enumerate(range(0, n, shard_size))]
     shards = []
     if workers == 1 or len(jobs) <= 1:
@@ -816,8 +821,8 @@ def make_dataset(
         "n": n,
         "seed": seed,
         "size": size,
-        "split": (HELD_OUT if held_out else TRAIN).name,
-        "split_spec": asdict(HELD_OUT if held_out else TRAIN),
+        "split": split.name,
+        "split_spec": asdict(split),
         "options": asdict(options),
         "shards": [s.name for s in shards],
         "image_channels": "RGB",
@@ -829,10 +834,10 @@ def make_dataset(
 
 
 def _make_shard(job, tick=None) -> Path:
-    seed, held_out, size, options, start, stop, path = job
+    seed, held_out, size, options, start, stop, path, split = job
     samples = []
     for i in range(start, stop):
-        samples.append(random_training_sample(sample_rng(seed, i, held_out), size, held_out, options))
+        samples.append(random_training_sample(sample_rng(seed, i, held_out), size, held_out, options, split))
         if tick is not None:
             tick(i + 1 - start, stop - start)
     np.savez_compressed(path, **_stack(samples))

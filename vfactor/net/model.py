@@ -64,7 +64,7 @@ WEIGHTS_FORMAT = "vfactor-stacked-hourglass"
 _WEIGHTS_VERSION = 1
 #: :func:`weights_digest` of the shipped weights (:func:`default_weights_path`), checked on every load of
 #: that file: update it (``weights_digest`` of the new file) when the shipped network is replaced.
-SHIPPED_WEIGHTS_SHA256 = "69c352a8b59e73c206995d4bd8c223bc0652c13ac7bbfc8a5730296383e7fe46"
+SHIPPED_WEIGHTS_SHA256 = "cfd5e5a0bb527f6f0c65737f631821f434ef9e235d0ee0f1850e07c311fd7d95"
 #: The stem downsamples by this factor: heatmaps are ``input_size / STRIDE`` pixels.
 STRIDE = 4
 

@@ -10,6 +10,7 @@ whose covariances are calibrated against the detector's true errors
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -19,7 +20,8 @@ from vfactor.evaluation import NOISE_LEVELS, noise_variant
 from vfactor.graph import observations_from_detections
 from vfactor.scene import load_scene, save_scene
 from vfactor.sim import load_scenario, simulate
-from vfactor.solve import SolveOptions, solve_observations
+from vfactor.schema import validate
+from vfactor.solve import SolveOptions, detector_shape_variance, solve_observations
 
 
 def _vehicles(seed: int = 7, frames: int = 6):
@@ -91,10 +93,48 @@ def test_the_flag_round_trips_through_a_scene_file(tmp_path):
     assert [d.covariance_calibrated for d in back.frames[0].detections] == [j == 0 for j in range(len(dets))]
     text = (tmp_path / "scene.json").read_text()
     assert text.count('"covariances_calibrated"') == 1
+    assert validate(json.loads(text), "scene") == []  # the schema knows the flag too
     bad = text.replace('"covariances_calibrated": true', '"covariances_calibrated": "yes"')
     (tmp_path / "bad.json").write_text(bad)
     with pytest.raises(SceneError, match="covariances_calibrated"):
         load_scene(tmp_path / "bad.json")
+
+
+def test_a_detector_shape_error_round_trips_and_widens_only_the_shape(tmp_path):
+    """``Detection.shape_sigma``: written and read back (and valid under the schema); the solve is unchanged, the
+    shape and world keypoint covariances grow by ``1 / sum_c sigma_c^-2`` per axis, the pose covariance not."""
+    sim, f, vid = _vehicles(frames=1)[0]
+    frame = sim.scene.frames[0]
+    sigmas = [0.04, 0.08, 0.06][: len(frame.detections)]
+    dets = [dataclasses.replace(d, shape_sigma=s) for d, s in zip(frame.detections, sigmas)]
+    scene = dataclasses.replace(sim.scene, frames=[dataclasses.replace(frame, detections=dets)])
+    save_scene(scene, tmp_path / "scene.json")
+    text = (tmp_path / "scene.json").read_text()
+    assert validate(json.loads(text), "scene") == []
+    back = load_scene(tmp_path / "scene.json").frames[0].detections
+    assert [d.shape_sigma for d in back] == sigmas
+    for bad, match in (('"shape_sigma": -0.1', "shape_sigma"), ('"shape_sigma": "5 cm"', "shape_sigma")):
+        (tmp_path / "bad.json").write_text(text.replace('"shape_sigma": 0.04', bad))
+        with pytest.raises(SceneError, match=match):
+            load_scene(tmp_path / "bad.json")
+        assert validate(json.loads((tmp_path / "bad.json").read_text()), "scene") != []
+
+    config = SolveOptions().graph
+    plain = solve_observations(observations_from_detections(frame.detections_of(vid), sim.scene.cameras, config),
+                               SolveOptions(), vid)
+    obs = observations_from_detections([d for d in dets if d.vehicle == vid], sim.scene.cameras, config)
+    widened = solve_observations(obs, SolveOptions(), vid)
+    assert detector_shape_variance(observations_from_detections(frame.detections_of(vid), sim.scene.cameras,
+                                                                config)) == 0.0
+    seen_by = [s for d, s in zip(dets, sigmas) if d.vehicle == vid and np.any(d.confidence > 0)]
+    variance = 1.0 / sum(s ** -2 for s in seen_by)
+    assert detector_shape_variance(obs) == pytest.approx(variance)
+    assert widened.extras["detector_shape_sigma"] == pytest.approx(np.sqrt(variance))
+    np.testing.assert_allclose(widened.keypoints_world, plain.keypoints_world, atol=1e-9)
+    np.testing.assert_allclose(widened.pose_covariance, plain.pose_covariance, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(widened.keypoint_covariances_world,
+                               plain.keypoint_covariances_world + variance * np.eye(3), rtol=1e-9, atol=1e-12)
+    assert np.all(widened.box.size_sigma > plain.box.size_sigma)
 
 
 def test_each_keypoint_takes_its_own_covariance_or_the_confidence_sigma():

@@ -154,15 +154,15 @@ def observations_from_detections(
     The pixel noise of keypoint k is the detection's 2x2 covariance where one is
     given (marked ``calibrated`` when the detection says it is,
     ``Detection.covariance_calibrated``), else isotropic with sigma ``max(min_pixel_sigma, relative_pixel_sigma *
-    box_diagonal) / confidence``. With ``config.truncation``, a detection whose
-    camera has an ``image_size`` and whose seen keypoints all lie in the image
-    gets the image as its truncation window.
+    box_diagonal) / confidence``; each observation keeps its detection's ``shape_sigma``. With
+    ``config.truncation``, a detection whose camera has an ``image_size`` and whose seen keypoints all lie in
+    the image gets the image as its truncation window.
 
     Raises:
         InputError: a detection names a camera that is not in ``cameras``.
     """
     names = list(cameras)
-    cam_idx, kp_idx, uv, sqrt_info, window, calibrated = [], [], [], [], [], []
+    cam_idx, kp_idx, uv, sqrt_info, window, calibrated, shape_sigma = [], [], [], [], [], [], []
     for d in detections:  # each detection's seen keypoints as arrays (one NumPy pass per detection, not per keypoint)
         if d.camera not in cameras:
             raise InputError("camera", f"unknown camera {d.camera!r}; known: {', '.join(names)}")
@@ -178,12 +178,14 @@ def observations_from_detections(
             if given.any():
                 L[given] = np.swapaxes(np.linalg.cholesky(np.linalg.inv(d.covariance[seen][given])), 1, 2)
         calibrated.append(given & bool(d.covariance_calibrated))
+        shape_sigma.append(np.full(len(seen), float(d.shape_sigma or 0.0)))
         cam_idx.append(np.full(len(seen), names.index(d.camera)))
         kp_idx.append(seen)
         uv.append(d.keypoints[seen])
         sqrt_info.append(L)
         window.append(np.tile(edges if edges is not None else _NO_WINDOW, (len(seen), 1)))
     calibrated = _stacked(calibrated, (0,), bool)
+    shape_sigma = _stacked(shape_sigma, (0,), float)
     return KeypointObservations(
         cameras=tuple(cameras.values()),
         camera_index=_stacked(cam_idx, (0,), int),
@@ -193,6 +195,7 @@ def observations_from_detections(
         window=_stacked(window, (0, 4), float),
         min_sigma=config.min_pixel_sigma,
         calibrated=calibrated if calibrated.any() else None,
+        shape_sigma=shape_sigma if np.any(shape_sigma > 0) else None,
     )
 
 

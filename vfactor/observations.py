@@ -67,6 +67,12 @@ class Detection:
             applied; the scene's ``"covariances_calibrated"``). The result's covariances are then computed at
             no less than these covariances: the residuals' noise scale may widen them, never narrow them
             (docs/factors.md, "Covariances").
+        shape_sigma: optional standard deviation (metres, per axis) of the detector's error that is shaped like a
+            change of the vehicle's shape: the keypoints of one detection err together, as if the camera saw a
+            slightly other vehicle, so the fit takes the error into the shape and the residuals never show it
+            (the keypoint network's, calibrated with ``python -m vfactor.net calibrate-shape``; the scene's
+            ``"shape_sigma"``). The one-frame result's shape and keypoint covariances are widened by it
+            (docs/factors.md, "Covariances", item 6); None or 0: no such error.
     """
 
     camera: str
@@ -80,6 +86,7 @@ class Detection:
     vehicle_class: str | None = None
     track: str | None = None
     covariance_calibrated: bool = False
+    shape_sigma: float | None = None
 
     @property
     def seen(self) -> np.ndarray:

@@ -19,7 +19,7 @@ otherwise)::
 
     detection = {"camera", "vehicle"?, "keypoints"?: 12 x [u, v, confidence],
                  "keypoint_covariances"?: 12 x (null | 2x2), "covariances_calibrated"?: bool,
-                 "heatmaps"?: "x.npy",
+                 "shape_sigma"?: metres, "heatmaps"?: "x.npy",
                  "roi"?: [x0, y0, x1, y1], "class"?: "car" | "truck" | "bus" | body type}
 
 A detection gives ``keypoints``, or ``heatmaps`` with ``roi``, or only a
@@ -30,8 +30,11 @@ network then finds the keypoints, see :mod:`vfactor.net.pipeline`).
 positive-definite 2x2 pixel covariance (px^2), or null where unknown;
 ``covariances_calibrated`` (default false) says they are calibrated against the
 detector's true errors (the keypoint network's, as ``vfactor.net`` writes them),
-so the result's covariances are computed at no less than them. Optional
-fields may also be given as null, which means "absent".
+so the result's covariances are computed at no less than them; ``shape_sigma``
+(metres, default none) is the detector's error shaped like a change of the
+vehicle's shape, which widens the result's shape and keypoint covariances
+(:class:`vfactor.observations.Detection`). Optional fields may also be given as
+null, which means "absent".
 
 Paths (``heatmaps``, ``images``, ``calibration``) are relative to the scene file's
 folder (or to ``base_dir``); in memory they are held as absolute paths, and written
@@ -88,7 +91,7 @@ _CAMERA_KEYS = ("name", "model", "K", "dist", "image_size", "world_T_camera", "c
 _INTRINSIC_KEYS = ("model", "K", "dist")
 _FRAME_KEYS = ("t", "detections", "images")
 _DETECTION_KEYS = ("camera", "vehicle", "track", "keypoints", "keypoint_covariances", "covariances_calibrated",
-                   "heatmaps", "roi", "class")
+                   "shape_sigma", "heatmaps", "roi", "class")
 _RESULT_TOP_KEYS = ("frames",)
 _RESULT_FRAME_KEYS = ("t", "vehicles")
 _VEHICLE_KEYS = (
@@ -531,6 +534,12 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Fol
         raise SceneError(f"{path}.covariances_calibrated", f"expected true or false, got {_kind(calibrated)}")
     if calibrated and covariance is None:
         raise SceneError(f"{path}.covariances_calibrated", "true without 'keypoint_covariances'")
+    shape_sigma = det.get("shape_sigma")
+    if shape_sigma is not None:
+        if isinstance(shape_sigma, bool) or not isinstance(shape_sigma, (int, float)) or not math.isfinite(shape_sigma) \
+                or shape_sigma < 0:
+            raise SceneError(f"{path}.shape_sigma", f"expected a finite number of metres >= 0, got {shape_sigma!r}")
+        shape_sigma = float(shape_sigma)
 
     if det.get("keypoints") is not None:
         keypoints, confidence = _keypoints(det["keypoints"], f"{path}.keypoints")
@@ -568,6 +577,7 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Fol
         vehicle_class=vehicle_class,
         track=track,
         covariance_calibrated=calibrated,
+        shape_sigma=shape_sigma,
     )
     return detection, has_vehicle
 
@@ -680,6 +690,8 @@ def _detection_to_dict(det: Detection, path: str, scene_base: Path | None, out_b
             out["keypoint_covariances"] = blocks
             if det.covariance_calibrated:
                 out["covariances_calibrated"] = True
+    if det.shape_sigma:
+        out["shape_sigma"] = float(det.shape_sigma)
     if det.heatmaps is not None:
         out["heatmaps"] = _path_out(det.heatmaps, scene_base, out_base)
     if det.roi is not None:

@@ -54,7 +54,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["SolveOptions", "solve_vehicle", "solve_observations", "solve_frame", "solve_scene", "iter_solve_scene",
            "POOR_FIT_SCALE",
-           "pose_shape_covariance", "keypoint_covariances"]
+           "pose_shape_covariance", "keypoint_covariances", "detector_shape_variance"]
 
 
 @dataclass(frozen=True)
@@ -328,6 +328,10 @@ def solve_observations(
             if options.estimate_noise and options.graph.covariance_sandwich_weight > 0:
                 joint = _widened_by_residuals(joint, inflation, linear.at(0), options.graph.covariance_sandwich_weight,
                                               result.extras)
+            shape_variance = detector_shape_variance(obs)
+            if shape_variance > 0:  # the detectors' shape-like error, which no residual shows (item 6)
+                joint = joint + np.diag(np.r_[np.zeros(6), np.full(36, shape_variance)])
+                result.extras["detector_shape_sigma"] = float(np.sqrt(shape_variance))
             result.pose_covariance = joint[:6, :6].copy()
             result.keypoint_covariances_world = keypoint_covariances(joint, keys, world_T_vehicle, wireframe)
         except (RuntimeError, np.linalg.LinAlgError) as exc:
@@ -416,6 +420,24 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
     out = copy_graph(graph)
     out.replace(0, projection_factor(pose_key, layer_keys, obs.subset(inlier), RobustLoss("none")))
     return out, inflation
+
+
+def detector_shape_variance(obs: KeypointObservations) -> float:
+    """Variance (m^2, per axis of each body-frame keypoint) of a vehicle's shape from its detectors' errors shaped
+    like a change of shape (``Detection.shape_sigma``; docs/factors.md, "Covariances", item 6).
+
+    Each camera's detection errs by its own such error, and the fit averages the cameras' errors as it averages
+    their views: ``1 / sum_c sigma_c^-2`` over the cameras whose detection has a ``shape_sigma`` (a camera's
+    largest, if its observations differ); 0 where none has.
+    """
+    if obs.shape_sigma is None:
+        return 0.0
+    precision = 0.0
+    for c in np.unique(obs.camera_index):
+        sigma = float(np.max(obs.shape_sigma[obs.camera_index == c]))
+        if sigma > 0:
+            precision += sigma ** -2
+    return 1.0 / precision if precision > 0 else 0.0
 
 
 def _widened_by_residuals(joint: np.ndarray, inflation: float, projection: gtsam.GaussianFactor, weight: float,

@@ -4,7 +4,7 @@ This package holds the parser and the dispatch; each group of commands has its
 own module: :mod:`vfactor.cli.estimate` (solve, track), :mod:`vfactor.cli.simulation`
 (simulate, demo), :mod:`vfactor.cli.evaluate` (eval), :mod:`vfactor.cli.tools`
 (schema, plot), :mod:`vfactor.cli.interop` (import), :mod:`vfactor.cli.common` (checks and messages they share).
-The keypoint network's commands (train, detect, calibrate, score) are forwarded
+The keypoint network's commands (train, detect, calibrate, calibrate-shape, score) are forwarded
 to :mod:`vfactor.net.commands`, so that PyTorch is imported only for them.
 
 Options every command takes, before or after its name: ``--debug`` (tracebacks
@@ -71,6 +71,7 @@ NET_COMMANDS = {
     "train": "train the keypoint network (progress bar, checkpoints, resume, PCK per epoch); needs torch",
     "detect": "keypoints, confidences, covariances and heatmaps per vehicle box: IMAGE --roi X0 Y0 X1 Y1; needs torch",
     "calibrate": "fit the network's keypoint covariances to its errors on held-out crops; needs torch",
+    "calibrate-shape": "fit the network's error shaped like a change of shape on solved rendered scenes; needs torch",
     "score": "PCK@0.1 of network weights on crops with known keypoints; needs torch",
 }
 
@@ -390,7 +391,7 @@ def _guarded(command: str, run, debug: bool) -> int:
 
 
 def _net(argv: list[str], command: str) -> int:
-    """``vfactor train|detect|calibrate|score``: the keypoint network's commands (:mod:`vfactor.net.commands`).
+    """``vfactor train|detect|calibrate|calibrate-shape|score``: the keypoint network's commands (:mod:`vfactor.net.commands`).
 
     The options of every command are taken out of ``argv`` wherever they stand; ``-q`` is passed on as the
     network's ``--quiet`` (no progress bar) where the command has one.

@@ -63,6 +63,9 @@ class KeypointObservations:
         calibrated: optional (n,) bools: the observation's noise is calibrated against the
             detector's true errors (``Detection.covariance_calibrated``), so the covariances of
             the result are computed at no less than it; None: none is.
+        shape_sigma: optional (n,) metres: the detector's error shaped like a change of the
+            vehicle's shape, of the observation's detection (``Detection.shape_sigma``; 0: none);
+            None: no observation has one.
     """
 
     cameras: tuple[Camera, ...]
@@ -73,6 +76,7 @@ class KeypointObservations:
     window: np.ndarray | None = None
     min_sigma: float = 0.0
     calibrated: np.ndarray | None = None
+    shape_sigma: np.ndarray | None = None
 
     def __post_init__(self):
         n = len(self.camera_index)
@@ -82,6 +86,11 @@ class KeypointObservations:
             if np.shape(self.calibrated) != (n,):
                 raise ValueError(f"KeypointObservations.calibrated: expected shape ({n},), got {np.shape(self.calibrated)}")
             object.__setattr__(self, "calibrated", np.asarray(self.calibrated, dtype=bool))
+        if self.shape_sigma is not None:
+            sigma = np.asarray(self.shape_sigma, dtype=float)
+            if sigma.shape != (n,) or not np.all(np.isfinite(sigma)) or np.any(sigma < 0):
+                raise ValueError(f"KeypointObservations.shape_sigma: expected ({n},) finite metres >= 0")
+            object.__setattr__(self, "shape_sigma", sigma)
         if self.window is not None and np.shape(self.window) != (n, 4):
             raise ValueError(f"KeypointObservations.window: expected shape ({n}, 4), got {np.shape(self.window)}")
         # the compiled kernel reads these as they are: int64 keypoints, float64 pixels and information
@@ -146,7 +155,7 @@ class KeypointObservations:
         tables = {name: np.ascontiguousarray(getattr(self, name)[mask])
                   for name in ("camera_index", "keypoint_index", "uv", "sqrt_information", "_window_table",
                                "_sigma_table", "_R_cw", "_t_cw", "_intrinsics_table", "_lens_table", "_dist_table")}
-        tables.update({name: getattr(self, name)[mask] for name in ("window", "calibrated")
+        tables.update({name: getattr(self, name)[mask] for name in ("window", "calibrated", "shape_sigma")
                        if getattr(self, name) is not None})
         tables["_intrinsics"] = tuple(column[mask] for column in self._intrinsics)
         if self._fisheye is not False:

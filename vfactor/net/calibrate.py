@@ -96,16 +96,22 @@ class CovarianceCalibration:
         confidence_rate: growth of the whole covariance as the confidence
             drops (>= 0): a factor ``exp(confidence_rate * (1 - confidence))``,
             1 at confidence 1.
+        shape_sigma: metres (>= 0): the network's error shaped like a change of
+            the vehicle's shape, per detection (``Detection.shape_sigma``, which
+            the pipeline sets from it; fitted on solved rendered scenes by
+            :func:`vfactor.net.shape_error.fit_shape_sigma`). Not part of the
+            pixel covariances: :meth:`apply` and :attr:`is_identity` ignore it.
     """
 
     scale: float = 1.0
     floor: float = 0.0
     confidence_rate: float = 0.0
+    shape_sigma: float = 0.0
 
     def __post_init__(self):
         check_numbers("calibration", self, ("scale",))
-        check_numbers("calibration", self, ("floor", "confidence_rate"), strict=False)
-        for name in ("scale", "floor", "confidence_rate"):
+        check_numbers("calibration", self, ("floor", "confidence_rate", "shape_sigma"), strict=False)
+        for name in ("scale", "floor", "confidence_rate", "shape_sigma"):
             object.__setattr__(self, name, float(getattr(self, name)))
 
     @property

@@ -1,0 +1,77 @@
+"""The network's shape-like error: the fit recovers a known one, the command fits and writes it, the pipeline sets it."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from vfactor.net.calibrate import CovarianceCalibration, write_calibration  # noqa: E402
+from vfactor.net.commands import main  # noqa: E402
+from vfactor.net.infer import KeypointDetector, default_weights_path  # noqa: E402
+from vfactor.net.shape_error import VehicleErrors, fit_shape_sigma, keypoint_nees_at  # noqa: E402
+
+
+def synthetic_vehicles(shape_sigma: float, n: int = 400, seed: int = 0) -> list[VehicleErrors]:
+    """Vehicles whose keypoint errors are drawn from their covariance plus ``shape_sigma^2 / cameras``."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        A = rng.normal(0.0, 0.03, (12, 3, 3))
+        cov = A @ np.swapaxes(A, 1, 2) + 1e-4 * np.eye(3)
+        cameras = 2 + i % 2
+        true = cov + shape_sigma ** 2 / cameras * np.eye(3)
+        error = np.einsum("kij,kj->ki", np.linalg.cholesky(true), rng.normal(size=(12, 3)))
+        out.append(VehicleErrors(error, cov, cameras, "sedan"))
+    return out
+
+
+def test_the_fit_recovers_a_known_shape_error():
+    vehicles = synthetic_vehicles(0.05)
+    assert np.mean(keypoint_nees_at(vehicles, 0.0)) > 3.5
+    sigma = fit_shape_sigma(vehicles)
+    assert sigma == pytest.approx(0.05, rel=0.1)
+    assert np.mean(keypoint_nees_at(vehicles, sigma)) == pytest.approx(3.0, abs=1e-6)
+    assert fit_shape_sigma(synthetic_vehicles(0.0)) < 0.01  # consistent keypoints need (almost) none
+    with pytest.raises(ValueError, match="no solved vehicles"):
+        fit_shape_sigma([])
+    with pytest.raises(ValueError, match="still leaves"):
+        fit_shape_sigma(synthetic_vehicles(0.05), upper=0.001)
+
+
+def test_calibrate_shape_command_fits_and_writes_and_the_pipeline_uses_it(tmp_path, capsys):
+    weights = tmp_path / "keypoints.pt"
+    shutil.copy(default_weights_path(), weights)
+    write_calibration(weights, CovarianceCalibration(**{**KeypointDetector(weights).calibration.to_dict(),
+                                                        "shape_sigma": 0.0}))
+    code = main(["calibrate-shape", "--weights", str(weights), "--scenario", "library_2cam", "--seed", "7",
+                 "--seeds", "1", "--frames", "3", "--write"])
+    assert code == 0
+    out = capsys.readouterr()
+    assert "| all | 3 |" in out.out and "written to" in out.err
+    printed = float(out.out.split("shape_sigma ", 1)[1].split(" m", 1)[0])
+    calibration = KeypointDetector(weights).calibration
+    assert calibration.shape_sigma == pytest.approx(printed, abs=1e-4) and 0.0 <= calibration.shape_sigma < 0.5
+    assert calibration.scale == KeypointDetector(default_weights_path()).calibration.scale  # the pixels' is kept
+    write_calibration(weights, CovarianceCalibration(**{**calibration.to_dict(), "shape_sigma": 0.05}))
+    from vfactor.net.pipeline import detect_scene
+    from vfactor.render.scenes import render_simulation
+    from vfactor.sim import load_scenario, simulate
+
+    sim = simulate(load_scenario("library_2cam"), seed=7, num_frames=1)
+    rendered = render_simulation(sim, tmp_path / "render", seed=7)
+    detected = detect_scene(rendered.scene, KeypointDetector(weights))
+    assert {d.shape_sigma for d in detected.frames[0].detections} == {0.05}
+
+
+def test_calibrate_shape_command_reports_bad_input(tmp_path, capsys):
+    assert main(["calibrate-shape", "--weights", str(tmp_path / "none.pt")]) == 2
+    assert "--weights" in capsys.readouterr().err
+    assert main(["calibrate-shape", "--seeds", "0"]) == 2
+    assert "--seeds" in capsys.readouterr().err
+    assert main(["calibrate-shape", "--scenario", "no_such_scenario", "--seeds", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --scenario") and len(err.strip().splitlines()) == 1

@@ -69,6 +69,7 @@ def test_detect_command_writes_keypoints_and_heatmaps(tmp_path, capsys):
     assert [d["roi"] for d in entry["detections"]] == [[10, 5, 42, 37], [30, 10, 70, 50]]
     d = entry["detections"][0]
     assert len(d["keypoints"]) == 12 and len(d["confidence"]) == 12 and np.shape(d["covariance"]) == (12, 2, 2)
+    assert d["covariance_calibrated"] is False and d["shape_sigma"] is None  # these weights carry no calibration
     with np.load(tmp_path / "h.npz") as z:
         assert z["heatmaps"].shape == (2, 12, 8, 8) and z["image_index"].tolist() == [0, 0]
 

@@ -293,6 +293,9 @@ def run_detect(args: argparse.Namespace) -> int:
                 "keypoints": _nan_to_none(kp.uv),
                 "confidence": _nan_to_none(kp.confidence),
                 "covariance": _nan_to_none(kp.covariance),
+                # what a scene's detection takes as "covariances_calibrated" and "shape_sigma"
+                "covariance_calibrated": not detector.calibration.is_identity,
+                "shape_sigma": detector.calibration.shape_sigma or None,
             })
             heatmaps.append(d.heatmaps)
             rois.append(roi)

@@ -29,7 +29,7 @@ from vfactor.solve import SolveOptions, solve_observations
 from vfactor.vehicle_library import BODY_TYPES, vehicle_library
 
 __all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held_out_model", "held_out_scene_model",
-           "compare_methods", "covariance_errors", "held_out_box_model", "true_box", "summarise_methods", "accuracy_table", "keypoint_table",
+           "compare_methods", "covariance_errors", "held_out_box_model", "solve_held_out", "true_box", "summarise_methods", "accuracy_table", "keypoint_table",
            "body_type_table", "consistency_table", "poor_fit_summary",
            "noise_variant", "run_accuracy", "compare_tracking", "tracking_table", "final_shape_errors",
            "shape_over_noise_draws", "shape_draws_table"]
@@ -106,8 +106,7 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
             for method in methods:
                 t0 = time.perf_counter()
                 if method == "factor_graph":
-                    result = solve_observations(obs, dataclasses.replace(options, box_model=held_out_box_model(
-                        truth.preset)), vid, held_out_model(truth.preset), hints=hints)
+                    result = solve_held_out(obs, truth.preset, options, vid, hints)
                 elif method == "car_prior":
                     result = solve_observations(obs, car_options, vid, default_shape_prior(), car_hwc_bounds())
                 elif method == "triangulation":
@@ -125,6 +124,15 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
                     row.update(covariance_errors(result, truth))
                 rows[method].append(row)
     return rows
+
+
+def solve_held_out(obs, model: str, options: SolveOptions = SolveOptions(), vehicle_id: str = "vehicle",
+                   hints: tuple[str, ...] = ()):
+    """The factor graph's one-frame solve of a simulated vehicle of model ``model`` (a library id, preset name or
+    ``pascal3d_<index>``) with the shape model and box offsets learnt without it (:func:`held_out_model`,
+    :func:`held_out_box_model`)."""
+    return solve_observations(obs, dataclasses.replace(options, box_model=held_out_box_model(model)), vehicle_id,
+                              held_out_model(model), hints=hints)
 
 
 def held_out_box_model(model: str) -> BoxModel:

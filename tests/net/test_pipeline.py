@@ -167,6 +167,33 @@ def test_cli_eval_images(rendered, tmp_path, capsys):
     assert "Tracking" not in text  # accuracy_2cam's frames hold new vehicles each: nothing to track
 
 
+def test_cli_eval_images_evaluates_the_given_weights(rendered, tmp_path, capsys):
+    """--weights: another network's keypoints (here the shipped one without its error of the shape: the same
+    estimates, narrower keypoint covariances); a bad file or another experiment is named bad input."""
+    from vfactor.net.calibrate import CovarianceCalibration, write_calibration
+    from vfactor.net.infer import default_weights_path
+
+    weights = tmp_path / "no_shape_error.pt"
+    shutil.copy(default_weights_path(), weights)
+    calibration = KeypointDetector(weights).calibration
+    write_calibration(weights, CovarianceCalibration(**{**calibration.to_dict(), "shape_sigma": 0.0}))
+    texts = []
+    for extra in ([], ["--weights", str(weights)]):
+        md = tmp_path / f"images{len(extra)}.md"
+        assert main(["eval", "images", "--frames", "2", "--seed", "4", "--markdown", str(md), *extra]) == 0
+        texts.append(md.read_text())
+    fg = [next(line for line in t.splitlines() if line.startswith("| factor_graph | 2 |")) for t in texts]
+    assert fg[0].split("|")[:-2] == fg[1].split("|")[:-2]  # the same errors (the last column is the time)
+    nees = [t.split("Consistency of the factor graph's covariances from the network", 1)[1].split("The same", 1)[0]
+            for t in texts]
+    assert nees[0] != nees[1]
+    capsys.readouterr()
+    assert main(["eval", "images", "--weights", str(tmp_path / "none.pt")]) == 2
+    assert "--weights" in capsys.readouterr().err
+    assert main(["eval", "frames", "--weights", str(weights)]) == 2
+    assert "--weights" in capsys.readouterr().err
+
+
 def test_lens_distortion_end_to_end(rendered, detector, tmp_path):
     """Barrel-distorted cameras: rendered with the distortion, keypoints found in the distorted image, the
     projection factors undo it."""

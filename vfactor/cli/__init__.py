@@ -280,6 +280,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lag", type=float, default=0.5,
                    help="tracks: the fixed lag of the isam2_lag row, seconds (default: 0.5)")
     p.add_argument("--markdown", help="also write the tables to this Markdown file")
+    p.add_argument("--weights", help="images: keypoint-network weights to evaluate (default: the shipped weights)")
     _scale_options(p, "frames, tracks, association: spread the simulated scenes (one per noise level and seed) over")
     return parser
 

@@ -25,6 +25,8 @@ def evaluate(args) -> int:
         raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
     if args.levels is not None and args.experiment not in ("frames", "association"):
         raise InputError("--levels", f"eval {args.experiment} has no noise levels (frames and association have)")
+    if args.weights is not None and args.experiment != "images":
+        raise InputError("--weights", f"eval {args.experiment} uses no keypoint network (eval images does)")
     if args.experiment in ("images", "paper") and (args.workers is not None or args.scheduler is not None):
         raise InputError("--workers" if args.workers is not None else "--scheduler",
                          f"eval {args.experiment} runs in this process (frames, tracks and association take a cluster)")
@@ -42,7 +44,7 @@ def evaluate(args) -> int:
                 sections = _eval_association(args.scenario, frames, args.seed, args.seeds, engine,
                                              _levels(args.levels) if args.levels else (None,))
     elif args.experiment == "images":
-        sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed)
+        sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed, args.weights)
     else:
         if args.scenario:
             raise InputError("--scenario", "the paper comparison uses its own scenario (paper_webots)")
@@ -100,12 +102,17 @@ def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper"
     return sections
 
 
-def _eval_images(scenario_name: str, frames, seed: int) -> list[str]:
+def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = None) -> list[str]:
     try:
         from vfactor.net.end_to_end import evaluate_images, images_report
+        from vfactor.net.infer import KeypointDetector
     except ImportError as exc:
         raise missing_extra("images", exc, "net,render") from None
-    return [images_report(evaluate_images(scenario_name, frames, seed, progress=progress("rendering")))]
+    try:
+        detector = KeypointDetector(weights)
+    except Exception as exc:  # noqa: BLE001 - any failure to read the weights file is bad input
+        raise InputError("--weights", str(exc)) from None
+    return [images_report(evaluate_images(scenario_name, frames, seed, detector, progress=progress("rendering")))]
 
 
 def _eval_association(scenario_name, frames, seed: int, seeds: int, engine=None, levels=(None,)) -> list[str]:

@@ -429,8 +429,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
         check = {g: {"n": after[g]["found"], "d2_median_before": before[g]["d2_median"],
                      "d2_median": after[g]["d2_median"], "within_95": after[g]["within_95"]}
                  for g in ("visible", "self_occluded", "all")}
-        stored = KeypointDetector(weights, device=args.device).calibration  # its shape_sigma is kept
-        with _file_of("--weights"):
+        stored = CovarianceCalibration.from_metadata(detector.metadata) or CovarianceCalibration()
+        with _file_of("--weights"):  # calibrate-shape's shape_sigma, already stored, is kept
             write_calibration(weights, replace(chosen, shape_sigma=stored.shape_sigma), {f"{METADATA_KEY}_check": {
                 "data": [str(v) for v in args.val], "fit": "even-numbered crops", "checked": "odd-numbered crops",
                 **check}})

@@ -31,7 +31,8 @@ from vfactor.sim import load_scenario, simulate
 from vfactor.vehicle_library import BODY_TYPES
 from vfactor.solve import SolveOptions
 
-__all__ = ["evaluate_images", "keypoint_accuracy", "calibration_table", "images_report", "network_saw"]
+__all__ = ["evaluate_images", "render_and_detect", "keypoint_accuracy", "calibration_table", "images_report",
+           "network_saw"]
 
 
 def network_saw(model: str) -> bool:
@@ -137,6 +138,35 @@ def calibration_table(keypoints: dict) -> str:
     return "\n".join(lines)
 
 
+def render_and_detect(scenario: str, seed: int, frames: int | None = None, detector=None,
+                      work_dir: str | Path | None = None, progress=None):
+    """Simulates a scenario, renders its camera images and finds the keypoints in the vehicles' boxes.
+
+    Args:
+        scenario: packaged scenario name or file (cameras need ``image_size``).
+        seed: the simulation's and the rendering's seed.
+        frames: number of frames (default: the scenario's).
+        detector: a :class:`~vfactor.net.infer.KeypointDetector`; None: the shipped weights.
+        work_dir: folder for the images, the scene file and the heatmaps; None: a temporary folder, removed
+            afterwards.
+        progress: called with ``(images rendered, images total)``.
+
+    Returns:
+        ``(simulation, rendered scene, detected scene, detector)``: the detected scene holds the network's
+        keypoints in place of the boxes.
+    """
+    from vfactor.net.infer import KeypointDetector
+    from vfactor.render.scenes import render_simulation
+
+    detector = detector or KeypointDetector()
+    sim = simulate(load_scenario(scenario), seed=seed, num_frames=frames)
+    with tempfile.TemporaryDirectory(prefix="vfactor_eval_images_") as tmp:
+        folder = Path(work_dir) if work_dir is not None else Path(tmp)
+        rendered = render_simulation(sim, folder, seed=seed, progress=progress)
+        detected = detect_scene(rendered.scene, detector, heatmaps_dir=folder / "heatmaps" if work_dir else None)
+    return sim, rendered, detected, detector
+
+
 def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, seed: int = 0, detector=None,
                     work_dir: str | Path | None = None, options: SolveOptions = SolveOptions(),
                     progress=None) -> dict:
@@ -162,15 +192,7 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
         its frames); without motion every frame holds new vehicles and there is
         nothing to track.
     """
-    from vfactor.net.infer import KeypointDetector
-    from vfactor.render.scenes import render_simulation
-
-    detector = detector or KeypointDetector()
-    sim = simulate(load_scenario(scenario), seed=seed, num_frames=frames)
-    with tempfile.TemporaryDirectory(prefix="vfactor_eval_images_") as tmp:
-        folder = Path(work_dir) if work_dir is not None else Path(tmp)
-        rendered = render_simulation(sim, folder, seed=seed, progress=progress)
-        detected = detect_scene(rendered.scene, detector, heatmaps_dir=folder / "heatmaps" if work_dir else None)
+    sim, rendered, detected, detector = render_and_detect(scenario, seed, frames, detector, work_dir, progress)
     body_types = {(f, vid): body_type_of(sim.truth[f][vid].preset) for f in range(len(sim.scene.frames))
                   for vid in sim.truth[f]}
     keypoints = keypoint_accuracy(detected, rendered, detector.crop_box, body_types)

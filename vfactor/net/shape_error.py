@@ -24,14 +24,14 @@ stores the result in the weights' calibration
 from __future__ import annotations
 
 import dataclasses
-import tempfile
 from dataclasses import dataclass
 
 import numpy as np
 
-from vfactor.evaluation import held_out_box_model, held_out_model
+from vfactor.evaluation import body_type_of, solve_held_out
 from vfactor.graph import observations_from_detections
-from vfactor.solve import SolveOptions, solve_observations
+from vfactor.net.end_to_end import render_and_detect
+from vfactor.solve import SolveOptions
 
 __all__ = ["VehicleErrors", "measure_vehicles", "fit_shape_sigma", "keypoint_nees_at"]
 
@@ -56,7 +56,8 @@ class VehicleErrors:
 def measure_vehicles(scenario: str, seeds, detector=None, options: SolveOptions = SolveOptions(),
                      frames: int | None = None, progress=None) -> list[VehicleErrors]:
     """Renders the scenes of ``scenario`` for each seed, finds the keypoints with the network and solves every
-    vehicle (each with the shape model learnt without it), without any shape error of the detector.
+    vehicle (each with the shape model learnt without it, :func:`vfactor.evaluation.solve_held_out`), without any
+    shape error of the detector.
 
     Args:
         scenario: packaged scenario name or file (cameras need ``image_size``).
@@ -69,27 +70,16 @@ def measure_vehicles(scenario: str, seeds, detector=None, options: SolveOptions 
     Returns:
         The vehicles solved with covariances.
     """
-    from vfactor.evaluation import body_type_of
-    from vfactor.net.infer import KeypointDetector
-    from vfactor.net.pipeline import detect_scene
-    from vfactor.render.scenes import render_simulation
-    from vfactor.sim import load_scenario, simulate
-
-    detector = detector or KeypointDetector()
     out = []
     for seed in seeds:
-        sim = simulate(load_scenario(scenario), seed=int(seed), num_frames=frames)
-        with tempfile.TemporaryDirectory(prefix="vfactor_shape_error_") as tmp:
-            rendered = render_simulation(sim, tmp, seed=int(seed), progress=progress)
-            detected = detect_scene(rendered.scene, detector)
+        sim, _, detected, detector = render_and_detect(scenario, int(seed), frames, detector, progress=progress)
         for f, frame in enumerate(detected.frames):
             for vid in frame.vehicle_ids():
                 truth = sim.truth[f][vid]
                 detections = [dataclasses.replace(d, shape_sigma=None) for d in frame.detections_of(vid)]
                 obs = observations_from_detections(detections, detected.cameras, options.graph)
-                result = solve_observations(
-                    obs, dataclasses.replace(options, box_model=held_out_box_model(truth.preset)), vid,
-                    held_out_model(truth.preset), hints=tuple(d.vehicle_class for d in detections if d.vehicle_class))
+                result = solve_held_out(obs, truth.preset, options, vid,
+                                        tuple(d.vehicle_class for d in detections if d.vehicle_class))
                 if not result.ok or result.keypoint_covariances_world is None:
                     continue
                 out.append(VehicleErrors(np.asarray(result.keypoints_world) - np.asarray(truth.keypoints_world),
@@ -101,11 +91,12 @@ def measure_vehicles(scenario: str, seeds, detector=None, options: SolveOptions 
 def keypoint_nees_at(vehicles: list[VehicleErrors], shape_sigma: float) -> np.ndarray:
     """(N, 12) keypoint NEES of each vehicle with its covariances widened by a detector shape error of
     ``shape_sigma`` metres per camera (``shape_sigma^2 / cameras`` per axis)."""
-    out = np.empty((len(vehicles), 12))
-    for i, v in enumerate(vehicles):
-        widened = v.covariance + (shape_sigma ** 2 / max(v.cameras, 1)) * np.eye(3)
-        out[i] = np.einsum("ki,kij,kj->k", v.error, np.linalg.inv(widened), v.error)
-    return out
+    if not vehicles:
+        return np.zeros((0, 12))
+    error = np.stack([v.error for v in vehicles])
+    cameras = np.array([max(v.cameras, 1) for v in vehicles], dtype=float)
+    widened = np.stack([v.covariance for v in vehicles]) + (shape_sigma ** 2 / cameras)[:, None, None, None] * np.eye(3)
+    return np.einsum("nki,nki->nk", error, np.linalg.solve(widened, error[..., None])[..., 0])
 
 
 def fit_shape_sigma(vehicles: list[VehicleErrors], target: float = 3.0, upper: float = 1.0) -> float:

@@ -9,6 +9,7 @@ The functions here are also the API for adding vehicles to a graph of your own
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -40,6 +41,8 @@ __all__ = [
     "observations_from_detections",
     "add_shape_factors",
     "add_observation_factor",
+    "detector_shape_sigmas",
+    "detector_offset_prior",
     "add_ground_factor",
     "ground_factor",
     "insert_vehicle_values",
@@ -285,10 +288,48 @@ def add_observation_factor(
     vehicle: int = 0,
     frame: int = 0,
     config: GraphConfig = GraphConfig(),
+    offsets: Mapping[str, int] | None = None,
 ) -> None:
-    """Adds the keypoint projection factor of one vehicle in one frame (no-op without observations)."""
-    if len(observations):
-        graph.add(projection_factor(keys.pose_key(vehicle, frame), keys.layer_keys(vehicle), observations, config.loss))
+    """Adds the keypoint projection factor of one vehicle in one frame (no-op without observations).
+
+    Args:
+        offsets: camera name -> key of the detector shape offset (36-vector) of that camera's keypoints
+            (a track's, docs/factors.md "The detector's shape offset in tracks"): each such camera's keypoints
+            get their own factor, which adds the offset to the shape; the other cameras' share one factor.
+    """
+    if not len(observations):
+        return
+    pose_key, layer_keys = keys.pose_key(vehicle, frame), keys.layer_keys(vehicle)
+    shared = np.ones(len(observations), dtype=bool)
+    for c, camera in enumerate(observations.cameras):
+        rows = observations.camera_index == c
+        if offsets and camera.name in offsets and rows.any():
+            graph.add(projection_factor(pose_key, layer_keys, observations.subset(rows), config.loss,
+                                        offset_key=offsets[camera.name]))
+            shared &= ~rows
+    if shared.all():
+        graph.add(projection_factor(pose_key, layer_keys, observations, config.loss))
+    elif shared.any():
+        graph.add(projection_factor(pose_key, layer_keys, observations.subset(shared), config.loss))
+
+
+def detector_shape_sigmas(observations: KeypointObservations) -> dict[str, float]:
+    """Camera name -> the ``shape_sigma`` (metres) of its detection of the vehicle, for the cameras whose
+    detection has one (a camera's largest, if its observations differ); empty where none has."""
+    if observations.shape_sigma is None:
+        return {}
+    out = {}
+    for c in np.unique(observations.camera_index):
+        sigma = float(np.max(observations.shape_sigma[observations.camera_index == c]))
+        if sigma > 0:
+            out[observations.cameras[c].name] = sigma
+    return out
+
+
+def detector_offset_prior(offset_key: int, sigma: float) -> gtsam.NonlinearFactor:
+    """The prior of a detector shape offset (:func:`add_observation_factor`'s ``offsets``): zero, with ``sigma``
+    metres on each of its 36 coordinates (the detection's ``shape_sigma``)."""
+    return gtsam.PriorFactorVector(offset_key, np.zeros(36), gtsam.noiseModel.Isotropic.Sigma(36, sigma))
 
 
 def add_ground_factor(

@@ -3,11 +3,14 @@
 Every variable is a ``gtsam.Symbol``: a character and an index. The default
 scheme uses ``x`` for vehicle poses (``world_T_vehicle``, one per vehicle per
 frame) and ``w``, ``l``, ``r`` for the wheel, light and roof shape layers (one
-12-vector each per vehicle, shared by all frames of its track). Choose other
-characters when those collide with a graph of your own.
+12-vector each per vehicle, shared by all frames of its track), and ``o`` for
+a track's detector shape offsets (a 36-vector per camera that sees it, where
+the detections carry a ``shape_sigma``). Choose other characters when those
+collide with a graph of your own.
 
 Index layout: a pose of vehicle ``v`` in frame ``f`` has index
-``v * frame_stride + f``; a layer of vehicle ``v`` has index ``v``.
+``v * frame_stride + f``; a layer of vehicle ``v`` has index ``v``; offset
+``j`` of vehicle ``v`` has index ``v * frame_stride + j``.
 """
 
 from __future__ import annotations
@@ -30,22 +33,27 @@ class KeyScheme:
         wheel: character of the wheel layer (12-vector, body frame, metres).
         light: character of the light layer.
         roof: character of the roof layer.
-        frame_stride: pose index = vehicle * frame_stride + frame.
+        offset: character of a track's detector shape offsets (36-vectors, body frame, metres; one per
+            camera that sees the track, where its detections carry a ``shape_sigma``).
+        frame_stride: pose index = vehicle * frame_stride + frame (and offset index = vehicle *
+            frame_stride + offset number).
     """
 
     pose: str = "x"
     wheel: str = "w"
     light: str = "l"
     roof: str = "r"
+    offset: str = "o"
     frame_stride: int = 1_000_000
 
     def __post_init__(self):
-        chars = (self.pose, self.wheel, self.light, self.roof)
-        for name, c in zip(("pose", "wheel", "light", "roof"), chars):
+        names = ("pose", "wheel", "light", "roof", "offset")
+        chars = tuple(getattr(self, name) for name in names)
+        for name, c in zip(names, chars):
             if not isinstance(c, str) or len(c) != 1:
                 raise ValueError(f"KeyScheme.{name}: expected a single character, got {c!r}")
-        if len(set(chars)) != 4:
-            raise ValueError(f"KeyScheme: the four characters must differ, got {chars}")
+        if len(set(chars)) != len(chars):
+            raise ValueError(f"KeyScheme: the five characters must differ, got {chars}")
         if not isinstance(self.frame_stride, int) or self.frame_stride < 1:
             raise ValueError(f"KeyScheme.frame_stride: expected a positive integer, got {self.frame_stride!r}")
 
@@ -54,6 +62,13 @@ class KeyScheme:
         if not 0 <= frame < self.frame_stride:
             raise ValueError(f"frame: expected 0 <= frame < {self.frame_stride}, got {frame}")
         return gtsam.symbol(self.pose, vehicle * self.frame_stride + frame)
+
+    def offset_key(self, vehicle: int = 0, number: int = 0) -> int:
+        """Key of a vehicle's detector shape offset number ``number`` (a track numbers its offsets as it makes
+        them: one per camera, a new one where the smoother has marginalised the camera's previous one)."""
+        if not 0 <= number < self.frame_stride:
+            raise ValueError(f"number: expected 0 <= number < {self.frame_stride}, got {number}")
+        return gtsam.symbol(self.offset, vehicle * self.frame_stride + number)
 
     def layer_key(self, layer: str, vehicle: int = 0) -> int:
         """Key of one shape layer ("wheel", "light" or "roof") of a vehicle."""

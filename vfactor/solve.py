@@ -30,6 +30,7 @@ from vfactor.graph import (
     GraphConfig,
     build_vehicle_graph,
     copy_graph,
+    detector_shape_sigmas,
     hwc_factor,
     hwc_residuals,
     hwc_terms,
@@ -430,13 +431,7 @@ def detector_shape_variance(obs: KeypointObservations) -> float:
     their views: ``1 / sum_c sigma_c^-2`` over the cameras whose detection has a ``shape_sigma`` (a camera's
     largest, if its observations differ); 0 where none has.
     """
-    if obs.shape_sigma is None:
-        return 0.0
-    precision = 0.0
-    for c in np.unique(obs.camera_index):
-        sigma = float(np.max(obs.shape_sigma[obs.camera_index == c]))
-        if sigma > 0:
-            precision += sigma ** -2
+    precision = sum(sigma ** -2 for sigma in detector_shape_sigmas(obs).values())
     return 1.0 / precision if precision > 0 else 0.0
 
 

@@ -37,6 +37,8 @@ from vfactor.factors.robust import RobustLoss
 from vfactor.graph import (
     add_observation_factor,
     add_shape_factors,
+    detector_offset_prior,
+    detector_shape_sigmas,
     ground_factor,
     hwc_factor,
     hwc_terms,
@@ -102,6 +104,13 @@ class TrackOptions:
             1e-4 reaches it (within 0.4 cm on tracks_3cam and tracks_3veh, seeds
             0-4) at about 1.3x the time per frame.
         covariance: compute each pose's marginal covariance.
+        detector_offsets: give each camera's detections of a track their own shape offset (a 36-vector
+            variable with the detections' ``shape_sigma`` as its prior; detections without one get none): the
+            model of a detector whose errors repeat from frame to frame, shaped like a change of the vehicle's
+            shape (docs/factors.md, "The detector's shape offset in tracks"). Off by default: from the keypoint
+            network's detections with three cameras it makes rotations better and the poses' covariances
+            much nearer their errors, translations somewhat worse; with two cameras of little overlap it makes
+            tracks worse (docs/results.md, "Tracking from images").
         optimizer: iSAM2's step: ``"dogleg"`` (Powell's dogleg, a trust region;
             the default, as Gauss-Newton steps can diverge when a weakly
             constrained track is suddenly well seen) or ``"gn"`` (Gauss-Newton).
@@ -117,6 +126,7 @@ class TrackOptions:
     update_tolerance: float = 1e-4
     relinearize_threshold: float = 1e-4
     covariance: bool = True
+    detector_offsets: bool = False
     optimizer: str = "dogleg"
     dogleg_delta: float = 1.0
 
@@ -164,7 +174,8 @@ class _TrackState:
     # while the track is young (fewer than _REANCHOR_FRAMES frames seen by two cameras) its observations and
     # motion factors are kept, so that it can be re-solved by Levenberg-Marquardt (see Tracker._reanchor)
     young: bool = False
-    # (frame index, observations at nominal sigmas, motion factors, the frame solved alone or None)
+    # (frame index, observations at nominal sigmas, motion factors, the frame solved alone or None,
+    # camera name -> the detector shape offset's key of its keypoints)
     young_frames: list = field(default_factory=list)
     multiview_frames: int = 0  # frames two cameras saw
     reanchored: bool = False
@@ -177,10 +188,16 @@ class _TrackState:
     jumps: list = field(default_factory=list)  # (frame index, t, what) of each jump beyond the motion model
     # (frame index, id) -> the final result of each pose of the segments the track ended (Tracker._retire)
     retired: dict = field(default_factory=dict)
+    # the detector shape offsets of the smoother (docs/factors.md): camera name -> its current offset's key, and
+    # each offset key -> its prior's sigma (metres); offsets_made numbers the keys (KeyScheme.offset_key)
+    offsets: dict = field(default_factory=dict)
+    offset_sigmas: dict = field(default_factory=dict)
+    offsets_made: int = 0
 
     def restart(self) -> None:
         """Drops the smoother and the young-track state: the track starts again from its next solvable frame."""
         self.smoother, self.poses, self.hwc_added, self.young, self.young_frames = None, [], False, False, []
+        self.offsets, self.offset_sigmas = {}, {}
 
 
 def frame_order(scene: Scene) -> list[int]:
@@ -372,22 +389,54 @@ class Tracker:
             track.swaps[key] = first.extras["swapped_keypoints"]
         motion, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         _add_pose_factors(motion, track.poses, key, t, self.options)
-        track.young, track.young_frames = True, [(frame_index, obs, motion, first)]
+        track.offsets, track.offset_sigmas = {}, {}
+        offsets = self._offsets(track, obs, values, gtsam.Values())
+        track.young, track.young_frames = True, [(frame_index, obs, motion, first, offsets)]
         insert_vehicle_values(values, self.keys, first.world_T_vehicle, first.wireframe, track.index, frame_index)
-        stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}}
+        stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}, **{k: t for k in offsets.values()}}
         track.smoother.update(self._young_graph(track), values, stamps)
         track.poses.append((frame_index, t, key))
         track.multiview_frames, track.reanchored = int(_camera_count(obs) >= 2), False
         return self._finish(track, key, t)
 
+    def _offsets(self, track: _TrackState, obs: KeypointObservations, values: gtsam.Values,
+                 estimate: gtsam.Values, graph: gtsam.NonlinearFactorGraph | None = None) -> dict[str, int]:
+        """Camera name -> the key of the detector shape offset of its keypoints in this frame, for the cameras
+        whose detections carry a ``shape_sigma`` (docs/factors.md, "The detector's shape offset in tracks").
+
+        A camera keeps its offset while the smoother holds it (``estimate``); a camera new to the track, or whose
+        offset the fixed lag has marginalised, gets a new one: zero in ``values``, and its prior in ``graph``
+        (a young track's graph adds the priors itself, :meth:`_young_graph`).
+        """
+        out = {}
+        if not self.options.detector_offsets:
+            return out
+        for name, sigma in detector_shape_sigmas(obs).items():
+            key = track.offsets.get(name)
+            if key is None or not (estimate.exists(key) or values.exists(key)):
+                key = self.keys.offset_key(track.index, track.offsets_made)
+                track.offsets_made += 1
+                track.offsets[name], track.offset_sigmas[key] = key, sigma
+                values.insert(key, np.zeros(36))
+                if graph is not None:
+                    graph.add(detector_offset_prior(key, sigma))
+            out[name] = key
+        return out
+
     def _young_graph(self, track: _TrackState) -> gtsam.NonlinearFactorGraph:
-        """A young track's whole graph: shape factors (its prior), each frame's keypoints (its noise scale) and motion."""
+        """A young track's whole graph: shape factors (its prior), each frame's keypoints (its noise scale, its
+        cameras' detector shape offsets and their priors) and motion."""
         config = self.options.solve.graph
         graph = gtsam.NonlinearFactorGraph()
         add_shape_factors(graph, self.keys, track.index, config, track.prior, self.bounds)
-        for frame_index, obs, motion, _ in track.young_frames:
-            add_observation_factor(graph, self.keys, obs.scaled(track.noise_scale), track.index, frame_index, config)
+        used = set()
+        for frame_index, obs, motion, _, offsets in track.young_frames:
+            add_observation_factor(graph, self.keys, obs.scaled(track.noise_scale), track.index, frame_index, config,
+                                   offsets)
             graph.push_back(motion)
+            used.update(offsets.values())
+        for key in sorted(used):
+            graph.add(detector_offset_prior(key, track.offset_sigmas[key]))
         if track.hwc_added:
             graph.add(hwc_factor(self.keys, track.index, terms=self._terms))
         return graph
@@ -419,24 +468,26 @@ class Tracker:
             return
         # every young frame solved alone (once): the first time its start, every time the type and noise scale
         options = dataclasses.replace(self.options.solve, covariance=False, shape_information=True)
-        for i, (frame_index, obs, motion, alone) in enumerate(track.young_frames):
+        for i, (frame_index, obs, motion, alone, offsets) in enumerate(track.young_frames):
             if alone is None:
                 alone = _solve_alone(obs, options, track.id, self.model or self.prior, self.bounds)
-                track.young_frames[i] = (frame_index, obs, motion, alone)
+                track.young_frames[i] = (frame_index, obs, motion, alone, offsets)
             if not track.reanchored and alone.ok:
                 estimate.update(self.keys.pose_key(track.index, frame_index), alone.world_T_vehicle)
         track.reanchored = True
-        self._rechoose(track, [alone for *_, alone in track.young_frames])  # all frames so far, not the first alone
+        self._rechoose(track, [frame[3] for frame in track.young_frames])  # all frames so far, not the first alone
         graph = self._young_graph(track)
         if track.multiview_frames >= _REANCHOR_FRAMES:  # well seen now: plain incremental updates from here
             track.young, track.young_frames = False, []
         solved = gtsam.LevenbergMarquardtOptimizer(graph, estimate, self.options.solve.lm_params()).optimize()
-        turned = canonical_gauge(solved, [key for *_, key in track.poses], self.keys.layer_keys(track.index))
+        turned = canonical_gauge(solved, [key for *_, key in track.poses], self.keys.layer_keys(track.index),
+                                 track.offset_sigmas)
         if turned is not None:  # the body frame turned front to back (vfactor.factors.body_frame): on from the convention's
             solved = gtsam.LevenbergMarquardtOptimizer(graph, turned, self.options.solve.lm_params()).optimize()
         track.smoother = self._new_smoother()
         stamps = {key: stamp for _, stamp, key in track.poses}
         stamps.update({k: t for k in self.keys.layer_keys(track.index)})
+        stamps.update({k: t for k in track.offset_sigmas if solved.exists(k)})
         track.smoother.update(graph, solved, stamps)
 
     def _add(self, vid: str, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
@@ -484,15 +535,16 @@ class Tracker:
                 raw = apply_swaps(raw, swaps)
                 track.swaps[key] = swaps
         graph, motion, values = gtsam.NonlinearFactorGraph(), gtsam.NonlinearFactorGraph(), gtsam.Values()
-        add_observation_factor(graph, self.keys, obs, track.index, frame_index, options.graph)
+        offsets = self._offsets(track, obs, values, estimate, graph)
+        add_observation_factor(graph, self.keys, obs, track.index, frame_index, options.graph, offsets)
         _add_pose_factors(motion, track.poses, key, t, self.options)
         graph.push_back(motion)
         values.insert(key, guess)
-        stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}}
+        stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}, **{k: t for k in offsets.values()}}
         track.smoother.update(graph, values, stamps)
         track.poses.append((frame_index, t, key))
         if track.young:
-            track.young_frames.append((frame_index, raw, motion, None))
+            track.young_frames.append((frame_index, raw, motion, None, offsets))
             if _camera_count(obs) >= 2:
                 track.multiview_frames += 1
                 self._reanchor(track, t)
@@ -810,6 +862,7 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     add_shape_factors(graph, keys, index, config, track_prior, bounds)
     posed, best, segments = [], -1, {}
+    offsets: dict[str, int] = {}  # camera name -> the key of its detector shape offset (one per camera, no lag)
     swaps = {}  # frame index -> the left/right pairs that frame's own solve relabelled, taken over by the batch graph
     for (i, t, obs), first in zip(items, firsts):
         obs = obs.scaled(scale)
@@ -829,7 +882,12 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         key = keys.pose_key(index, i)
         if posed and t - posed[-1][1] > options.max_gap:
             segments[i] = _segment_message(t - posed[-1][1], options.max_gap)
-        add_observation_factor(graph, keys, obs, index, i, config)
+        for name, sigma in detector_shape_sigmas(obs).items() if options.detector_offsets else ():
+            if name not in offsets:
+                offsets[name] = keys.offset_key(index, len(offsets))
+                values.insert(offsets[name], np.zeros(36))
+                graph.add(detector_offset_prior(offsets[name], sigma))
+        add_observation_factor(graph, keys, obs, index, i, config, offsets)
         _add_pose_factors(graph, posed, key, t, options)
         values.insert(key, guess)
         posed.append((i, t, key))
@@ -844,7 +902,7 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
             graph.add(hwc_factor(keys, index, terms=terms))
             optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.solve.lm_params())
             estimate = optimizer.optimize()
-        turned = canonical_gauge(estimate, [key for *_, key in posed], keys.layer_keys(index))
+        turned = canonical_gauge(estimate, [key for *_, key in posed], keys.layer_keys(index), offsets.values())
         if turned is not None:  # the body frame turned front to back (vfactor.factors.body_frame): on from the convention's
             optimizer = gtsam.LevenbergMarquardtOptimizer(graph, turned, options.solve.lm_params())
             estimate = optimizer.optimize()

@@ -108,6 +108,46 @@ class TestProjectionEveryLensCauchyAnisotropic(ProjectionContract):
     anisotropic = True
 
 
+OFFSET_KEY = KEYS.offset_key(0, 1)
+
+
+class TestProjectionWithDetectorOffset(ProjectionContract):
+    """The fifth key: a detector shape offset (36-vector) added to the shape; its Jacobian is the shape's."""
+
+    loss = RobustLoss("cauchy", 1.0)
+
+    def make_factor(self):
+        obs = observations(2.0, np.random.default_rng(11), True, self.cameras)
+        return projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss, offset_key=OFFSET_KEY)
+
+    def make_values(self, rng):
+        values = super().make_values(rng)
+        values.insert(OFFSET_KEY, rng.normal(0, 0.05, 36))
+        return values
+
+    def make_truth_values(self):
+        values = super().make_truth_values()
+        values.insert(OFFSET_KEY, np.zeros(36))
+        return values
+
+    def test_zero_at_truth(self):
+        obs = observations(cameras=self.cameras)
+        factor = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss, offset_key=OFFSET_KEY)
+        assert factor.error(self.make_truth_values()) < 1e-12
+
+    def test_the_offset_moves_the_keypoints_as_the_shape_does(self):
+        rng = np.random.default_rng(5)
+        obs = observations(2.0, rng, cameras=self.cameras)
+        offset = rng.normal(0, 0.05, (12, 3))
+        shifted = values_at(TRUTH_POSE, type(TRUTH_SHAPE)(TRUTH_SHAPE.vehicle_p_keypoints + offset))
+        plain = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss)
+        values = self.make_truth_values()
+        values.update(OFFSET_KEY, offset.ravel())
+        with_offset = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss, offset_key=OFFSET_KEY)
+        np.testing.assert_allclose(with_offset.unwhitenedError(values), plain.unwhitenedError(shifted), atol=1e-12)
+        assert with_offset.error(values) > 1.0  # a 5 cm offset is seen
+
+
 def test_kernel_matches_numpy_projection_for_every_lens():
     """The compiled factor's residuals equal the NumPy projection's (project_pinhole) for mixed lenses."""
     from vfactor.factors.projection import whitened_residuals

@@ -168,7 +168,8 @@ def _track_one(args, engine: _Engine) -> int:
         check_out_file(args.plot, "--plot", [("scene file", args.scene), ("result file --out", args.out)])
     given = detect(load_input(args), args, engine.get())
     scene, association = associate(given, args)
-    options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance)
+    options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance,
+                           detector_offsets=args.detector_offsets)
     where = engine.get()
     t0 = time.perf_counter()
     if args.batch:

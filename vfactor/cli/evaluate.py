@@ -44,7 +44,8 @@ def evaluate(args) -> int:
                 sections = _eval_association(args.scenario, frames, args.seed, args.seeds, engine,
                                              _levels(args.levels) if args.levels else (None,))
     elif args.experiment == "images":
-        sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed, args.weights)
+        sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed, args.weights,
+                                args.detector_offsets)
     else:
         if args.scenario:
             raise InputError("--scenario", "the paper comparison uses its own scenario (paper_webots)")
@@ -102,7 +103,8 @@ def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper"
     return sections
 
 
-def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = None) -> list[str]:
+def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = None,
+                 detector_offsets: bool = False) -> list[str]:
     try:
         from vfactor.net.end_to_end import evaluate_images, images_report
         from vfactor.net.infer import KeypointDetector
@@ -112,7 +114,11 @@ def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = No
         detector = KeypointDetector(weights)
     except Exception as exc:  # noqa: BLE001 - any failure to read the weights file is bad input
         raise InputError("--weights", str(exc)) from None
-    return [images_report(evaluate_images(scenario_name, frames, seed, detector, progress=progress("rendering")))]
+    from vfactor.track import TrackOptions
+
+    track_options = TrackOptions(detector_offsets=detector_offsets)
+    return [images_report(evaluate_images(scenario_name, frames, seed, detector, progress=progress("rendering"),
+                                          track_options=track_options))]
 
 
 def _eval_association(scenario_name, frames, seed: int, seeds: int, engine=None, levels=(None,)) -> list[str]:

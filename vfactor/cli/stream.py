@@ -43,7 +43,8 @@ def track_stream_command(args) -> int:
     if lag is None:
         lag = DEFAULT_STREAM_LAG
         note(f"a stream is tracked with a fixed lag: {lag:g} s (--lag to change it)")
-    options = TrackOptions(solve=SolveOptions(covariance=False), lag=lag, covariance=not args.no_covariance)
+    options = TrackOptions(solve=SolveOptions(covariance=False), lag=lag, covariance=not args.no_covariance,
+                           detector_offsets=args.detector_offsets)
     if args.scene == "-":
         lines, base = read_lines(sys.stdin), Path.cwd()
     else:

@@ -59,7 +59,7 @@ def turned_front_to_back(wheel_layer: np.ndarray) -> bool:
     return bool(p[0, 0] + p[1, 0] < p[2, 0] + p[3, 0])
 
 
-def canonical_gauge(values: gtsam.Values, pose_keys, layer_keys) -> gtsam.Values | None:
+def canonical_gauge(values: gtsam.Values, pose_keys, layer_keys, offset_keys=()) -> gtsam.Values | None:
     """``values`` in the body frame of the convention when their body frame is turned front to back, else None.
 
     Every layer's body points become ``(-x, -y, z)`` and every pose ``world_T_vehicle Rz(pi)``: each keypoint keeps
@@ -70,6 +70,7 @@ def canonical_gauge(values: gtsam.Values, pose_keys, layer_keys) -> gtsam.Values
         values: a solution.
         pose_keys: the vehicle's pose keys (one per frame).
         layer_keys: its (wheel, light, roof) layer keys.
+        offset_keys: its detector shape offsets' keys (36-vectors in the layers' layout), turned as the layers.
     """
     layer_keys = list(layer_keys)
     if not values.exists(layer_keys[0]) or not turned_front_to_back(values.atVector(layer_keys[0])):
@@ -78,6 +79,9 @@ def canonical_gauge(values: gtsam.Values, pose_keys, layer_keys) -> gtsam.Values
     for key in layer_keys:
         if out.exists(key):
             out.update(key, _HALF_TURN_POINTS * out.atVector(key))
+    for key in offset_keys:
+        if out.exists(key):
+            out.update(key, np.tile(_HALF_TURN_POINTS, 3) * out.atVector(key))
     for key in pose_keys:
         if out.exists(key):
             out.update(key, out.atPose3(key).compose(_HALF_TURN))

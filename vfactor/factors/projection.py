@@ -20,7 +20,11 @@ For observation i of keypoint k from camera c (docs/factors.md)::
 loses keypoints pushed out of the image), the mean of the Gaussian truncated
 to it (:mod:`vfactor.factors.truncation`).
 
-Keys: ``[pose, wheel, light, roof]``.
+Keys: ``[pose, wheel, light, roof]``, and optionally a fifth: a detector's
+shape offset (36-vector, the layers' layout), added to the shape for these
+observations only (``vehicle_p_k`` becomes ``layer_k + offset_k``): a track
+gives each camera's detector its own error shaped like a change of shape
+(docs/factors.md, "The detector's shape offset in tracks").
 """
 
 from __future__ import annotations
@@ -294,7 +298,10 @@ def _layers_to_points(values: gtsam.Values, layer_keys) -> np.ndarray:
 def _error(obs: KeypointObservations, loss: RobustLoss, this: gtsam.CustomFactor, values: gtsam.Values, H):
     keys = this.keys()
     T = values.atPose3(keys[0]).matrix()
-    points = _layers_to_points(values, keys[1:])
+    points = _layers_to_points(values, keys[1:4])
+    offset = len(keys) == 5
+    if offset:
+        points = points + values.atVector(keys[4]).reshape(12, 3)
     n = len(obs)
     r = np.empty(2 * n)
     want = H is not None
@@ -307,21 +314,28 @@ def _error(obs: KeypointObservations, loss: RobustLoss, this: gtsam.CustomFactor
         H[0] = H_pose
         for j in range(3):
             H[j + 1] = H_shape[:, 12 * j : 12 * j + 12]
+        if offset:  # the offset moves the keypoints as the layers do
+            H[4] = H_shape
     return r
 
 
 def projection_factor(
-    pose_key: int, layer_keys, obs: KeypointObservations, loss: RobustLoss = RobustLoss()
+    pose_key: int, layer_keys, obs: KeypointObservations, loss: RobustLoss = RobustLoss(),
+    offset_key: int | None = None,
 ) -> gtsam.CustomFactor:
-    """A factor on ``[pose_key, *layer_keys]`` for all observations in ``obs``.
+    """A factor on ``[pose_key, *layer_keys]`` (and ``offset_key``) for all observations in ``obs``.
 
     Args:
         pose_key: key of ``world_T_vehicle`` (``gtsam.Pose3``).
         layer_keys: keys of the (wheel, light, roof) layer 12-vectors.
         obs: the pixel observations with their square-root information.
         loss: robust loss applied to each observation's whitened 2-vector.
+        offset_key: optional key of a 36-vector (metres, body frame, the layers' layout: keypoint ``k``'s
+            ``x, y, z`` at ``3k, 3k+1, 3k+2``) added to the shape for these observations: a detector's shape
+            offset (docs/factors.md).
     """
     if len(obs) == 0:
         raise ValueError("projection_factor: no observations")
     noise = gtsam.noiseModel.Unit.Create(2 * len(obs))
-    return gtsam.CustomFactor(noise, [pose_key, *layer_keys], partial(_error, obs, loss))
+    keys = [pose_key, *layer_keys] + ([] if offset_key is None else [offset_key])
+    return gtsam.CustomFactor(noise, keys, partial(_error, obs, loss))

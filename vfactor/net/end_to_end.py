@@ -169,7 +169,7 @@ def render_and_detect(scenario: str, seed: int, frames: int | None = None, detec
 
 def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, seed: int = 0, detector=None,
                     work_dir: str | Path | None = None, options: SolveOptions = SolveOptions(),
-                    progress=None) -> dict:
+                    progress=None, track_options=None) -> dict:
     """Runs the image-to-pose pipeline on rendered scenes of a scenario and scores it.
 
     Args:
@@ -181,6 +181,7 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
             temporary folder, removed afterwards.
         options: solver options of the factor graph.
         progress: called with ``(images rendered, images total)``.
+        track_options: the tracking comparison's :class:`~vfactor.track.TrackOptions` (default: the defaults).
 
     Returns:
         ``{"scenario", "seed", "frames", "keypoints": keypoint_accuracy(...),
@@ -199,7 +200,7 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
     rows = compare_methods(dataclasses.replace(sim, scene=detected), options)
     rows["factor_graph_simulated_noise"] = compare_methods(sim, options, methods=("factor_graph",))["factor_graph"]
     tracked = sim.scenario.motion is not None
-    tracking = compare_tracking(dataclasses.replace(sim, scene=detected)) if tracked else None
+    tracking = compare_tracking(dataclasses.replace(sim, scene=detected), track_options) if tracked else None
     return {"scenario": sim.scenario.name, "seed": seed, "frames": len(sim.scene.frames), "keypoints": keypoints,
             "summary": summarise_methods(rows), "rows": rows, "tracking": tracking}
 

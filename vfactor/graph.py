@@ -157,7 +157,8 @@ def observations_from_detections(
     The pixel noise of keypoint k is the detection's 2x2 covariance where one is
     given (marked ``calibrated`` when the detection says it is,
     ``Detection.covariance_calibrated``), else isotropic with sigma ``max(min_pixel_sigma, relative_pixel_sigma *
-    box_diagonal) / confidence``; each observation keeps its detection's ``shape_sigma``. With
+    box_diagonal) / confidence``; each observation keeps its detection's ``shape_sigma``, and is marked ``cut``
+    where its detection's ``roi`` reaches beyond its camera's image (``image_size``). With
     ``config.truncation``, a detection whose camera has an ``image_size`` and whose seen keypoints all lie in
     the image gets the image as its truncation window.
 
@@ -165,7 +166,7 @@ def observations_from_detections(
         InputError: a detection names a camera that is not in ``cameras``.
     """
     names = list(cameras)
-    cam_idx, kp_idx, uv, sqrt_info, window, calibrated, shape_sigma = [], [], [], [], [], [], []
+    cam_idx, kp_idx, uv, sqrt_info, window, calibrated, shape_sigma, cut = [], [], [], [], [], [], [], []
     for d in detections:  # each detection's seen keypoints as arrays (one NumPy pass per detection, not per keypoint)
         if d.camera not in cameras:
             raise InputError("camera", f"unknown camera {d.camera!r}; known: {', '.join(names)}")
@@ -182,6 +183,7 @@ def observations_from_detections(
                 L[given] = np.swapaxes(np.linalg.cholesky(np.linalg.inv(d.covariance[seen][given])), 1, 2)
         calibrated.append(given & bool(d.covariance_calibrated))
         shape_sigma.append(np.full(len(seen), float(d.shape_sigma or 0.0)))
+        cut.append(np.full(len(seen), _roi_cut(cameras[d.camera], d.roi)))
         cam_idx.append(np.full(len(seen), names.index(d.camera)))
         kp_idx.append(seen)
         uv.append(d.keypoints[seen])
@@ -189,6 +191,7 @@ def observations_from_detections(
         window.append(np.tile(edges if edges is not None else _NO_WINDOW, (len(seen), 1)))
     calibrated = _stacked(calibrated, (0,), bool)
     shape_sigma = _stacked(shape_sigma, (0,), float)
+    cut = _stacked(cut, (0,), bool)
     return KeypointObservations(
         cameras=tuple(cameras.values()),
         camera_index=_stacked(cam_idx, (0,), int),
@@ -199,6 +202,7 @@ def observations_from_detections(
         min_sigma=config.min_pixel_sigma,
         calibrated=calibrated if calibrated.any() else None,
         shape_sigma=shape_sigma if np.any(shape_sigma > 0) else None,
+        cut=cut if cut.any() else None,
     )
 
 
@@ -208,6 +212,15 @@ _NO_WINDOW = np.full(4, np.nan)
 def _stacked(parts: list, empty_shape: tuple, dtype) -> np.ndarray:
     """The detections' arrays of :func:`observations_from_detections` end to end (an empty one of ``empty_shape``)."""
     return np.concatenate(parts).astype(dtype, copy=False) if parts else np.zeros(empty_shape, dtype=dtype)
+
+
+def _roi_cut(camera: Camera, roi) -> bool:
+    """Whether the detection box ``roi`` ``(x0, y0, x1, y1)`` reaches beyond the camera's image (False where either
+    is not known)."""
+    if roi is None or camera.image_size is None:
+        return False
+    width, height = camera.image_size
+    return bool(roi[0] < -0.5 or roi[1] < -0.5 or roi[2] > width - 0.5 or roi[3] > height - 0.5)
 
 
 def _truncation_window(camera: Camera, uv: np.ndarray) -> np.ndarray | None:

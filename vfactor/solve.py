@@ -315,9 +315,14 @@ def solve_observations(
     strict = as_given.scaled(min(float(extras.get("noise_scale", 1.0)), 1.0))
     strict_weights = options.graph.loss.weight(np.linalg.norm(
         whitened_residuals(strict, world_T_vehicle, wireframe.vehicle_p_keypoints), axis=1))
-    problem, rejected = _camera_disagreement(strict, strict_weights, mean, options)
+    problem, rejected, cut = _camera_disagreement(strict, strict_weights, mean, options)
     if problem:
         return VehicleResult(vehicle_id, Status.FAILED, message=problem, extras={"disagreeing_cameras": rejected})
+    if cut:  # a view cut by the image border: a detector's keypoints there may be a whole vehicle drawn in the part seen
+        result.extras["disagreeing_cut_cameras"] = cut
+        note = (f"the keypoints of camera(s) {', '.join(repr(n) for n in cut)} disagree with the other cameras where "
+                "the image border cuts the vehicle: left to the robust loss")
+        result.message = f"{result.message}; {note}" if result.message else note
     joint = None
     if options.covariance:
         try:
@@ -743,9 +748,11 @@ DISAGREEMENT_MARGIN = 0.55
 
 
 def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: Wireframe,
-                         options: SolveOptions) -> tuple[str, list[str]]:
+                         options: SolveOptions) -> tuple[str, list[str], list[str]]:
     """A message when some camera's keypoints agree among themselves but not with the other cameras, naming it,
-    and the names of those cameras ("" and [] when none).
+    the names of those cameras ("" and [] when none), and the names of the cameras that would be named but whose
+    view of the vehicle the image border cuts (``obs.cut``: a detector may draw a whole vehicle in the part it
+    sees, consistent and wrong; those are not blamed on the camera).
 
     A camera is at odds when the joint solution rejects its keypoints (fewer
     than :data:`DISAGREEMENT_JOINT_INLIERS` of them have a robust-loss weight
@@ -758,7 +765,7 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
     (docs/reliability.md). The message also says when, as a camera sees it, the
     vehicle lies behind another camera.
     """
-    own_poses, rejected = {}, []
+    own_poses, rejected, cut = {}, [], []
 
     def own_pose(c):  # the camera's own PnP pose of the mean shape (computed once, only where needed)
         if c not in own_poses:
@@ -780,9 +787,9 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
         alone = options.graph.loss.weight(np.linalg.norm(
             whitened_residuals(obs.subset(rows), own_pose(c), mean.vehicle_p_keypoints), axis=1))
         if float(np.mean(alone > 0.5)) - joint >= DISAGREEMENT_MARGIN - 1e-9:
-            rejected.append(camera.name)
+            (cut if obs.cut is not None and obs.cut[rows].all() else rejected).append(camera.name)
     if not rejected:
-        return "", []
+        return "", [], cut
     details = []
     for c in range(len(obs.cameras)):
         if (obs.camera_index == c).sum() < options.min_keypoints_in_one_view or own_pose(c) is None:
@@ -795,7 +802,7 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
     text = f"the keypoints of camera(s) {', '.join(repr(n) for n in rejected)} disagree with the other cameras"
     if details:
         text += "; " + "; ".join(details)
-    return text + ": check the cameras' world_T_camera", rejected
+    return text + ": check the cameras' world_T_camera", rejected, cut
 
 
 def solve_vehicle(

@@ -70,6 +70,8 @@ class KeypointObservations:
         shape_sigma: optional (n,) metres: the detector's error shaped like a change of the
             vehicle's shape, of the observation's detection (``Detection.shape_sigma``; 0: none);
             None: no observation has one.
+        cut: optional (n,) bools: the observation's detection box (``Detection.roi``) reaches beyond its camera's
+            image, so that view of the vehicle is cut by the image border; None: none is.
     """
 
     cameras: tuple[Camera, ...]
@@ -81,6 +83,7 @@ class KeypointObservations:
     min_sigma: float = 0.0
     calibrated: np.ndarray | None = None
     shape_sigma: np.ndarray | None = None
+    cut: np.ndarray | None = None
 
     def __post_init__(self):
         n = len(self.camera_index)
@@ -90,6 +93,10 @@ class KeypointObservations:
             if np.shape(self.calibrated) != (n,):
                 raise ValueError(f"KeypointObservations.calibrated: expected shape ({n},), got {np.shape(self.calibrated)}")
             object.__setattr__(self, "calibrated", np.asarray(self.calibrated, dtype=bool))
+        if self.cut is not None:
+            if np.shape(self.cut) != (n,):
+                raise ValueError(f"KeypointObservations.cut: expected shape ({n},), got {np.shape(self.cut)}")
+            object.__setattr__(self, "cut", np.asarray(self.cut, dtype=bool))
         if self.shape_sigma is not None:
             sigma = np.asarray(self.shape_sigma, dtype=float)
             if sigma.shape != (n,) or not np.all(np.isfinite(sigma)) or np.any(sigma < 0):
@@ -159,7 +166,7 @@ class KeypointObservations:
         tables = {name: np.ascontiguousarray(getattr(self, name)[mask])
                   for name in ("camera_index", "keypoint_index", "uv", "sqrt_information", "_window_table",
                                "_sigma_table", "_R_cw", "_t_cw", "_intrinsics_table", "_lens_table", "_dist_table")}
-        tables.update({name: getattr(self, name)[mask] for name in ("window", "calibrated", "shape_sigma")
+        tables.update({name: getattr(self, name)[mask] for name in ("window", "calibrated", "shape_sigma", "cut")
                        if getattr(self, name) is not None})
         tables["_intrinsics"] = tuple(column[mask] for column in self._intrinsics)
         if self._fisheye is not False:

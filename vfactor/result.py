@@ -69,7 +69,9 @@ class VehicleResult:
             ``"outliers_left_out"``: indices of the observations the one-frame solve left out as gross outliers
             (docs/factors.md); ``"fit_noise_scale"``: the noise scale over every observation before that;
             ``"disagreeing_cameras"``: on a ``failed`` vehicle, the cameras whose keypoints the joint solve
-            rejected while they agree among themselves (docs/reliability.md);
+            rejected while they agree among themselves (docs/reliability.md); ``"disagreeing_cut_cameras"``: on
+            a solved vehicle, such cameras whose box of the vehicle reaches beyond their image (not blamed: the
+            vehicle is solved, those keypoints left to the robust loss);
             ``"detections"``: the indices, in the frame's ``detections``, of the detections the vehicle was
             solved from (the result file's ``detections``);
             ``"covariance_inflation"``: the factor the one-frame covariances carry

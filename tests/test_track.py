@@ -329,3 +329,29 @@ def test_detector_offsets_need_a_shape_sigma(sim):
     for a, b in zip(plain.frames, offsets.frames):
         np.testing.assert_array_equal(a.vehicles[0].world_T_vehicle.matrix(), b.vehicles[0].world_T_vehicle.matrix())
         np.testing.assert_array_equal(a.vehicles[0].pose_covariance, b.vehicles[0].pose_covariance)
+
+
+def test_a_track_does_not_narrow_calibrated_covariances(sim):
+    """A detector's calibrated covariances (the keypoint network's) are a floor in tracks, as in the one-frame
+    covariances: the residuals of a fit that absorbs such a detector's errors understate them, and a track at their
+    noise scale (0.2-0.45 on the network's keypoints) weighed its keypoints 5-25 times their calibrated information
+    (docs/results.md, "Tracking from images"). Uncalibrated covariances still follow the residuals."""
+    def given(calibrated):  # covariances of twice the simulator's pixel noise: the residuals say less
+        frames = []
+        for frame in sim.scene.frames:
+            detections = []
+            for d in frame.detections:
+                sigma = 2 * 0.03 * d.box_diagonal() / np.maximum(d.confidence, 0.1)
+                covariance = sigma[:, None, None] ** 2 * np.eye(2)
+                detections.append(dataclasses.replace(d, covariance=covariance, covariance_calibrated=calibrated))
+            frames.append(dataclasses.replace(frame, detections=detections))
+        return dataclasses.replace(sim.scene, frames=frames)
+
+    spread = {}
+    for calibrated in (False, True):
+        run = track_scene(given(calibrated))
+        assert all(v.ok for fr in run.frames for v in fr.vehicles)
+        assert run.frames[-1].vehicles[0].extras["noise_scale"] < 0.8  # the residuals say the sigmas are too wide
+        spread[calibrated] = np.median([np.trace(fr.vehicles[0].pose_covariance) for fr in run.frames])
+    assert spread[True] > 1.5 * spread[False]
+

@@ -431,7 +431,7 @@ class Tracker:
         add_shape_factors(graph, self.keys, track.index, config, track.prior, self.bounds)
         used = set()
         for frame_index, obs, motion, _, offsets in track.young_frames:
-            add_observation_factor(graph, self.keys, obs.scaled(track.noise_scale), track.index, frame_index, config,
+            add_observation_factor(graph, self.keys, _track_noise(obs, track.noise_scale), track.index, frame_index, config,
                                    offsets)
             graph.push_back(motion)
             used.update(offsets.values())
@@ -503,7 +503,7 @@ class Tracker:
             track.notes[self.keys.pose_key(track.index, frame_index)] = _segment_message(gap, self.options.max_gap)
         if track.smoother is None:
             return self._start(track, frame_index, t, obs)
-        raw, obs = obs, obs.scaled(track.noise_scale)
+        raw, obs = obs, _track_noise(obs, track.noise_scale)
         options = self.options.solve
         # once both motion factors fix the pose any keypoint helps, as in smooth_scene; a younger track needs three
         fixed_by_motion = _acceleration_applies(track.poses, t, self.options)
@@ -662,6 +662,19 @@ def _jump(predicted: gtsam.Pose3, found: gtsam.Pose3, dt: float, options: TrackO
 def _segment_message(gap: float, max_gap: float) -> str:
     return (f"new segment of the track: {gap:.3g} s since its previous frame exceed the motion model's reach "
             f"(TrackOptions.max_gap = {max_gap:g} s); no motion factors across the gap")
+
+
+def _track_noise(obs: KeypointObservations, noise_scale: float) -> KeypointObservations:
+    """A track's observations at its noise scale; calibrated sigmas (``obs.calibrated``: the keypoint network's)
+    are not narrowed by a scale below 1, as in the one-frame solve's covariances (docs/factors.md, "Noise scale").
+
+    The fit absorbs much of such a detector's error into the pose and shape, so its residuals understate it: on
+    the network's keypoints a track's scale came out 0.2-0.45, and a track at that scale weighed its keypoints
+    5-25 times their calibrated information (pose NEES about 5x; a vehicle seen far by one camera shrank to 2 m
+    and went 14 m off, docs/results.md "Tracking from images")."""
+    if obs.calibrated is None or noise_scale >= 1.0:
+        return obs.scaled(noise_scale)
+    return obs.scaled(np.where(obs.calibrated, 1.0, noise_scale))
 
 
 def _seen_by(frame: Frame, vid: str, cameras: dict[str, Camera]) -> list[Camera]:
@@ -865,7 +878,7 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     offsets: dict[str, int] = {}  # camera name -> the key of its detector shape offset (one per camera, no lag)
     swaps = {}  # frame index -> the left/right pairs that frame's own solve relabelled, taken over by the batch graph
     for (i, t, obs), first in zip(items, firsts):
-        obs = obs.scaled(scale)
+        obs = _track_noise(obs, scale)
         if first is not None and first.ok and first.extras.get("swapped_keypoints"):
             swaps[i] = first.extras["swapped_keypoints"]
             obs = apply_swaps(obs, swaps[i])

@@ -355,3 +355,35 @@ def test_a_track_does_not_narrow_calibrated_covariances(sim):
         spread[calibrated] = np.median([np.trace(fr.vehicles[0].pose_covariance) for fr in run.frames])
     assert spread[True] > 1.5 * spread[False]
 
+
+
+
+def test_a_young_track_off_by_metres_is_rejoined_not_split(sim):
+    """A young track can be what is wrong, not the id: here cam1 alone sees the vehicle for six frames, and then
+    cam0's first three views give the keypoints of a vehicle 5 m further along its heading (as a detector's
+    keypoints of a vehicle entering the view, cut by the image border, were on library_tracks_2cam seed 10 from
+    rendered images), which drag the track metres off. When cam0's keypoints are right again they lie beyond the
+    jump gate. The track is re-solved with them, every pose from its own frame's solve, and goes on as one
+    track; it used to split into a new segment and keep its first ten poses 2.2-2.6 m off."""
+    cam0 = sim.scene.cameras["cam0"]
+    frames = []
+    for f, frame in enumerate(sim.scene.frames):
+        detections = [d for d in frame.detections if f >= 6 or d.camera == "cam1"]
+        if f in (6, 7, 8):
+            truth = sim.truth[f]["v1"]
+            ahead = truth.keypoints_world + 5.0 * truth.world_T_vehicle.rotation().matrix()[:, 0]
+            shift = cam0.project(ahead)[0] - cam0.project(truth.keypoints_world)[0]
+            detections = [dataclasses.replace(d, keypoints=d.keypoints + shift) if d.camera == "cam0" else d
+                          for d in detections]
+        frames.append(dataclasses.replace(frame, detections=detections))
+    run = track_scene(dataclasses.replace(sim.scene, frames=frames))
+
+    def translation_cm(results):
+        return np.array([pose_errors(fr.vehicles[0].world_T_vehicle, fr.vehicles[0].keypoints_world,
+                                     sim.truth[f]["v1"].world_T_vehicle, sim.truth[f]["v1"].keypoints_world)[
+                                         "translation_cm"] for f, fr in enumerate(results)])
+
+    assert translation_cm(run.online)[6:10].min() > 200  # the track dragged off by the wrong views
+    assert not any("jumps" in m for m in run.messages), run.messages
+    final = translation_cm(run.frames)
+    assert final[:10].max() < 60 and final[10:].max() < 25, final

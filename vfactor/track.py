@@ -151,6 +151,11 @@ _REANCHOR_FRAMES = 5  # frames seen by two cameras over which a young track is r
 #: explains them at under this share of the cost at the motion model's prediction, and lies beyond
 #: :func:`_jump`'s gate from it: then they are another vehicle's, and the track starts a new segment.
 _JUMP_COST_RATIO = 0.25
+#: A young track's frame beyond the jump gate joins the track (:meth:`Tracker._rejoined`) where the track re-solved
+#: with it explains its keypoints at no more than this multiple of the cost of the frame's own best start.
+_REJOIN_COST_RATIO = 2.0
+#: ... and only a track of at least this many poses (Tracker._rejoined).
+_REJOIN_POSES = 5
 #: The gate of :func:`_jump`: metres beyond the constant-twist prediction (plus what the motion model's
 #: acceleration allows over the step), and radians of heading (plus its yaw rate bound over the step). Set on
 #: tracks_3veh, tracks_3cam, library_tracks(_2cam) and intersection_2cam_track (no jump on any) and
@@ -423,14 +428,14 @@ class Tracker:
             out[name] = key
         return out
 
-    def _young_graph(self, track: _TrackState) -> gtsam.NonlinearFactorGraph:
-        """A young track's whole graph: shape factors (its prior), each frame's keypoints (its noise scale, its
-        cameras' detector shape offsets and their priors) and motion."""
+    def _young_graph(self, track: _TrackState, frames: list | None = None) -> gtsam.NonlinearFactorGraph:
+        """A young track's whole graph (``frames``: its young frames): shape factors (its prior), each frame's
+        keypoints (its noise scale, its cameras' detector shape offsets and their priors) and motion."""
         config = self.options.solve.graph
         graph = gtsam.NonlinearFactorGraph()
         add_shape_factors(graph, self.keys, track.index, config, track.prior, self.bounds)
         used = set()
-        for frame_index, obs, motion, _, offsets in track.young_frames:
+        for frame_index, obs, motion, _, offsets in track.young_frames if frames is None else frames:
             add_observation_factor(graph, self.keys, _track_noise(obs, track.noise_scale), track.index, frame_index, config,
                                    offsets)
             graph.push_back(motion)
@@ -490,6 +495,69 @@ class Tracker:
         stamps.update({k: t for k in track.offset_sigmas if solved.exists(k)})
         track.smoother.update(graph, solved, stamps)
 
+    def _rejoined(self, track: _TrackState, frame_index: int, t: float, raw: KeypointObservations,
+                  obs: KeypointObservations, start) -> bool:
+        """Whether a young track's frame whose keypoints lie beyond the jump gate is the track's own vehicle after
+        all, and if so the track re-solved with it.
+
+        A young track may be what is off, not the id: one far camera fixes the depth only through the shape prior,
+        and a detector's keypoints of a vehicle cut by the image border can be consistent and wrong, so a track can
+        be metres off when good views arrive (``library_tracks_2cam`` from the network's keypoints). So its whole
+        graph with this frame is re-solved by LM, every pose from its own frame's solve as :meth:`_reanchor` starts
+        (this frame's from ``start``, its best PnP / triangulation pose): where the solution explains this frame's
+        keypoints within :data:`_REJOIN_COST_RATIO` of ``start``'s cost, the track goes on from it (re-anchored);
+        keypoints of another vehicle cannot be joined to the track's motion at that cost, and the track splits.
+        Only for a track of at least :data:`_REJOIN_POSES` poses: with fewer the motion model knows too little of
+        the vehicle's speed and turning, and the keypoints of another vehicle within reach joined a track at that
+        cost (``intersection_multi`` with its vehicles drawn anew every frame, tests/test_track.py).
+
+        Args:
+            raw: the frame's observations at their nominal sigmas; ``obs`` at the track's noise scale, as
+                ``start.cost`` was computed.
+        """
+        estimate = track.smoother.calculateEstimate()
+        key = self.keys.pose_key(track.index, frame_index)
+        motion = gtsam.NonlinearFactorGraph()
+        _add_pose_factors(motion, track.poses, key, t, self.options)
+        values = gtsam.Values()
+        offsets = self._offsets(track, obs, values, estimate)
+        frames = track.young_frames + [(frame_index, raw, motion, None, offsets)]
+        values.insert(key, start.world_T_vehicle)
+        estimate.insert(values)
+        if not all(estimate.exists(k) for k in self._young_graph(track, frames).keyVector()):
+            return False  # poses already marginalised (fixed lag)
+        options = dataclasses.replace(self.options.solve, covariance=False, shape_information=True)
+        for i, (index, frame_obs, frame_motion, alone, frame_offsets) in enumerate(frames):
+            if alone is None:
+                alone = _solve_alone(frame_obs, options, track.id, self.model or self.prior, self.bounds)
+                frames[i] = (index, frame_obs, frame_motion, alone, frame_offsets)
+            if alone.ok:
+                estimate.update(self.keys.pose_key(track.index, index), alone.world_T_vehicle)
+        prior, scale = track.prior, track.noise_scale
+        self._rechoose(track, [frame[3] for frame in frames])
+        graph = self._young_graph(track, frames)
+        solved = gtsam.LevenbergMarquardtOptimizer(graph, estimate, self.options.solve.lm_params()).optimize()
+        pose_keys = [k for *_, k in track.poses] + [key]
+        turned = canonical_gauge(solved, pose_keys, self.keys.layer_keys(track.index), track.offset_sigmas)
+        if turned is not None:
+            solved = gtsam.LevenbergMarquardtOptimizer(graph, turned, self.options.solve.lm_params()).optimize()
+        cost = cross_projection_cost(obs, solved.atPose3(key), wireframe_from_values(solved, self.keys, track.index),
+                                     self.options.solve.graph.loss)
+        if cost > _REJOIN_COST_RATIO * start.cost:
+            track.prior, track.noise_scale = prior, scale
+            return False
+        track.young_frames, track.reanchored = frames, True
+        track.poses.append((frame_index, t, key))
+        track.multiview_frames += int(_camera_count(obs) >= 2)
+        if track.multiview_frames >= _REANCHOR_FRAMES:
+            track.young, track.young_frames = False, []
+        track.smoother = self._new_smoother()
+        stamps = {k: stamp for _, stamp, k in track.poses}
+        stamps.update({k: t for k in self.keys.layer_keys(track.index)})
+        stamps.update({k: t for k in track.offset_sigmas if solved.exists(k)})
+        track.smoother.update(graph, solved, stamps)
+        return True
+
     def _add(self, vid: str, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
         track = self._track(vid)
         track.last_seen = t
@@ -522,6 +590,9 @@ class Tracker:
                 jump = _jump(guess, starts[0].world_T_vehicle, t - track.poses[-1][1], self.options,
                              velocity_known=len(track.poses) >= 2)
                 if jump and starts[0].cost < _JUMP_COST_RATIO * predicted_cost:
+                    if track.young and len(track.poses) >= _REJOIN_POSES and self._rejoined(track, frame_index, t, raw,
+                                                                                         obs, starts[0]):
+                        return self._finish(track, key, t)  # the track was what was off, not the id
                     # the keypoints are those of a vehicle elsewhere: the id does not follow one vehicle here
                     self._retire(track)
                     track.restart()

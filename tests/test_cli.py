@@ -176,6 +176,32 @@ def test_track_writes_results_and_plot(tmp_path, capsys):
     assert "--lag" in capsys.readouterr().err
 
 
+def test_track_with_detector_offsets(tmp_path):
+    """``--detector-offsets`` gives each camera's detections that carry a shape_sigma their own shape offset, in
+    the tracker (also with a lag) and batch smoothing: the CLI's results are the API's with the option."""
+    from vfactor.scene import load_scene
+    from vfactor.track import TrackOptions, track_scene
+
+    scene = tmp_path / "track.json"
+    assert main(["simulate", "intersection_2cam_track", "--out", str(scene), "--frames", "8"]) == 0
+    data = json.loads(scene.read_text())
+    for frame in data["frames"]:
+        for detection in frame["detections"]:
+            detection["shape_sigma"] = 0.04
+    scene.write_text(json.dumps(data))
+    out = tmp_path / "tracked.json"
+    assert main(["track", str(scene), "--out", str(out), "--detector-offsets"]) == 0
+    frames = load_results(out)
+    api = track_scene(load_scene(scene), TrackOptions(detector_offsets=True)).frames
+    plain = track_scene(load_scene(scene), TrackOptions()).frames
+    for a, b, c in zip(frames, api, plain):
+        assert np.allclose(a.vehicles[0].world_T_vehicle.matrix(), b.vehicles[0].world_T_vehicle.matrix(), atol=1e-9)
+        assert not np.allclose(a.vehicles[0].pose_covariance, c.vehicles[0].pose_covariance, rtol=1e-3)
+    for extra in (["--lag", "0.3"], ["--batch"]):
+        assert main(["track", str(scene), "--out", str(out), "--detector-offsets", *extra]) == 0
+        assert all(f.vehicles[0].status.value == "converged" for f in load_results(out))
+
+
 def test_eval_paper_writes_tables_and_plots(tmp_path, capsys):
     md, figures = tmp_path / "paper.md", tmp_path / "figures"
     assert main(["eval", "paper", "--frames", "3", "--sweep-frames", "3", "--markdown", str(md),

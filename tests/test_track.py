@@ -385,5 +385,6 @@ def test_a_young_track_off_by_metres_is_rejoined_not_split(sim):
 
     assert translation_cm(run.online)[6:10].min() > 200  # the track dragged off by the wrong views
     assert not any("jumps" in m for m in run.messages), run.messages
+    assert sum("re-solved with this frame" in fr.vehicles[0].message for fr in run.frames) == 1
     final = translation_cm(run.frames)
     assert final[:10].max() < 60 and final[10:].max() < 25, final

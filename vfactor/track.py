@@ -81,6 +81,10 @@ class TrackOptions:
         motion: the vehicle motion model.
         lag: fixed lag in seconds (poses older than this are marginalised out,
             so memory and time per frame stay flat); ``None`` keeps every pose.
+            A young track (fewer than five frames seen by two cameras) keeps its
+            poses until its last re-solve has been read, at most
+            ``_YOUNG_HOLD_FRAMES`` (30) of them: its first poses, often seen by
+            one camera, are re-solved when the second camera comes in.
         max_gap: seconds between two frames of a track beyond which the motion
             model says nothing (a constant-twist step over more than a few
             seconds is no prediction, and the motion factors' noise grows with the
@@ -156,6 +160,9 @@ _JUMP_COST_RATIO = 0.25
 _REJOIN_COST_RATIO = 2.0
 #: ... and only a track of at least this many poses (Tracker._rejoined).
 _REJOIN_POSES = 5
+#: With a fixed lag, a young track's poses stay in its smoother (re-stamped with each new frame) while it has fewer
+#: than this many young frames, so that re-anchoring and re-joining can still re-solve them all.
+_YOUNG_HOLD_FRAMES = 30
 #: The gate of :func:`_jump`: metres beyond the constant-twist prediction (plus what the motion model's
 #: acceleration allows over the step), and radians of heading (plus its yaw rate bound over the step). Set on
 #: tracks_3veh, tracks_3cam, library_tracks(_2cam) and intersection_2cam_track (no jump on any) and
@@ -468,6 +475,7 @@ class Tracker:
         """
         graph = self._young_graph(track)
         estimate = track.smoother.calculateEstimate()
+        held = _held(track)  # its poses stay at least until this re-solve has been read (a fixed lag)
         if not all(estimate.exists(k) for k in graph.keyVector()):  # poses already marginalised (fixed lag)
             track.young, track.young_frames = False, []
             return
@@ -490,7 +498,7 @@ class Tracker:
         if turned is not None:  # the body frame turned front to back (vfactor.factors.body_frame): on from the convention's
             solved = gtsam.LevenbergMarquardtOptimizer(graph, turned, self.options.solve.lm_params()).optimize()
         track.smoother = self._new_smoother()
-        stamps = {key: stamp for _, stamp, key in track.poses}
+        stamps = {key: t if held else stamp for _, stamp, key in track.poses}
         stamps.update({k: t for k in self.keys.layer_keys(track.index)})
         stamps.update({k: t for k in track.offset_sigmas if solved.exists(k)})
         track.smoother.update(graph, solved, stamps)
@@ -516,6 +524,7 @@ class Tracker:
                 ``start.cost`` was computed.
         """
         estimate = track.smoother.calculateEstimate()
+        held = _held(track)
         key = self.keys.pose_key(track.index, frame_index)
         motion = gtsam.NonlinearFactorGraph()
         _add_pose_factors(motion, track.poses, key, t, self.options)
@@ -554,7 +563,7 @@ class Tracker:
         if track.multiview_frames >= _REANCHOR_FRAMES:
             track.young, track.young_frames = False, []
         track.smoother = self._new_smoother()
-        stamps = {k: stamp for _, stamp, k in track.poses}
+        stamps = {k: t if held else stamp for _, stamp, k in track.poses}
         stamps.update({k: t for k in self.keys.layer_keys(track.index)})
         stamps.update({k: t for k in track.offset_sigmas if solved.exists(k)})
         track.smoother.update(graph, solved, stamps)
@@ -614,6 +623,8 @@ class Tracker:
         graph.push_back(motion)
         values.insert(key, guess)
         stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}, **{k: t for k in offsets.values()}}
+        if _held(track):  # a young track's poses stay for its re-solves
+            stamps.update({k: t for *_, k in track.poses})
         track.smoother.update(graph, values, stamps)
         track.poses.append((frame_index, t, key))
         if track.young:
@@ -735,6 +746,11 @@ def _jump(predicted: gtsam.Pose3, found: gtsam.Pose3, dt: float, options: TrackO
 def _segment_message(gap: float, max_gap: float) -> str:
     return (f"new segment of the track: {gap:.3g} s since its previous frame exceed the motion model's reach "
             f"(TrackOptions.max_gap = {max_gap:g} s); no motion factors across the gap")
+
+
+def _held(track: _TrackState) -> bool:
+    """Whether a track's poses are held in its smoother whatever the lag (:data:`_YOUNG_HOLD_FRAMES`)."""
+    return track.young and len(track.young_frames) < _YOUNG_HOLD_FRAMES
 
 
 def _track_noise(obs: KeypointObservations, noise_scale: float) -> KeypointObservations:

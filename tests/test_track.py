@@ -397,3 +397,23 @@ def test_a_young_track_off_by_metres_is_rejoined_not_split(sim):
     lagged = track_scene(scene, TrackOptions(lag=0.3))
     assert not any("jumps" in m for m in lagged.messages), lagged.messages
     assert translation_cm(lagged.frames)[:10].max() < 100
+
+
+def test_a_track_one_camera_sees_holds_a_bounded_window(sim):
+    """A track that only one camera ever sees stays young (nothing re-anchors it); with a fixed lag its window
+    and its young-frame store stay bounded however long it runs."""
+    import vfactor.track as track_module
+
+    frames = [dataclasses.replace(f, detections=[d for d in f.detections if d.camera == "cam1"])
+              for f in sim.scene.frames]
+    scene = dataclasses.replace(sim.scene, frames=frames)
+    hold = track_module._YOUNG_HOLD_FRAMES
+    track_module._YOUNG_HOLD_FRAMES = 6
+    try:
+        tracker = Tracker(scene.cameras, TrackOptions(lag=0.35))
+        for i, frame in enumerate(scene.frames):
+            assert tracker.add_frame(frame, i).vehicles[0].ok
+            assert len(tracker.estimates()) <= 6 + 4  # the held poses, then the lag's (0.35 s at 10 Hz)
+            assert len(tracker._tracks["v1"].young_frames) <= 7
+    finally:
+        track_module._YOUNG_HOLD_FRAMES = hold

@@ -632,6 +632,10 @@ class Tracker:
             if _camera_count(obs) >= 2:
                 track.multiview_frames += 1
                 self._reanchor(track, t)
+            elif self.options.lag is not None and len(track.young_frames) > _YOUNG_HOLD_FRAMES:
+                # one camera only for longer than the window holds a young track: its first poses are gone, so it
+                # can no longer be re-solved whole (and a stream's memory stays bounded)
+                track.young, track.young_frames = False, []
         return self._finish(track, key, t)
 
     def _settle(self, track: _TrackState, max_updates: int, recent: int | None = 20) -> None:

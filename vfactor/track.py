@@ -84,7 +84,8 @@ class TrackOptions:
             A young track (fewer than five frames seen by two cameras) keeps its
             poses until its last re-solve has been read, at most
             ``_YOUNG_HOLD_FRAMES`` (30) of them: its first poses, often seen by
-            one camera, are re-solved when the second camera comes in.
+            one camera, are re-solved when the second camera comes in. A track
+            that one camera alone sees for longer is no longer young.
         max_gap: seconds between two frames of a track beyond which the motion
             model says nothing (a constant-twist step over more than a few
             seconds is no prediction, and the motion factors' noise grows with the

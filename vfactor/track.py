@@ -161,6 +161,12 @@ _JUMP_COST_RATIO = 0.25
 _REJOIN_COST_RATIO = 2.0
 #: ... and only a track of at least this many poses (Tracker._rejoined).
 _REJOIN_POSES = 5
+#: The frame after a jump resumes the segment the jump ended (Tracker._resumed) where that segment's prediction
+#: explains it at under this share of the cost at the new segment's.
+_RESUME_COST_RATIO = 0.5
+#: What a track's segment is (Tracker._resumed keeps them for one frame after a jump ends a segment).
+_SEGMENT_STATE = ("smoother", "poses", "hwc_added", "young", "young_frames", "multiview_frames", "reanchored", "prior",
+                  "body_type", "body_type_probability", "noise_scale", "offsets", "offset_sigmas")
 #: With a fixed lag, a young track's poses stay in its smoother (re-stamped with each new frame) while it has fewer
 #: than this many young frames, so that re-anchoring and re-joining can still re-solve them all.
 _YOUNG_HOLD_FRAMES = 30
@@ -206,11 +212,13 @@ class _TrackState:
     offsets: dict = field(default_factory=dict)
     offset_sigmas: dict = field(default_factory=dict)
     offsets_made: int = 0
+    # the segment a jump ended, kept for one frame (Tracker._resumed): its smoother and state, or None
+    previous: dict | None = None
 
     def restart(self) -> None:
         """Drops the smoother and the young-track state: the track starts again from its next solvable frame."""
         self.smoother, self.poses, self.hwc_added, self.young, self.young_frames = None, [], False, False, []
-        self.offsets, self.offset_sigmas = {}, {}
+        self.offsets, self.offset_sigmas, self.previous = {}, {}, None
 
 
 def frame_order(scene: Scene) -> list[int]:
@@ -570,6 +578,42 @@ class Tracker:
         track.smoother.update(graph, solved, stamps)
         return True
 
+    def _resumed(self, track: _TrackState, t: float, raw: KeypointObservations) -> bool:
+        """Whether the frame after a jump follows the segment the jump ended, and if so that segment resumed.
+
+        A learnt detector now and then gives one frame's keypoints of a vehicle turned round or elsewhere
+        (``library_tracks_2cam`` seed 12 from the network's keypoints: both cameras' keypoints of one frame
+        165 deg off): one such frame beyond the motion model's gate started a new segment, and the next frame,
+        right again, another. So the ended segment's smoother is kept for one frame: where the next frame's
+        keypoints are explained by the ended segment's prediction at under :data:`_RESUME_COST_RATIO` of the cost
+        at the new segment's, the jump was one bad frame. The ended segment goes on (its poses live again); the bad
+        frame keeps its own solve, with a message, out of the track.
+        """
+        previous, track.previous = track.previous, None
+        if len(track.poses) != 1:
+            return False
+        loss = self.options.solve.graph.loss
+        now = track.smoother.calculateEstimate()
+        cost_now = cross_projection_cost(_track_noise(raw, track.noise_scale), self._predict(track, now, t),
+                                         self._wireframe(now, track), loss)
+        before = previous["smoother"].calculateEstimate()
+        ended = dataclasses.replace(track, **previous)  # the ended segment's state, for its prediction
+        cost_before = cross_projection_cost(_track_noise(raw, ended.noise_scale), self._predict(ended, before, t),
+                                            self._wireframe(before, ended), loss)
+        if not cost_before < _RESUME_COST_RATIO * cost_now:
+            return False
+        (frame_index, _, key), = track.poses
+        track.notes[key] = ("its keypoints lay beyond the motion model's gate, and the next frame's followed the "
+                            "track again: solved alone, left out of the track")
+        self._retire(track)  # the bad frame's own estimate
+        for name, value in previous.items():
+            setattr(track, name, value)
+        for index, _, _ in track.poses:  # the ended segment's poses are live again
+            track.retired.pop((index, track.id), None)
+        if track.jumps and track.jumps[-1][0] == frame_index:
+            track.jumps.pop()
+        return True
+
     def _add(self, vid: str, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
         track = self._track(vid)
         track.last_seen = t
@@ -583,6 +627,8 @@ class Tracker:
             track.notes[self.keys.pose_key(track.index, frame_index)] = _segment_message(gap, self.options.max_gap)
         if track.smoother is None:
             return self._start(track, frame_index, t, obs)
+        if track.previous is not None:
+            self._resumed(track, t, obs)
         raw, obs = obs, _track_noise(obs, track.noise_scale)
         options = self.options.solve
         # once both motion factors fix the pose any keypoint helps, as in smooth_scene; a younger track needs three
@@ -607,7 +653,9 @@ class Tracker:
                         return self._finish(track, key, t)  # the track was what was off, not the id
                     # the keypoints are those of a vehicle elsewhere: the id does not follow one vehicle here
                     self._retire(track)
+                    ended = {name: getattr(track, name) for name in _SEGMENT_STATE}
                     track.restart()
+                    track.previous = ended
                     track.jumps.append((frame_index, t, jump))
                     track.notes[key] = f"a new segment of the track: {jump}; the detections' id may not follow one vehicle"
                     return self._start(track, frame_index, t, raw)

@@ -313,10 +313,13 @@ def add_observation_factor(
     if not len(observations):
         return
     pose_key, layer_keys = keys.pose_key(vehicle, frame), keys.layer_keys(vehicle)
+    if not offsets:  # the common case: one factor, no per-camera masks
+        graph.add(projection_factor(pose_key, layer_keys, observations, config.loss))
+        return
     shared = np.ones(len(observations), dtype=bool)
     for c, camera in enumerate(observations.cameras):
         rows = observations.camera_index == c
-        if offsets and camera.name in offsets and rows.any():
+        if camera.name in offsets and rows.any():
             graph.add(projection_factor(pose_key, layer_keys, observations.subset(rows), config.loss,
                                         offset_key=offsets[camera.name]))
             shared &= ~rows

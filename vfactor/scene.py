@@ -536,10 +536,9 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Fol
         raise SceneError(f"{path}.covariances_calibrated", "true without 'keypoint_covariances'")
     shape_sigma = det.get("shape_sigma")
     if shape_sigma is not None:
-        if isinstance(shape_sigma, bool) or not isinstance(shape_sigma, (int, float)) or not math.isfinite(shape_sigma) \
-                or shape_sigma < 0:
-            raise SceneError(f"{path}.shape_sigma", f"expected a finite number of metres >= 0, got {shape_sigma!r}")
-        shape_sigma = float(shape_sigma)
+        shape_sigma = _number(shape_sigma, f"{path}.shape_sigma", "a finite number of metres >= 0")
+        if shape_sigma < 0:
+            raise SceneError(f"{path}.shape_sigma", f"expected a finite number of metres >= 0, got {shape_sigma}")
 
     if det.get("keypoints") is not None:
         keypoints, confidence = _keypoints(det["keypoints"], f"{path}.keypoints")

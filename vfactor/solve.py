@@ -418,7 +418,7 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
         inflation = covariance_inflation(dof)
         calibrated = nominal.calibrated
         if calibrated is not None and scale * relative < 1.0:  # calibrated sigmas are not narrowed
-            obs = floored.scaled(np.where(calibrated, 1.0, scale * relative))
+            obs = floored.scaled_above_calibrated(scale * relative)
             inflation = 1.0 if calibrated.all() else inflation
         else:
             obs = obs.scaled(relative)

@@ -208,10 +208,9 @@ class _TrackState:
     # (frame index, id) -> the final result of each pose of the segments the track ended (Tracker._retire)
     retired: dict = field(default_factory=dict)
     # the detector shape offsets of the smoother (docs/factors.md): camera name -> its current offset's key, and
-    # each offset key -> its prior's sigma (metres); offsets_made numbers the keys (KeyScheme.offset_key)
+    # each offset key the smoother was given -> its prior's sigma (metres; their count numbers the next key)
     offsets: dict = field(default_factory=dict)
     offset_sigmas: dict = field(default_factory=dict)
-    offsets_made: int = 0
     # the segment a jump ended, kept for one frame (Tracker._resumed): its smoother and state, or None
     previous: dict | None = None
 
@@ -386,13 +385,13 @@ class Tracker:
             result.extras["swapped_keypoints"] = track.swaps[key]
         return result
 
-    def _predict(self, track: _TrackState, estimate: gtsam.Values, t: float) -> gtsam.Pose3:
-        """Constant-twist prediction of the pose at ``t`` from the last two poses."""
-        _, t1, k1 = track.poses[-1]
+    def _predict(self, poses: list, estimate: gtsam.Values, t: float) -> gtsam.Pose3:
+        """Constant-twist prediction of the pose at ``t`` from the last two of a segment's ``poses``."""
+        _, t1, k1 = poses[-1]
         T1 = estimate.atPose3(k1)
-        if len(track.poses) < 2:
+        if len(poses) < 2:
             return T1
-        _, t0, k0 = track.poses[-2]
+        _, t0, k0 = poses[-2]
         twist = gtsam.Pose3.Logmap(estimate.atPose3(k0).between(T1)) / (t1 - t0)
         return T1.compose(gtsam.Pose3.Expmap(twist * (t - t1)))
 
@@ -435,8 +434,7 @@ class Tracker:
         for name, sigma in detector_shape_sigmas(obs).items():
             key = track.offsets.get(name)
             if key is None or not (estimate.exists(key) or values.exists(key)):
-                key = self.keys.offset_key(track.index, track.offsets_made)
-                track.offsets_made += 1
+                key = self.keys.offset_key(track.index, len(track.offset_sigmas))
                 track.offsets[name], track.offset_sigmas[key] = key, sigma
                 values.insert(key, np.zeros(36))
                 if graph is not None:
@@ -452,8 +450,8 @@ class Tracker:
         add_shape_factors(graph, self.keys, track.index, config, track.prior, self.bounds)
         used = set()
         for frame_index, obs, motion, _, offsets in track.young_frames if frames is None else frames:
-            add_observation_factor(graph, self.keys, _track_noise(obs, track.noise_scale), track.index, frame_index, config,
-                                   offsets)
+            add_observation_factor(graph, self.keys, obs.scaled_above_calibrated(track.noise_scale), track.index,
+                                   frame_index, config, offsets)
             graph.push_back(motion)
             used.update(offsets.values())
         for key in sorted(used):
@@ -482,30 +480,43 @@ class Tracker:
         :func:`smooth_scene` starts (each pose from its own frame's solve, where
         that succeeds), and the smoother restarted from the solution.
         """
-        graph = self._young_graph(track)
         estimate = track.smoother.calculateEstimate()
         held = _held(track)  # its poses stay at least until this re-solve has been read (a fixed lag)
-        if not all(estimate.exists(k) for k in graph.keyVector()):  # poses already marginalised (fixed lag)
+        if not all(estimate.exists(k) for k in self._young_graph(track).keyVector()):  # poses marginalised (lag)
             track.young, track.young_frames = False, []
             return
-        # every young frame solved alone (once): the first time its start, every time the type and noise scale
-        options = dataclasses.replace(self.options.solve, covariance=False, shape_information=True)
-        for i, (frame_index, obs, motion, alone, offsets) in enumerate(track.young_frames):
-            if alone is None:
-                alone = _solve_alone(obs, options, track.id, self.model or self.prior, self.bounds)
-                track.young_frames[i] = (frame_index, obs, motion, alone, offsets)
-            if not track.reanchored and alone.ok:
-                estimate.update(self.keys.pose_key(track.index, frame_index), alone.world_T_vehicle)
+        graph, solved = self._solved_young(track, track.young_frames, estimate, [k for *_, k in track.poses],
+                                           fresh=not track.reanchored)
         track.reanchored = True
-        self._rechoose(track, [frame[3] for frame in track.young_frames])  # all frames so far, not the first alone
-        graph = self._young_graph(track)
         if track.multiview_frames >= _REANCHOR_FRAMES:  # well seen now: plain incremental updates from here
             track.young, track.young_frames = False, []
+        self._restart_smoother(track, graph, solved, t, held)
+
+    def _solved_young(self, track: _TrackState, frames: list, estimate: gtsam.Values, pose_keys: list,
+                      fresh: bool) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+        """LM over a young track's whole graph of ``frames`` from ``estimate``: every frame solved alone (once,
+        kept in ``frames``; with ``fresh`` each pose starts from its frame's own solve), the track's prior and noise
+        scale chosen again from all of them (:meth:`_rechoose`), and the body frame put back in the convention's
+        gauge. Returns the graph and the solution."""
+        options = dataclasses.replace(self.options.solve, covariance=False, shape_information=True)
+        for i, (index, obs, motion, alone, offsets) in enumerate(frames):
+            if alone is None:
+                alone = _solve_alone(obs, options, track.id, self.model or self.prior, self.bounds)
+                frames[i] = (index, obs, motion, alone, offsets)
+            if fresh and alone.ok:
+                estimate.update(self.keys.pose_key(track.index, index), alone.world_T_vehicle)
+        self._rechoose(track, [frame[3] for frame in frames])  # all frames so far, not the first alone
+        graph = self._young_graph(track, frames)
         solved = gtsam.LevenbergMarquardtOptimizer(graph, estimate, self.options.solve.lm_params()).optimize()
-        turned = canonical_gauge(solved, [key for *_, key in track.poses], self.keys.layer_keys(track.index),
-                                 track.offset_sigmas)
+        turned = canonical_gauge(solved, pose_keys, self.keys.layer_keys(track.index), track.offset_sigmas)
         if turned is not None:  # the body frame turned front to back (vfactor.factors.body_frame): on from the convention's
             solved = gtsam.LevenbergMarquardtOptimizer(graph, turned, self.options.solve.lm_params()).optimize()
+        return graph, solved
+
+    def _restart_smoother(self, track: _TrackState, graph: gtsam.NonlinearFactorGraph, solved: gtsam.Values,
+                          t: float, held: bool) -> None:
+        """A new smoother for the track from a whole-graph solution; with ``held`` every pose is stamped ``t``, so
+        that a fixed lag keeps it until this solution has been read."""
         track.smoother = self._new_smoother()
         stamps = {key: t if held else stamp for _, stamp, key in track.poses}
         stamps.update({k: t for k in self.keys.layer_keys(track.index)})
@@ -544,21 +555,8 @@ class Tracker:
         estimate.insert(values)
         if not all(estimate.exists(k) for k in self._young_graph(track, frames).keyVector()):
             return False  # poses already marginalised (fixed lag)
-        options = dataclasses.replace(self.options.solve, covariance=False, shape_information=True)
-        for i, (index, frame_obs, frame_motion, alone, frame_offsets) in enumerate(frames):
-            if alone is None:
-                alone = _solve_alone(frame_obs, options, track.id, self.model or self.prior, self.bounds)
-                frames[i] = (index, frame_obs, frame_motion, alone, frame_offsets)
-            if alone.ok:
-                estimate.update(self.keys.pose_key(track.index, index), alone.world_T_vehicle)
         prior, scale = track.prior, track.noise_scale
-        self._rechoose(track, [frame[3] for frame in frames])
-        graph = self._young_graph(track, frames)
-        solved = gtsam.LevenbergMarquardtOptimizer(graph, estimate, self.options.solve.lm_params()).optimize()
-        pose_keys = [k for *_, k in track.poses] + [key]
-        turned = canonical_gauge(solved, pose_keys, self.keys.layer_keys(track.index), track.offset_sigmas)
-        if turned is not None:
-            solved = gtsam.LevenbergMarquardtOptimizer(graph, turned, self.options.solve.lm_params()).optimize()
+        graph, solved = self._solved_young(track, frames, estimate, [k for *_, k in track.poses] + [key], fresh=True)
         cost = cross_projection_cost(obs, solved.atPose3(key), wireframe_from_values(solved, self.keys, track.index),
                                      self.options.solve.graph.loss)
         if cost > _REJOIN_COST_RATIO * start.cost:
@@ -571,11 +569,7 @@ class Tracker:
         track.multiview_frames += int(_camera_count(obs) >= 2)
         if track.multiview_frames >= _REANCHOR_FRAMES:
             track.young, track.young_frames = False, []
-        track.smoother = self._new_smoother()
-        stamps = {k: t if held else stamp for _, stamp, k in track.poses}
-        stamps.update({k: t for k in self.keys.layer_keys(track.index)})
-        stamps.update({k: t for k in track.offset_sigmas if solved.exists(k)})
-        track.smoother.update(graph, solved, stamps)
+        self._restart_smoother(track, graph, solved, t, held)
         return True
 
     def _resumed(self, track: _TrackState, t: float, raw: KeypointObservations) -> bool:
@@ -594,12 +588,12 @@ class Tracker:
             return False
         loss = self.options.solve.graph.loss
         now = track.smoother.calculateEstimate()
-        cost_now = cross_projection_cost(_track_noise(raw, track.noise_scale), self._predict(track, now, t),
-                                         self._wireframe(now, track), loss)
-        before = previous["smoother"].calculateEstimate()
-        ended = dataclasses.replace(track, **previous)  # the ended segment's state, for its prediction
-        cost_before = cross_projection_cost(_track_noise(raw, ended.noise_scale), self._predict(ended, before, t),
-                                            self._wireframe(before, ended), loss)
+        cost_now = cross_projection_cost(raw.scaled_above_calibrated(track.noise_scale),
+                                         self._predict(track.poses, now, t), self._wireframe(now, track), loss)
+        before = previous["smoother"].calculateEstimate()  # the ended segment (same keys' characters and index)
+        cost_before = cross_projection_cost(raw.scaled_above_calibrated(previous["noise_scale"]),
+                                            self._predict(previous["poses"], before, t), self._wireframe(before, track),
+                                            loss)
         if not cost_before < _RESUME_COST_RATIO * cost_now:
             return False
         (frame_index, _, key), = track.poses
@@ -629,7 +623,7 @@ class Tracker:
             return self._start(track, frame_index, t, obs)
         if track.previous is not None:
             self._resumed(track, t, obs)
-        raw, obs = obs, _track_noise(obs, track.noise_scale)
+        raw, obs = obs, obs.scaled_above_calibrated(track.noise_scale)
         options = self.options.solve
         # once both motion factors fix the pose any keypoint helps, as in smooth_scene; a younger track needs three
         fixed_by_motion = _acceleration_applies(track.poses, t, self.options)
@@ -637,7 +631,7 @@ class Tracker:
             return VehicleResult(vid, Status.DEGENERATE, message=f"only {len(obs)} keypoints seen in this frame")
         estimate = track.smoother.calculateEstimate()
         wireframe = self._wireframe(estimate, track)
-        guess = self._predict(track, estimate, t)
+        guess = self._predict(track.poses, estimate, t)
         # a poor prediction (a long gap, a sharp manoeuvre) is replaced by the best PnP/triangulation start
         loss = options.graph.loss
         key = self.keys.pose_key(track.index, frame_index)
@@ -804,19 +798,6 @@ def _segment_message(gap: float, max_gap: float) -> str:
 def _held(track: _TrackState) -> bool:
     """Whether a track's poses are held in its smoother whatever the lag (:data:`_YOUNG_HOLD_FRAMES`)."""
     return track.young and len(track.young_frames) < _YOUNG_HOLD_FRAMES
-
-
-def _track_noise(obs: KeypointObservations, noise_scale: float) -> KeypointObservations:
-    """A track's observations at its noise scale; calibrated sigmas (``obs.calibrated``: the keypoint network's)
-    are not narrowed by a scale below 1, as in the one-frame solve's covariances (docs/factors.md, "Noise scale").
-
-    The fit absorbs much of such a detector's error into the pose and shape, so its residuals understate it: on
-    the network's keypoints a track's scale came out 0.2-0.45, and a track at that scale weighed its keypoints
-    5-25 times their calibrated information (pose NEES about 5x; a vehicle seen far by one camera shrank to 2 m
-    and went 14 m off, docs/results.md "Tracking from images")."""
-    if obs.calibrated is None or noise_scale >= 1.0:
-        return obs.scaled(noise_scale)
-    return obs.scaled(np.where(obs.calibrated, 1.0, noise_scale))
 
 
 def _seen_by(frame: Frame, vid: str, cameras: dict[str, Camera]) -> list[Camera]:
@@ -1020,7 +1001,7 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     offsets: dict[str, int] = {}  # camera name -> the key of its detector shape offset (one per camera, no lag)
     swaps = {}  # frame index -> the left/right pairs that frame's own solve relabelled, taken over by the batch graph
     for (i, t, obs), first in zip(items, firsts):
-        obs = _track_noise(obs, scale)
+        obs = obs.scaled_above_calibrated(scale)
         if first is not None and first.ok and first.extras.get("swapped_keypoints"):
             swaps[i] = first.extras["swapped_keypoints"]
             obs = apply_swaps(obs, swaps[i])

@@ -208,6 +208,14 @@ class KeypointObservations:
         return self._with(sqrt_information=L / factor[:, None, None],
                           _sigma_table=np.where(truncated[:, None], self._sigma_table * factor[:, None], 1.0))
 
+    def scaled_above_calibrated(self, noise_scale: float) -> "KeypointObservations":
+        """:meth:`scaled` by ``noise_scale``, except that a scale below 1 leaves the calibrated observations
+        (:attr:`calibrated`: the detector's covariances calibrated against its true errors) at their sigmas: an
+        estimated noise scale never narrows a calibrated covariance (docs/factors.md, "Covariances", item 4)."""
+        if self.calibrated is None or noise_scale >= 1.0:
+            return self.scaled(noise_scale)
+        return self.scaled(np.where(self.calibrated, 1.0, noise_scale))
+
     def with_min_sigma(self, min_sigma: float) -> "KeypointObservations":
         """The same observations with another :attr:`min_sigma` (the sigmas themselves unchanged)."""
         return self._with(min_sigma=float(min_sigma))

@@ -119,6 +119,11 @@ class CovarianceCalibration:
         """True when :meth:`apply` returns covariances unchanged."""
         return self.scale == 1.0 and self.floor == 0.0 and self.confidence_rate == 0.0
 
+    def detection_fields(self) -> dict:
+        """What a detection found with weights of this calibration carries (:class:`vfactor.observations.Detection`'s
+        fields, and ``vfactor detect``'s output): ``covariance_calibrated`` and ``shape_sigma`` (None: none)."""
+        return {"covariance_calibrated": not self.is_identity, "shape_sigma": self.shape_sigma or None}
+
     def apply(self, covariance, confidence, box_size) -> np.ndarray:
         """Calibrated covariances.
 

@@ -294,8 +294,7 @@ def run_detect(args: argparse.Namespace) -> int:
                 "confidence": _nan_to_none(kp.confidence),
                 "covariance": _nan_to_none(kp.covariance),
                 # what a scene's detection takes as "covariances_calibrated" and "shape_sigma"
-                "covariance_calibrated": not detector.calibration.is_identity,
-                "shape_sigma": detector.calibration.shape_sigma or None,
+                **detector.calibration.detection_fields(),
             })
             heatmaps.append(d.heatmaps)
             rois.append(roi)

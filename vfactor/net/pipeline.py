@@ -168,8 +168,7 @@ def _detect_frame(unit: tuple):
         kp = result.keypoints
         changes = dict(keypoints=np.asarray(kp.uv, float), confidence=np.asarray(kp.confidence, float),
                        covariance=np.asarray(kp.covariance, float), from_image=False,
-                       covariance_calibrated=not detector.calibration.is_identity,
-                       shape_sigma=detector.calibration.shape_sigma or None)
+                       **detector.calibration.detection_fields())
         if out_dir is not None:
             path = out_dir / f"f{f:04d}_d{j:02d}_{_safe(det.camera)}_{_safe(det.vehicle)}.npy"
             np.save(path, np.asarray(result.heatmaps, np.float32))

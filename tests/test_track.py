@@ -424,8 +424,8 @@ def test_one_frame_of_a_vehicle_turned_round_is_left_out_not_a_new_segment(sim):
     """A learnt detector now and then gives one frame's keypoints of the vehicle turned round
     (library_tracks_2cam seed 12 from rendered images: both cameras' keypoints of one frame fit the vehicle
     165 deg off). That frame lies beyond the motion model's gate and starts a new segment; the next frame, right
-    again, follows the ended segment, which goes on: the bad frame keeps its own solve, with a message, out of
-    the track (it used to leave three segments and two jumps)."""
+    again, follows the ended segment, which goes on, and the bad frame's pose goes back into it from the track's
+    motion alone, with a message (it used to leave three segments and two jumps, the bad frame turned round)."""
     import gtsam
 
     frames = []
@@ -448,3 +448,11 @@ def test_one_frame_of_a_vehicle_turned_round_is_left_out_not_a_new_segment(sim):
                           sim.truth[f]["v1"].world_T_vehicle, sim.truth[f]["v1"].keypoints_world)
               for f, fr in enumerate(run.frames) if f != 10]
     assert max(e["rotation_deg"] for e in errors) < 5 and max(e["translation_cm"] for e in errors) < 25
+    # the bad frame: online its own (turned) solve, finally the track's pose for its time
+    assert run.online[10].vehicles[0].world_T_vehicle.rotation().matrix()[:, 0] @ \
+        sim.truth[10]["v1"].world_T_vehicle.rotation().matrix()[:, 0] < 0
+    bad = run.frames[10].vehicles[0]
+    assert pose_errors(bad.world_T_vehicle, bad.keypoints_world, sim.truth[10]["v1"].world_T_vehicle,
+                       sim.truth[10]["v1"].keypoints_world)["rotation_deg"] < 5
+    lagged = track_scene(dataclasses.replace(sim.scene, frames=frames), TrackOptions(lag=0.3))
+    assert not any("jumps" in m for m in lagged.messages) and "left out" in lagged.frames[10].vehicles[0].message

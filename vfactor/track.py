@@ -580,8 +580,9 @@ class Tracker:
         165 deg off): one such frame beyond the motion model's gate started a new segment, and the next frame,
         right again, another. So the ended segment's smoother is kept for one frame: where the next frame's
         keypoints are explained by the ended segment's prediction at under :data:`_RESUME_COST_RATIO` of the cost
-        at the new segment's, the jump was one bad frame. The ended segment goes on (its poses live again); the bad
-        frame keeps its own solve, with a message, out of the track.
+        at the new segment's, the jump was one bad frame. The ended segment goes on (its poses live again), and the
+        bad frame's pose goes back into it without the frame's keypoints: where the track's motion puts it, said
+        in its result's message (its online result, given before the next frame came, was its own solve).
         """
         previous, track.previous = track.previous, None
         if len(track.poses) != 1:
@@ -596,16 +597,25 @@ class Tracker:
                                             loss)
         if not cost_before < _RESUME_COST_RATIO * cost_now:
             return False
-        (frame_index, _, key), = track.poses
-        track.notes[key] = ("its keypoints lay beyond the motion model's gate, and the next frame's followed the "
-                            "track again: solved alone, left out of the track")
-        self._retire(track)  # the bad frame's own estimate
+        (frame_index, t_bad, key), = track.poses
         for name, value in previous.items():
             setattr(track, name, value)
         for index, _, _ in track.poses:  # the ended segment's poses are live again
             track.retired.pop((index, track.id), None)
         if track.jumps and track.jumps[-1][0] == frame_index:
             track.jumps.pop()
+        # the bad frame's pose goes back into the track without its keypoints: where its motion puts it
+        motion, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        _add_pose_factors(motion, track.poses, key, t_bad, self.options)
+        values.insert(key, self._predict(track.poses, before, t_bad))
+        stamps = {key: t_bad, **({k: t_bad for *_, k in track.poses} if _held(track) else {})}
+        track.smoother.update(motion, values, stamps)
+        if track.young:  # a frame without keypoints in the young track's graph: its motion factors only
+            left_out = VehicleResult(track.id, Status.FAILED, message="keypoints left out")
+            track.young_frames.append((frame_index, raw.subset(np.zeros(len(raw), dtype=bool)), motion, left_out, {}))
+        track.poses.append((frame_index, t_bad, key))
+        track.notes[key] = ("its keypoints lay beyond the motion model's gate, and the next frame's followed the "
+                            "track again: left out of the track, the pose from the track's motion alone")
         return True
 
     def _add(self, vid: str, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:

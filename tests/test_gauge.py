@@ -70,6 +70,29 @@ def test_canonical_gauge_keeps_every_world_point_and_lowers_the_prior_cost():
     assert graph.error(at_turned) > graph.error(at_truth) + 100.0
 
 
+def test_canonical_gauge_keeps_what_a_detector_pose_offset_sees():
+    """A track's detector pose offsets are put in the turned body frame: the same pixels, the same prior cost."""
+    from vfactor.factors.projection import projection_factor
+    from vfactor.graph import detector_offset_prior
+
+    keys = KeyScheme()
+    sim = simulate("intersection_2cam", seed=1, num_frames=1)
+    vid = sim.scene.frames[0].vehicle_ids()[0]
+    obs = observations_from_detections(sim.scene.frames[0].detections_of(vid), sim.scene.cameras)
+    truth = sim.truth[0][vid]
+    offset_key = keys.offset_key(0, 0)
+    factor = projection_factor(keys.pose_key(), keys.layer_keys(0), obs, RobustLoss("none"), offset_key=offset_key)
+    prior = detector_offset_prior(offset_key, 0.04, truth.wireframe.vehicle_p_keypoints)
+    bad = gtsam.Values()
+    insert_vehicle_values(bad, keys, *turned(truth.world_T_vehicle, truth.wireframe))
+    bad.insert(offset_key, gtsam.Pose3.Expmap(np.array([0.01, -0.02, 0.015, 0.03, 0.02, -0.01])))
+    fixed = canonical_gauge(bad, [keys.pose_key()], keys.layer_keys(0), [offset_key])
+    assert fixed is not None
+    assert factor.error(bad) > 1.0
+    assert factor.error(fixed) == pytest.approx(factor.error(bad), rel=1e-9)
+    assert prior.error(fixed) == pytest.approx(prior.error(bad), rel=1e-9)
+
+
 @pytest.mark.parametrize("loss", [RobustLoss("cauchy", 6.0), RobustLoss("none")])
 def test_a_solve_started_turned_front_to_back_ends_in_the_convention(loss):
     sim = simulate("intersection_2cam", seed=3, num_frames=1)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 
+import gtsam
 import numpy as np
 import pytest
 
@@ -279,18 +280,24 @@ def test_a_segment_ended_by_a_jump_keeps_its_smoothed_estimates(sim):
 
 
 def _with_detector_offsets(sim, sigma: float, seed: int):
-    """``sim``'s scene whose detections carry ``shape_sigma = sigma`` and err by it: each camera sees the
-    vehicle's keypoints moved by its own fixed body-frame offset (N(0, sigma^2) per axis) in every frame, on top
-    of the simulator's independent pixel noise: errors that repeat from frame to frame."""
+    """``sim``'s scene whose detections carry ``shape_sigma = sigma`` and err as the pose offsets model: each
+    camera sees the vehicle moved by its own fixed rigid motion (drawn from the offsets' prior, about sigma / 3.5
+    of shift and sigma / 5 m radians of turn) in every frame, on top of the simulator's independent pixel noise:
+    errors that repeat from frame to frame."""
+    from vfactor.graph import detector_offset_prior
+
     rng = np.random.default_rng(seed)
-    offsets = {name: rng.normal(0.0, sigma, (12, 3)) for name in sim.scene.cameras}
+    prior = detector_offset_prior(0, sigma, sim.truth[0][sim.scene.frames[0].detections[0].vehicle].wireframe
+                                  .vehicle_p_keypoints)
+    R = prior.noiseModel().R()  # the prior's square-root information
+    offsets = {name: gtsam.Pose3.Expmap(np.linalg.solve(R, rng.normal(size=6))) for name in sim.scene.cameras}
     frames = []
     for f, frame in enumerate(sim.scene.frames):
         detections = []
         for d in frame.detections:
             truth = sim.truth[f][d.vehicle]
             camera = sim.scene.cameras[d.camera]
-            moved = truth.world_T_vehicle.transformFrom((truth.wireframe.vehicle_p_keypoints + offsets[d.camera]).T).T
+            moved = truth.world_T_vehicle.compose(offsets[d.camera]).transformFrom(truth.wireframe.vehicle_p_keypoints.T).T
             shift = camera.project(moved)[0] - camera.project(truth.keypoints_world)[0]
             detections.append(dataclasses.replace(d, keypoints=d.keypoints + shift, shape_sigma=sigma))
         frames.append(dataclasses.replace(frame, detections=detections))
@@ -305,8 +312,8 @@ def _mean_nees(sim, frames):
 
 
 def test_detector_offsets_model_errors_that_repeat_from_frame_to_frame(sim):
-    """With each camera's keypoints off by its own fixed shape offset, a track that counts every frame as new
-    information is far too sure of its poses; one offset variable per camera (its prior the detections'
+    """With each camera's view of the vehicle off by its own fixed rigid motion, a track that counts every frame
+    as new information is far too sure of its poses; one pose offset per camera (its prior from the detections'
     shape_sigma) keeps the covariances near the errors, in the tracker and in batch smoothing."""
     clean = dataclasses.replace(load_scenario("intersection_2cam_track"),
                                 noise=NoiseModel(relative_sigma=0.003, outlier_rate=0, swap_rate=0, missing_rate=0))
@@ -320,9 +327,9 @@ def test_detector_offsets_model_errors_that_repeat_from_frame_to_frame(sim):
     (rotation_plain, _), _ = mean_errors(truth, plain.frames)
     for frames in (offsets.frames, batch):
         assert all(v.ok for fr in frames for v in fr.vehicles)
-        assert _mean_nees(truth, frames) < 1.5 * 6
+        assert 0.4 * 6 < _mean_nees(truth, frames) < 1.5 * 6
         (rotation, translation), _ = mean_errors(truth, frames)
-        assert rotation < 0.75 * rotation_plain and translation < 5.0
+        assert rotation < rotation_plain and translation < 5.0
 
 
 def test_detector_offsets_need_a_shape_sigma(sim):

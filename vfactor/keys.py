@@ -4,8 +4,8 @@ Every variable is a ``gtsam.Symbol``: a character and an index. The default
 scheme uses ``x`` for vehicle poses (``world_T_vehicle``, one per vehicle per
 frame) and ``w``, ``l``, ``r`` for the wheel, light and roof shape layers (one
 12-vector each per vehicle, shared by all frames of its track), and ``o`` for
-a track's detector shape offsets (a 36-vector per camera that sees it, where
-the detections carry a ``shape_sigma``). Choose other characters when those
+a track's detector pose offsets (a ``gtsam.Pose3`` per camera that sees it,
+where the detections carry a ``shape_sigma``). Choose other characters when those
 collide with a graph of your own.
 
 Index layout: a pose of vehicle ``v`` in frame ``f`` has index
@@ -33,7 +33,7 @@ class KeyScheme:
         wheel: character of the wheel layer (12-vector, body frame, metres).
         light: character of the light layer.
         roof: character of the roof layer.
-        offset: character of a track's detector shape offsets (36-vectors, body frame, metres; one per
+        offset: character of a track's detector pose offsets (``vehicle_T_seen``, ``gtsam.Pose3``; one per
             camera that sees the track, where its detections carry a ``shape_sigma``).
         frame_stride: pose index = vehicle * frame_stride + frame (and offset index = vehicle *
             frame_stride + offset number).
@@ -64,7 +64,7 @@ class KeyScheme:
         return gtsam.symbol(self.pose, vehicle * self.frame_stride + frame)
 
     def offset_key(self, vehicle: int = 0, number: int = 0) -> int:
-        """Key of a vehicle's detector shape offset number ``number`` (a track numbers its offsets as it makes
+        """Key of a vehicle's detector pose offset number ``number`` (a track numbers its offsets as it makes
         them: one per camera, a new one where the smoother has marginalised the camera's previous one)."""
         if not 0 <= number < self.frame_stride:
             raise ValueError(f"number: expected 0 <= number < {self.frame_stride}, got {number}")

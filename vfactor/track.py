@@ -109,13 +109,14 @@ class TrackOptions:
             1e-4 reaches it (within 0.4 cm on tracks_3cam and tracks_3veh, seeds
             0-4) at about 1.3x the time per frame.
         covariance: compute each pose's marginal covariance.
-        detector_offsets: give each camera's detections of a track their own shape offset (a 36-vector
-            variable with the detections' ``shape_sigma`` as its prior; detections without one get none): the
-            model of a detector whose errors repeat from frame to frame, shaped like a change of the vehicle's
-            shape (docs/factors.md, "The detector's shape offset in tracks"). Off by default: from the keypoint
-            network's detections with three cameras it makes rotations better and the poses' covariances
-            nearer their errors, translations 0.3-1.2 cm worse; with two cameras of little overlap tracks are
-            no better (docs/results.md, "Tracking from images"). It costs 1.4-2.2x per frame in iSAM2.
+        detector_offsets: give each camera's detections of a track their own pose offset (a ``gtsam.Pose3``
+            variable: the small rigid motion of the vehicle as that camera's detector sees it, its prior from the
+            detections' ``shape_sigma``; detections without one get none): the model of a detector whose
+            errors repeat from frame to frame (docs/factors.md, "The detector's pose offset in tracks"). Off by
+            default: from the keypoint network's detections with three cameras it makes rotations better and
+            the poses' covariances nearer their errors, translations -0.1 to +1.2 cm; with two cameras of
+            little overlap rotations are mostly worse (docs/results.md, "Tracking from images"). It costs
+            1.2-1.5x per frame in iSAM2.
         optimizer: iSAM2's step: ``"dogleg"`` (Powell's dogleg, a trust region;
             the default, as Gauss-Newton steps can diverge when a weakly
             constrained track is suddenly well seen) or ``"gn"`` (Gauss-Newton).
@@ -166,7 +167,7 @@ _REJOIN_POSES = 5
 _RESUME_COST_RATIO = 0.5
 #: What a track's segment is (Tracker._resumed keeps them for one frame after a jump ends a segment).
 _SEGMENT_STATE = ("smoother", "poses", "hwc_added", "young", "young_frames", "multiview_frames", "reanchored", "prior",
-                  "body_type", "body_type_probability", "noise_scale", "offsets", "offset_sigmas")
+                  "body_type", "body_type_probability", "noise_scale", "offsets", "offset_priors")
 #: With a fixed lag, a young track's poses stay in its smoother (re-stamped with each new frame) while it has fewer
 #: than this many young frames, so that re-anchoring and re-joining can still re-solve them all.
 _YOUNG_HOLD_FRAMES = 30
@@ -194,7 +195,7 @@ class _TrackState:
     # motion factors are kept, so that it can be re-solved by Levenberg-Marquardt (see Tracker._reanchor)
     young: bool = False
     # (frame index, observations at nominal sigmas, motion factors, the frame solved alone or None,
-    # camera name -> the detector shape offset's key of its keypoints)
+    # camera name -> the detector pose offset's key of its keypoints)
     young_frames: list = field(default_factory=list)
     multiview_frames: int = 0  # frames two cameras saw
     reanchored: bool = False
@@ -207,17 +208,17 @@ class _TrackState:
     jumps: list = field(default_factory=list)  # (frame index, t, what) of each jump beyond the motion model
     # (frame index, id) -> the final result of each pose of the segments the track ended (Tracker._retire)
     retired: dict = field(default_factory=dict)
-    # the detector shape offsets of the smoother (docs/factors.md): camera name -> its current offset's key, and
-    # each offset key the smoother was given -> its prior's sigma (metres; their count numbers the next key)
+    # the detector pose offsets of the smoother (docs/factors.md): camera name -> its current offset's key, and
+    # each offset key the smoother was given -> its prior (their count numbers the next key)
     offsets: dict = field(default_factory=dict)
-    offset_sigmas: dict = field(default_factory=dict)
+    offset_priors: dict = field(default_factory=dict)
     # the segment a jump ended, kept for one frame (Tracker._resumed): its smoother and state, or None
     previous: dict | None = None
 
     def restart(self) -> None:
         """Drops the smoother and the young-track state: the track starts again from its next solvable frame."""
         self.smoother, self.poses, self.hwc_added, self.young, self.young_frames = None, [], False, False, []
-        self.offsets, self.offset_sigmas, self.previous = {}, {}, None
+        self.offsets, self.offset_priors, self.previous = {}, {}, None
 
 
 def frame_order(scene: Scene) -> list[int]:
@@ -409,10 +410,10 @@ class Tracker:
             track.swaps[key] = first.extras["swapped_keypoints"]
         motion, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         _add_pose_factors(motion, track.poses, key, t, self.options)
-        track.offsets, track.offset_sigmas = {}, {}
+        insert_vehicle_values(values, self.keys, first.world_T_vehicle, first.wireframe, track.index, frame_index)
+        track.offsets, track.offset_priors = {}, {}
         offsets = self._offsets(track, obs, values, gtsam.Values())
         track.young, track.young_frames = True, [(frame_index, obs, motion, first, offsets)]
-        insert_vehicle_values(values, self.keys, first.world_T_vehicle, first.wireframe, track.index, frame_index)
         stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}, **{k: t for k in offsets.values()}}
         track.smoother.update(self._young_graph(track), values, stamps)
         track.poses.append((frame_index, t, key))
@@ -421,12 +422,13 @@ class Tracker:
 
     def _offsets(self, track: _TrackState, obs: KeypointObservations, values: gtsam.Values,
                  estimate: gtsam.Values, graph: gtsam.NonlinearFactorGraph | None = None) -> dict[str, int]:
-        """Camera name -> the key of the detector shape offset of its keypoints in this frame, for the cameras
-        whose detections carry a ``shape_sigma`` (docs/factors.md, "The detector's shape offset in tracks").
+        """Camera name -> the key of the detector pose offset of its keypoints in this frame, for the cameras
+        whose detections carry a ``shape_sigma`` (docs/factors.md, "The detector's pose offset in tracks").
 
         A camera keeps its offset while the smoother holds it (``estimate``); a camera new to the track, or whose
-        offset the fixed lag has marginalised, gets a new one: zero in ``values``, and its prior in ``graph``
-        (a young track's graph adds the priors itself, :meth:`_young_graph`).
+        offset the fixed lag has marginalised, gets a new one: the identity in ``values``, and its prior (made at
+        the track's shape in ``estimate``, else in ``values``) in ``graph`` (a young track's graph adds the priors
+        itself, :meth:`_young_graph`).
         """
         out = {}
         if not self.options.detector_offsets:
@@ -434,17 +436,17 @@ class Tracker:
         for name, sigma in detector_shape_sigmas(obs).items():
             key = track.offsets.get(name)
             if key is None or not (estimate.exists(key) or values.exists(key)):
-                key = self.keys.offset_key(track.index, len(track.offset_sigmas))
-                track.offsets[name], track.offset_sigmas[key] = key, sigma
-                values.insert(key, np.zeros(36))
+                shape = estimate if estimate.exists(self.keys.layer_keys(track.index)[0]) else values
+                key, prior = _new_offset(self.keys, track.index, len(track.offset_priors), sigma, shape, values)
+                track.offsets[name], track.offset_priors[key] = key, prior
                 if graph is not None:
-                    graph.add(detector_offset_prior(key, sigma))
+                    graph.add(prior)
             out[name] = key
         return out
 
     def _young_graph(self, track: _TrackState, frames: list | None = None) -> gtsam.NonlinearFactorGraph:
         """A young track's whole graph (``frames``: its young frames): shape factors (its prior), each frame's
-        keypoints (its noise scale, its cameras' detector shape offsets and their priors) and motion."""
+        keypoints (its noise scale, its cameras' detector pose offsets and their priors) and motion."""
         config = self.options.solve.graph
         graph = gtsam.NonlinearFactorGraph()
         add_shape_factors(graph, self.keys, track.index, config, track.prior, self.bounds)
@@ -455,7 +457,7 @@ class Tracker:
             graph.push_back(motion)
             used.update(offsets.values())
         for key in sorted(used):
-            graph.add(detector_offset_prior(key, track.offset_sigmas[key]))
+            graph.add(track.offset_priors[key])
         if track.hwc_added:
             graph.add(hwc_factor(self.keys, track.index, terms=self._terms))
         return graph
@@ -508,7 +510,7 @@ class Tracker:
         self._rechoose(track, [frame[3] for frame in frames])  # all frames so far, not the first alone
         graph = self._young_graph(track, frames)
         solved = gtsam.LevenbergMarquardtOptimizer(graph, estimate, self.options.solve.lm_params()).optimize()
-        turned = canonical_gauge(solved, pose_keys, self.keys.layer_keys(track.index), track.offset_sigmas)
+        turned = canonical_gauge(solved, pose_keys, self.keys.layer_keys(track.index), track.offset_priors)
         if turned is not None:  # the body frame turned front to back (vfactor.factors.body_frame): on from the convention's
             solved = gtsam.LevenbergMarquardtOptimizer(graph, turned, self.options.solve.lm_params()).optimize()
         return graph, solved
@@ -520,7 +522,7 @@ class Tracker:
         track.smoother = self._new_smoother()
         stamps = {key: t if held else stamp for _, stamp, key in track.poses}
         stamps.update({k: t for k in self.keys.layer_keys(track.index)})
-        stamps.update({k: t for k in track.offset_sigmas if solved.exists(k)})
+        stamps.update({k: t for k in track.offset_priors if solved.exists(k)})
         track.smoother.update(graph, solved, stamps)
 
     def _rejoined(self, track: _TrackState, frame_index: int, t: float, raw: KeypointObservations,
@@ -993,6 +995,16 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
     return _frame_results(scene, results, options.covariance)
 
 
+def _new_offset(keys: KeyScheme, index: int, number: int, sigma: float, shape: gtsam.Values,
+                values: gtsam.Values) -> tuple[int, gtsam.NonlinearFactor]:
+    """A new detector pose offset of track ``index`` (docs/factors.md, "The detector's pose offset in tracks"):
+    its key (offset ``number``), the identity inserted in ``values``, and its prior made at the track's keypoints
+    in ``shape`` with the detections' ``shape_sigma`` ``sigma``."""
+    key = keys.offset_key(index, number)
+    values.insert(key, gtsam.Pose3())
+    return key, detector_offset_prior(key, sigma, wireframe_from_values(shape, keys, index).vehicle_p_keypoints)
+
+
 def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     """Batch smoothing of one track (a :func:`_track_units` unit): its results by frame index."""
     vid, index, ((cameras, options, prior, bounds), frames) = unit
@@ -1008,7 +1020,7 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     add_shape_factors(graph, keys, index, config, track_prior, bounds)
     posed, best, segments = [], -1, {}
-    offsets: dict[str, int] = {}  # camera name -> the key of its detector shape offset (one per camera, no lag)
+    offsets: dict[str, int] = {}  # camera name -> the key of its detector pose offset (one per camera, no lag)
     swaps = {}  # frame index -> the left/right pairs that frame's own solve relabelled, taken over by the batch graph
     for (i, t, obs), first in zip(items, firsts):
         obs = obs.scaled_above_calibrated(scale)
@@ -1030,9 +1042,8 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
             segments[i] = _segment_message(t - posed[-1][1], options.max_gap)
         for name, sigma in detector_shape_sigmas(obs).items() if options.detector_offsets else ():
             if name not in offsets:
-                offsets[name] = keys.offset_key(index, len(offsets))
-                values.insert(offsets[name], np.zeros(36))
-                graph.add(detector_offset_prior(offsets[name], sigma))
+                offsets[name], prior = _new_offset(keys, index, len(offsets), sigma, values, values)
+                graph.add(prior)
         add_observation_factor(graph, keys, obs, index, i, config, offsets)
         _add_pose_factors(graph, posed, key, t, options)
         values.insert(key, guess)

@@ -112,7 +112,7 @@ OFFSET_KEY = KEYS.offset_key(0, 1)
 
 
 class TestProjectionWithDetectorOffset(ProjectionContract):
-    """The fifth key: a detector shape offset (36-vector) added to the shape; its Jacobian is the shape's."""
+    """The fifth key: a detector pose offset ``vehicle_T_seen`` (Pose3) that moves the vehicle these observations see."""
 
     loss = RobustLoss("cauchy", 1.0)
 
@@ -122,12 +122,12 @@ class TestProjectionWithDetectorOffset(ProjectionContract):
 
     def make_values(self, rng):
         values = super().make_values(rng)
-        values.insert(OFFSET_KEY, rng.normal(0, 0.05, 36))
+        values.insert(OFFSET_KEY, gtsam.Pose3.Expmap(rng.normal(0, [0.05, 0.05, 0.1, 0.1, 0.1, 0.05])))
         return values
 
     def make_truth_values(self):
         values = super().make_truth_values()
-        values.insert(OFFSET_KEY, np.zeros(36))
+        values.insert(OFFSET_KEY, gtsam.Pose3())
         return values
 
     def test_zero_at_truth(self):
@@ -135,17 +135,39 @@ class TestProjectionWithDetectorOffset(ProjectionContract):
         factor = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss, offset_key=OFFSET_KEY)
         assert factor.error(self.make_truth_values()) < 1e-12
 
-    def test_the_offset_moves_the_keypoints_as_the_shape_does(self):
+    def test_the_offset_moves_the_vehicle_these_observations_see(self):
         rng = np.random.default_rng(5)
         obs = observations(2.0, rng, cameras=self.cameras)
-        offset = rng.normal(0, 0.05, (12, 3))
-        shifted = values_at(TRUTH_POSE, type(TRUTH_SHAPE)(TRUTH_SHAPE.vehicle_p_keypoints + offset))
+        vehicle_T_seen = gtsam.Pose3.Expmap(np.array([0.01, -0.02, 0.03, 0.05, -0.04, 0.02]))
+        moved = values_at(TRUTH_POSE.compose(vehicle_T_seen), TRUTH_SHAPE)
         plain = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss)
         values = self.make_truth_values()
-        values.update(OFFSET_KEY, offset.ravel())
+        values.update(OFFSET_KEY, vehicle_T_seen)
         with_offset = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss, offset_key=OFFSET_KEY)
-        np.testing.assert_allclose(with_offset.unwhitenedError(values), plain.unwhitenedError(shifted), atol=1e-12)
-        assert with_offset.error(values) > 1.0  # a 5 cm offset is seen
+        np.testing.assert_allclose(with_offset.unwhitenedError(values), plain.unwhitenedError(moved), atol=1e-9)
+        assert with_offset.error(values) > 1.0  # a few centimetres and a degree are seen
+
+
+def test_detector_offset_prior_is_the_keypoints_sigma_on_rigid_motions():
+    """The pose offset's prior costs what ``sigma`` per coordinate costs on the keypoints (and their half turn)
+    that the small rigid motion moves, and the same in either gauge of the body frame."""
+    from vfactor.graph import detector_offset_prior
+
+    sigma, points = 0.038, TRUTH_SHAPE.vehicle_p_keypoints
+    prior = detector_offset_prior(OFFSET_KEY, sigma, points)
+    both = np.concatenate([points, points * [-1.0, -1.0, 1.0]])
+    half_turn = gtsam.Pose3(gtsam.Rot3.Rz(np.pi), np.zeros(3))
+    rng = np.random.default_rng(2)
+    for _ in range(5):
+        offset = gtsam.Pose3.Expmap(rng.normal(0, [2e-3, 2e-3, 2e-3, 5e-3, 5e-3, 5e-3]))
+        values = gtsam.Values()
+        values.insert(OFFSET_KEY, offset)
+        moved = offset.transformFrom(both.T).T - both
+        expected = 0.5 * np.sum(moved**2) / (2 * sigma**2)  # half the squared whitened norm, the doubled points once
+        assert prior.error(values) == pytest.approx(expected, rel=2e-2)
+        turned = gtsam.Values()
+        turned.insert(OFFSET_KEY, half_turn.between(offset).compose(half_turn))
+        assert prior.error(turned) == pytest.approx(prior.error(values), rel=1e-9)
 
 
 def test_kernel_matches_numpy_projection_for_every_lens():

@@ -70,7 +70,8 @@ def canonical_gauge(values: gtsam.Values, pose_keys, layer_keys, offset_keys=())
         values: a solution.
         pose_keys: the vehicle's pose keys (one per frame).
         layer_keys: its (wheel, light, roof) layer keys.
-        offset_keys: its detector shape offsets' keys (36-vectors in the layers' layout), turned as the layers.
+        offset_keys: its detector pose offsets' keys (``vehicle_T_seen``, ``gtsam.Pose3``), put in the turned body
+            frame (``Rz(pi)^-1 vehicle_T_seen Rz(pi)``).
     """
     layer_keys = list(layer_keys)
     if not values.exists(layer_keys[0]) or not turned_front_to_back(values.atVector(layer_keys[0])):
@@ -81,7 +82,7 @@ def canonical_gauge(values: gtsam.Values, pose_keys, layer_keys, offset_keys=())
             out.update(key, _HALF_TURN_POINTS * out.atVector(key))
     for key in offset_keys:
         if out.exists(key):
-            out.update(key, np.tile(_HALF_TURN_POINTS, 3) * out.atVector(key))
+            out.update(key, _HALF_TURN.between(out.atPose3(key)).compose(_HALF_TURN))
     for key in pose_keys:
         if out.exists(key):
             out.update(key, out.atPose3(key).compose(_HALF_TURN))

@@ -21,10 +21,11 @@ loses keypoints pushed out of the image), the mean of the Gaussian truncated
 to it (:mod:`vfactor.factors.truncation`).
 
 Keys: ``[pose, wheel, light, roof]``, and optionally a fifth: a detector's
-shape offset (36-vector, the layers' layout), added to the shape for these
-observations only (``vehicle_p_k`` becomes ``layer_k + offset_k``): a track
-gives each camera's detector its own error shaped like a change of shape
-(docs/factors.md, "The detector's shape offset in tracks").
+pose offset ``vehicle_T_seen`` (``gtsam.Pose3``, near the identity), a rigid
+motion of the vehicle as these observations see it (``world_p`` becomes
+``world_T_vehicle * vehicle_T_seen * vehicle_p_k``): a track gives each
+camera's detector its own error that repeats from frame to frame
+(docs/factors.md, "The detector's pose offset in tracks").
 """
 
 from __future__ import annotations
@@ -315,8 +316,9 @@ def _error(obs: KeypointObservations, loss: RobustLoss, this: gtsam.CustomFactor
     T = values.atPose3(keys[0]).matrix()
     points = _layers_to_points(values, keys[1:4])
     offset = len(keys) == 5
-    if offset:
-        points = points + values.atVector(keys[4]).reshape(12, 3)
+    if offset:  # the keypoints as this detector sees them: world_T_seen = world_T_vehicle * vehicle_T_seen
+        vehicle_T_seen = values.atPose3(keys[4])
+        T = T @ vehicle_T_seen.matrix()
     n = len(obs)
     r = np.empty(2 * n)
     want = H is not None
@@ -326,11 +328,12 @@ def _error(obs: KeypointObservations, loss: RobustLoss, this: gtsam.CustomFactor
                       obs._lens_table, obs._dist_table, obs.uv, obs.sqrt_information, obs._window_table, obs._sigma_table,
                       loss.id, float(loss.threshold), _MIN_DEPTH, want, r, H_pose, H_shape)
     if want:
-        H[0] = H_pose
         for j in range(3):
             H[j + 1] = H_shape[:, 12 * j : 12 * j + 12]
-        if offset:  # the offset moves the keypoints as the layers do
-            H[4] = H_shape
+        if offset:  # H_pose is d/d world_T_seen: world_T_vehicle Exp(xi) vehicle_T_seen = world_T_seen Exp(Ad(seen_T_vehicle) xi)
+            H[4] = H_pose
+            H_pose = H_pose @ vehicle_T_seen.inverse().AdjointMap()
+        H[0] = H_pose
     return r
 
 
@@ -345,9 +348,8 @@ def projection_factor(
         layer_keys: keys of the (wheel, light, roof) layer 12-vectors.
         obs: the pixel observations with their square-root information.
         loss: robust loss applied to each observation's whitened 2-vector.
-        offset_key: optional key of a 36-vector (metres, body frame, the layers' layout: keypoint ``k``'s
-            ``x, y, z`` at ``3k, 3k+1, 3k+2``) added to the shape for these observations: a detector's shape
-            offset (docs/factors.md).
+        offset_key: optional key of a detector's pose offset ``vehicle_T_seen`` (``gtsam.Pose3``): the
+            rigid motion of the vehicle, in its body frame, as these observations see it (docs/factors.md).
     """
     if len(obs) == 0:
         raise ValueError("projection_factor: no observations")

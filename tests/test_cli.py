@@ -177,7 +177,7 @@ def test_track_writes_results_and_plot(tmp_path, capsys):
 
 
 def test_track_with_detector_offsets(tmp_path):
-    """``--detector-offsets`` gives each camera's detections that carry a shape_sigma their own shape offset, in
+    """``--detector-offsets`` gives each camera's detections that carry a shape_sigma their own pose offset, in
     the tracker (also with a lag) and batch smoothing: the CLI's results are the API's with the option."""
     from vfactor.scene import load_scene
     from vfactor.track import TrackOptions, track_scene

@@ -31,6 +31,7 @@ from vfactor.graph import (
     insert_vehicle_values,
     observations_from_detections,
 )
+from vfactor.ground_fit import GroundFit, fit_ground_plane
 from vfactor.keypoints import KEYPOINT_NAMES, LAYERS, LEFT_RIGHT_PAIRS, NUM_KEYPOINTS
 from vfactor.keys import KeyScheme
 from vfactor.observations import Detection, Frame, Scene
@@ -52,6 +53,7 @@ __all__ = [
     "Frame",
     "FrameResult",
     "GraphConfig",
+    "GroundFit",
     "GroundPlane",
     "InputError",
     "KEYPOINT_NAMES",
@@ -83,6 +85,7 @@ __all__ = [
     "default_hwc_bounds",
     "default_shape_model",
     "default_shape_prior",
+    "fit_ground_plane",
     "hwc_factor",
     "insert_vehicle_values",
     "load_calibration",

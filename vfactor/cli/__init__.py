@@ -154,6 +154,22 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--idle-timeout", type=float, metavar="SECONDS",
                    help="with --follow, stop after this long without a new line (default: until interrupted)")
 
+    p = add(
+        "fit-ground", help="fit a rig's road plane to the vehicles it tracks; write the scene with it",
+        description="Track every vehicle of SCENE (which gives no road plane), fit a plane to the tracked wheel hubs "
+        "(robust to vehicles metres off), move it down by the hub height and write SCENE_OUT: SCENE with that plane "
+        "as its ground_plane. Solves and tracks of the rig's later scenes can then use it: it holds each vehicle's "
+        "height, roll and pitch to the road (docs/factors.md, \"Ground plane\"; docs/results.md, \"The road plane "
+        "from the traffic\").",
+    )
+    p.add_argument("scene", help="scene file (JSON, docs/scene-format.md) without a ground_plane")
+    p.add_argument("--out", required=True, help="scene file to write: SCENE with the fitted ground_plane (atomically)")
+    p.add_argument("--hub-height", type=float, default=0.34,
+                   help="height of the wheel hubs above the road, metres (default: 0.34, GraphConfig.hub_height)")
+    p.add_argument("--batch", action="store_true", help="fit to batch-smoothed tracks instead of iSAM2's")
+    p.add_argument("--allow-outside-paths", action="store_true",
+                   help="accept heatmap and image paths outside the scene file's folder (refused by default)")
+
     for name, text in NET_COMMANDS.items():
         p = sub.add_parser(name, help=text, add_help=False)
         p.add_argument("net_args", nargs=argparse.REMAINDER)
@@ -345,11 +361,11 @@ def main(argv=None) -> int:
         return EXIT_OK
     if args.command == "help":
         return _help(parser, args.topic)
-    from vfactor.cli import estimate, evaluate, interop, simulation, tools
+    from vfactor.cli import estimate, evaluate, ground, interop, simulation, tools
 
     handlers = {"solve": estimate.solve, "track": estimate.track, "simulate": simulation.simulate,
                 "demo": simulation.demo, "eval": evaluate.evaluate, "plot": tools.plot, "schema": tools.schema,
-                "import": interop.import_detections}
+                "import": interop.import_detections, "fit-ground": ground.fit_ground}
     return _guarded(args.command, lambda: handlers[args.command](args), args.debug)
 
 

@@ -1,0 +1,103 @@
+"""The road plane fitted to the traffic (vfactor.ground_fit, ``vfactor fit-ground``)."""
+
+from __future__ import annotations
+
+import json
+
+import gtsam
+import numpy as np
+import pytest
+
+from vfactor.cli import main
+from vfactor.errors import InputError
+from vfactor.ground_fit import MIN_GROUND_POINTS, fit_ground_plane
+from vfactor.result import FrameResult, Status, VehicleResult
+from vfactor.scene import load_scene
+from vfactor.wireframe import PRESETS
+
+HUB_HEIGHT = 0.34
+
+
+def _on_plane(normal, offset, positions, rng, noise=0.02, yaw=None):
+    """Frames of one solved vehicle each, standing on the plane n . x = offset at the given (x, y) positions
+    (hubs HUB_HEIGHT above it, give or take ``noise`` metres), turned so that its z is the plane's normal."""
+    n = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+    x_axis = np.cross([0.0, 1.0, 0.0], n)
+    x_axis /= np.linalg.norm(x_axis)
+    R = np.column_stack([x_axis, np.cross(n, x_axis), n])
+    shape = PRESETS["toyota_prius"].wireframe()
+    frames = []
+    for i, (x, y) in enumerate(positions):
+        z = (offset - n[0] * x - n[1] * y) / n[2]  # on the road
+        hub = np.array([x, y, z]) + (HUB_HEIGHT + rng.normal(0.0, noise)) * n
+        turn = gtsam.Rot3(R).compose(gtsam.Rot3.Rz(rng.uniform(-np.pi, np.pi) if yaw is None else yaw))
+        pose = gtsam.Pose3(turn, hub)  # the body origin is the hub centroid
+        frames.append(FrameResult(0.1 * i, [VehicleResult(f"v{i}", Status.CONVERGED, pose, shape)]))
+    return frames
+
+
+def _tilt_deg(a, b) -> float:
+    return float(np.degrees(np.arccos(np.clip(np.dot(a, b), -1.0, 1.0))))
+
+
+def test_the_plane_under_the_hubs_comes_back_despite_vehicles_metres_off():
+    rng = np.random.default_rng(3)
+    normal, offset = np.array([0.03, -0.05, 1.0]) / np.linalg.norm([0.03, -0.05, 1.0]), 1.7
+    positions = rng.uniform(-20.0, 20.0, (60, 2))
+    frames = _on_plane(normal, offset, positions, rng)
+    for frame in frames[:8]:  # a vehicle taken for the wrong type is metres off along a camera's ray
+        v = frame.vehicles[0]
+        v.world_T_vehicle = gtsam.Pose3(v.world_T_vehicle.rotation(), v.world_T_vehicle.translation()
+                                        + rng.normal(0.0, 2.0, 3))
+    frames.append(FrameResult(9.0, [VehicleResult("gone", Status.FAILED, message="not solved")]))  # skipped
+    fit = fit_ground_plane(frames, HUB_HEIGHT)
+    assert fit.points == 60
+    assert _tilt_deg(fit.plane.normal, normal) < 0.2
+    assert fit.plane.offset == pytest.approx(offset, abs=0.02)
+    assert fit.inliers <= 54 and fit.scale < 0.05
+    hubs = np.array([f.vehicles[0].world_T_vehicle.translation() for f in frames[:60]])
+    plain = np.linalg.svd(hubs - hubs.mean(axis=0))[2][-1]  # the plane of least squares through them all
+    assert _tilt_deg(np.sign(plain[2]) * plain, normal) > 3 * _tilt_deg(fit.plane.normal, normal)
+
+
+def test_too_few_poses_or_traffic_along_one_line_is_refused():
+    rng = np.random.default_rng(4)
+    with pytest.raises(InputError, match="at least"):
+        fit_ground_plane(_on_plane([0, 0, 1], 0.0, rng.uniform(-10, 10, (MIN_GROUND_POINTS - 1, 2)), rng))
+    line = np.c_[np.linspace(-20.0, 20.0, 30), 0.2 * rng.normal(size=30)]
+    with pytest.raises(InputError, match="one line"):
+        fit_ground_plane(_on_plane([0, 0, 1], 0.0, line, rng))
+
+
+def test_fit_ground_writes_the_scene_with_the_road_under_the_tracks(tmp_path, capsys):
+    """The command tracks a simulated two-camera scene (no plane given) and writes it back with a plane within
+    half a degree and 10 cm of the simulator's road (z = 0; the hubs of its vehicles are 0.30-0.40 m high)."""
+    scene = tmp_path / "scene.json"
+    assert main(["simulate", "library_tracks_2cam", "--seed", "20", "--out", str(scene)]) == 0
+    out = tmp_path / "with_plane.json"
+    assert main(["fit-ground", str(scene), "--out", str(out)]) == 0
+    assert "road plane" in capsys.readouterr().out
+    plane = load_scene(out).ground_plane
+    assert plane is not None and _tilt_deg(plane.normal, [0.0, 0.0, 1.0]) < 0.5 and abs(plane.offset) < 0.1
+    given = json.loads(scene.read_text())
+    written = json.loads(out.read_text())
+    assert written.pop("ground_plane") and written == given  # nothing else changed
+
+    assert main(["fit-ground", str(out), "--out", str(tmp_path / "again.json")]) == 2  # a plane is given already
+    assert "ground_plane" in capsys.readouterr().err
+    assert not (tmp_path / "again.json").exists()
+
+
+def test_fit_ground_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
+    scene = tmp_path / "short.json"
+    assert main(["simulate", "intersection_2cam", "--out", str(scene)]) == 0  # 8 frames of one vehicle each
+    capsys.readouterr()
+    out = tmp_path / "out.json"
+    for argv, field in ((["fit-ground", str(scene), "--out", str(out)], "short.json: 8 solved vehicle poses"),
+                        (["fit-ground", str(scene), "--out", str(out), "--hub-height", "-1"], "--hub-height"),
+                        (["fit-ground", str(tmp_path / "none.json"), "--out", str(out)], "none.json")):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert field in err and len(err.strip().splitlines()) == 1
+        assert not out.exists()
+

@@ -1,0 +1,122 @@
+"""The road plane fitted to the traffic: a ground plane for a rig whose road nobody surveyed.
+
+With fixed cameras the road under them is fixed too. Vehicles solved without a
+plane put their wheel hubs on it, give or take their errors; a plane fitted to
+many hub centres (robustly: a vehicle taken for the wrong type from one camera is
+metres off along that camera's ray) is then a ground plane for every later
+solve and track of the rig: the ground-plane factor holds each vehicle's
+height and its roll and pitch to it (:mod:`vfactor.factors.ground_plane`).
+
+Fit it to *tracks* (smoothed poses, :func:`vfactor.track.track_scene`), not to
+one-frame solves: from the keypoint network's detections with two cameras of
+little overlap, one-frame hubs gave planes 1.9-7.3 degrees off, smoothed ones
+0.1-0.6 degrees (docs/results.md, "The road plane from the traffic"). The
+command ``vfactor fit-ground`` tracks a scene and writes it back with the
+fitted plane.
+
+The plane ``n . x = offset`` is that of the hub centres (the mean of the four
+hub keypoints, world frame) moved down by ``hub_height`` along ``n``, as the
+ground-plane factor expects (:class:`vfactor.graph.GraphConfig` ``hub_height``;
+a library of real wheels spans 0.30-0.40 m, which the factor's height sigma
+covers). docs/factors.md gives the maths.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from vfactor.errors import InputError
+from vfactor.factors.ground_plane import GroundPlane
+from vfactor.keypoints import LAYERS
+from vfactor.result import FrameResult
+
+__all__ = ["GroundFit", "fit_ground_plane", "MIN_GROUND_POINTS"]
+
+#: At least this many solved vehicle poses (hub centres) make a plane.
+MIN_GROUND_POINTS = 10
+#: The hub centres must span at least this much (metres) in the plane's second direction: a plane is not fitted
+#: to vehicles that all drove along one line.
+MIN_SPREAD = 1.0
+_HUBER = 1.5  # robust scales at which a hub centre starts to weigh less (Huber)
+_ITERATIONS = 30
+
+
+@dataclass(frozen=True)
+class GroundFit:
+    """A road plane fitted to hub centres.
+
+    Attributes:
+        plane: the road plane (world frame; hubs at ``hub_height`` above it).
+        points: how many hub centres it was fitted to.
+        inliers: how many of them lie within three robust scales of the hubs' plane.
+        scale: robust scale (metres) of the hub centres' distances to their plane.
+        tilt_deg: the plane's angle to the world's horizontal (degrees).
+        hub_height: the hub height it was moved down by (metres).
+    """
+
+    plane: GroundPlane
+    points: int
+    inliers: int
+    scale: float
+    tilt_deg: float
+    hub_height: float
+
+    def to_dict(self) -> dict:
+        """The scene file's ``ground_plane`` (docs/scene-format.md)."""
+        return {"normal": list(self.plane.normal), "offset": self.plane.offset}
+
+
+def _hub_centres(results: Iterable[FrameResult]) -> np.ndarray:
+    hubs = list(LAYERS["wheel"])
+    return np.array([v.keypoints_world[hubs].mean(axis=0) for frame in results for v in frame.vehicles
+                     if v.ok and v.keypoints_world is not None], dtype=float).reshape(-1, 3)
+
+
+def fit_ground_plane(results: Iterable[FrameResult], hub_height: float = 0.34) -> GroundFit:
+    """The road plane under the solved vehicles of ``results``.
+
+    A plane through the hub centres of every solved vehicle pose (the
+    converged and poor-fit ones), by iteratively reweighted total least squares
+    with Huber weights at 1.5 robust scales (the median absolute distance, made
+    a sigma), its normal pointing up; then moved down by ``hub_height``.
+
+    Args:
+        results: frames of results (``vfactor track`` or ``vfactor solve``; tracks are better: see the module).
+        hub_height: height of the wheel hubs above the road, metres.
+
+    Raises:
+        InputError: fewer than :data:`MIN_GROUND_POINTS` solved poses, hub centres that lie along one line (less
+            than :data:`MIN_SPREAD` across it), or a plane whose upward normal is more than 45 degrees from the
+            world's z (the world frame's z must point up: docs/conventions.md).
+    """
+    points = _hub_centres(results)
+    if len(points) < MIN_GROUND_POINTS:
+        raise InputError("results", f"{len(points)} solved vehicle poses; a road plane needs at least "
+                                    f"{MIN_GROUND_POINTS} (more frames, or tracks seen longer)")
+    if not np.isfinite(hub_height) or hub_height < 0:
+        raise InputError("hub_height", f"expected a non-negative number of metres, got {hub_height!r}")
+    weights = np.ones(len(points))
+    for _ in range(_ITERATIONS):
+        centre = weights @ points / weights.sum()
+        _, singular, Vt = np.linalg.svd(np.sqrt(weights)[:, None] * (points - centre), full_matrices=False)
+        normal = Vt[-1] if Vt[-1][2] >= 0 else -Vt[-1]
+        distance = (points - centre) @ normal
+        scale = max(1.4826 * float(np.median(np.abs(distance))), 1e-6)
+        new = 1.0 / np.maximum(1.0, np.abs(distance) / (_HUBER * scale))
+        if np.allclose(new, weights, atol=1e-6):
+            break
+        weights = new
+    spread = singular[1] / np.sqrt(weights.sum())  # rms extent along the plane's second direction
+    if spread < MIN_SPREAD:
+        raise InputError("results", f"the vehicles' hub centres lie along one line ({spread:.2f} m across it): "
+                                    "a road plane needs traffic that covers an area")
+    tilt = float(np.degrees(np.arccos(np.clip(normal[2], -1.0, 1.0))))
+    if tilt > 45.0:
+        raise InputError("results", f"the hub centres' plane is {tilt:.0f} deg from horizontal: is the world "
+                                    "frame's z up (docs/conventions.md)?")
+    plane = GroundPlane(tuple(float(v) for v in normal), float(normal @ centre - hub_height))
+    inliers = int(np.sum(np.abs(distance) <= 3.0 * scale))
+    return GroundFit(plane, len(points), inliers, scale, tilt, float(hub_height))

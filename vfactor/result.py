@@ -71,7 +71,9 @@ class VehicleResult:
             ``"disagreeing_cameras"``: on a ``failed`` vehicle, the cameras whose keypoints the joint solve
             rejected while they agree among themselves (docs/reliability.md); ``"disagreeing_cut_cameras"``: on
             a solved vehicle, such cameras whose box of the vehicle reaches beyond their image (not blamed: the
-            vehicle is solved, those keypoints left to the robust loss);
+            vehicle is solved, those keypoints left to the robust loss); ``"cut_cameras_left_out"``: on a solved
+            vehicle, the cameras whose cut view the joint solve had followed against another camera's keypoints,
+            and without which the vehicle was solved (docs/reliability.md);
             ``"detections"``: the indices, in the frame's ``detections``, of the detections the vehicle was
             solved from (the result file's ``detections``);
             ``"covariance_inflation"``: the factor the one-frame covariances carry

@@ -317,6 +317,17 @@ def solve_observations(
         whitened_residuals(strict, world_T_vehicle, wireframe.vehicle_p_keypoints), axis=1))
     problem, rejected, cut = _camera_disagreement(strict, strict_weights, mean, options)
     if problem:
+        suspects = _cut_views(obs, exclude=rejected)
+        if suspects:  # the joint solve followed a view the image border cuts: solve without it
+            kept = ~np.isin(obs.camera_index, [c for c, camera in enumerate(obs.cameras) if camera.name in suspects])
+            alone = solve_observations(obs.subset(kept), options, vehicle_id, prior, bounds, None, hints)
+            if alone.ok:
+                note = (f"the keypoints of camera(s) {', '.join(repr(n) for n in suspects)}, whose view the image "
+                        f"border cuts, disagree with those of camera(s) {', '.join(repr(n) for n in rejected)}: "
+                        "left out")
+                alone.message = f"{alone.message}; {note}" if alone.message else note
+                alone.extras["cut_cameras_left_out"] = suspects
+                return alone
         return VehicleResult(vehicle_id, Status.FAILED, message=problem, extras={"disagreeing_cameras": rejected})
     if cut:  # a view cut by the image border: a detector's keypoints there may be a whole vehicle drawn in the part seen
         result.extras["disagreeing_cut_cameras"] = cut
@@ -745,6 +756,14 @@ def _lm(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc, check
 DISAGREEMENT_JOINT_INLIERS = 0.3
 #: ... and a pose fitted to its keypoints alone (PnP of the mean shape) keeps this many more (a share of them).
 DISAGREEMENT_MARGIN = 0.55
+
+
+def _cut_views(obs: KeypointObservations, exclude=()) -> list[str]:
+    """Names of the cameras (but ``exclude``) whose view of the vehicle the image border cuts (``obs.cut``)."""
+    if obs.cut is None:
+        return []
+    return [camera.name for c, camera in enumerate(obs.cameras) if camera.name not in exclude
+            and (obs.camera_index == c).any() and obs.cut[obs.camera_index == c].all()]
 
 
 def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: Wireframe,

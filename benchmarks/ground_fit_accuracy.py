@@ -6,9 +6,11 @@ to the tracks of *calibration* scenes (other seeds: other vehicles, other
 noise), then the held-out scenes are tracked three ways: without a plane (what
 such a rig gets today), with the fitted plane, and with the true one (the
 simulator's road, z = 0). Every vehicle is solved with a shape model learnt
-without it. Prints per scene and per body type: rotation (deg) / translation
-(cm) / pose NEES (as a ratio to 6) for the smoothed (isam2), online, fixed-lag
-(0.5 s) and batch estimates.
+without it. Prints per scene, per body type and per camera count (the cameras
+that saw the vehicle in that frame): rotation (deg) / translation (cm) / pose
+NEES (as a ratio to 6) of the one-frame solves (``frame_by_frame``, as
+``vfactor solve``) and of the smoothed (isam2), online, fixed-lag (0.5 s) and
+batch estimates.
 
 Run: ``python benchmarks/ground_fit_accuracy.py [--images]`` (``--images``: the
 scenes rendered and their keypoints found by the shipped network, as ``vfactor
@@ -28,6 +30,7 @@ from vfactor.factors.ground_plane import GroundPlane
 from vfactor.ground_fit import fit_ground_plane
 from vfactor.metrics import nees_summary, pose_errors, pose_nees
 from vfactor.sim import load_scenario, simulate
+from vfactor.solve import SolveOptions, solve_scene
 from vfactor.track import TrackOptions, smooth_scene, track_scene
 
 CALIBRATION = ("library_tracks_2cam:20", "tracks_3veh:20")
@@ -46,7 +49,8 @@ def _scene(spec: str, images: bool):
     return simulate(load_scenario(scenario), seed=int(seed))
 
 
-def _rows(sim, frames) -> list[tuple]:
+def _rows(sim, scene, frames) -> list[tuple]:
+    """(body type, cameras that saw it, rotation deg, translation cm, pose NEES) of each solved pose."""
     out = []
     for f, frame in enumerate(frames):
         for v in frame.vehicles:
@@ -54,15 +58,17 @@ def _rows(sim, frames) -> list[tuple]:
                 truth = sim.truth[f][v.id]
                 e = pose_errors(v.world_T_vehicle, v.keypoints_world, truth.world_T_vehicle, truth.keypoints_world)
                 nees = pose_nees(v.world_T_vehicle, v.pose_covariance, truth.world_T_vehicle)
-                out.append((body_type_of(truth.preset), e["rotation_deg"], e["translation_cm"], nees))
+                cameras = len({d.camera for d in scene.frames[f].detections if d.vehicle == v.id})
+                out.append((body_type_of(truth.preset), f"{cameras} camera{'s' if cameras > 1 else ''}",
+                            e["rotation_deg"], e["translation_cm"], nees))
     return out
 
 
 def _cell(rows) -> str:
     if not rows:
         return "-"
-    r = np.array([row[1:3] for row in rows])
-    nees = nees_summary([row[3] for row in rows], 6)
+    r = np.array([row[2:4] for row in rows])
+    nees = nees_summary([row[4] for row in rows], 6)
     return f"{r[:, 0].mean():.2f} / {r[:, 1].mean():.1f} / {nees['ratio']:.2f}x"
 
 
@@ -80,29 +86,34 @@ def main(argv=None) -> dict:
     print(f"plane fitted to {', '.join(CALIBRATION)} ({fit.points} tracked poses): {fit.tilt_deg:.2f} deg from "
           f"the true road's, offset {100 * fit.plane.offset:.1f} cm (the road at 0, hubs at 0.34 m above the plane)")
     planes = {"no plane": None, "fitted plane": fit.plane, "true plane": TRUE_PLANE}
-    methods = ("isam2", "isam2_online", "isam2_lag", "batch")
+    methods = ("frame_by_frame", "isam2", "isam2_online", "isam2_lag", "batch")
     pooled = defaultdict(list)
-    print(f"\n| scene | plane | {' | '.join(methods)} |\n| --- | --- | {' | '.join('---' for _ in methods)} |")
+    print(f"\n| scene | plane | {' | '.join(methods)} | not solved (frame by frame) |\n| --- | --- | "
+          f"{' | '.join('---' for _ in methods)} | --- |")
     for spec in HELD_OUT:
         sim = _scene(spec, args.images)
         model = held_out_scene_model(sim)
         for name, plane in planes.items():
             scene = dataclasses.replace(sim.scene, ground_plane=plane)
             run = track_scene(scene, TrackOptions(), prior=model)
-            runs = {"isam2": run.frames, "isam2_online": run.online,
+            runs = {"frame_by_frame": solve_scene(scene, SolveOptions(), prior=model),
+                    "isam2": run.frames, "isam2_online": run.online,
                     "isam2_lag": track_scene(scene, TrackOptions(lag=args.lag), prior=model).frames,
                     "batch": smooth_scene(scene, TrackOptions(), prior=model)}
-            rows = {m: _rows(sim, frames) for m, frames in runs.items()}
+            rows = {m: _rows(sim, scene, frames) for m, frames in runs.items()}
+            failed = sum(not v.ok for frame in runs["frame_by_frame"] for v in frame.vehicles)
             for m in methods:
                 pooled[(name, m)] += rows[m]
-            print(f"| {spec.replace(':', ' ')} | {name} | {' | '.join(_cell(rows[m]) for m in methods)} |", flush=True)
-    print(f"\nPooled, per body type (rotation deg / translation cm / pose NEES):\n\n| body type | plane | "
-          f"{' | '.join(methods)} |\n| --- | --- | {' | '.join('---' for _ in methods)} |")
-    types = sorted({row[0] for rows in pooled.values() for row in rows})
-    for body_type in types + ["all"]:
-        for name in planes:
-            cells = [_cell([r for r in pooled[(name, m)] if body_type in ("all", r[0])]) for m in methods]
-            print(f"| {body_type} | {name} | {' | '.join(cells)} |")
+            print(f"| {spec.replace(':', ' ')} | {name} | {' | '.join(_cell(rows[m]) for m in methods)} | {failed} |",
+                  flush=True)
+    for what, column in (("body type", 0), ("cameras", 1)):
+        print(f"\nPooled, per {what} (rotation deg / translation cm / pose NEES):\n\n| {what} | plane | "
+              f"{' | '.join(methods)} |\n| --- | --- | {' | '.join('---' for _ in methods)} |")
+        keys = sorted({row[column] for rows in pooled.values() for row in rows})
+        for key in keys + ["all"]:
+            for name in planes:
+                cells = [_cell([r for r in pooled[(name, m)] if key in ("all", r[column])]) for m in methods]
+                print(f"| {key} | {name} | {' | '.join(cells)} |")
     return {"fit": fit, "pooled": pooled}
 
 

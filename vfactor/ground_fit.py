@@ -17,8 +17,8 @@ fitted plane.
 The plane ``n . x = offset`` is that of the hub centres (the mean of the four
 hub keypoints, world frame) moved down by ``hub_height`` along ``n``, as the
 ground-plane factor expects (:class:`vfactor.graph.GraphConfig` ``hub_height``;
-a library of real wheels spans 0.30-0.40 m, which the factor's height sigma
-covers). docs/factors.md gives the maths.
+the wheel radii of the 65 library vehicles span 0.30-0.42 m, which the factor's
+height sigma covers; the fitted offset takes the traffic's mean). docs/factors.md gives the maths.
 """
 
 from __future__ import annotations

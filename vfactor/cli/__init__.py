@@ -159,8 +159,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Track every vehicle of SCENE (which gives no road plane), fit a plane to the tracked wheel hubs "
         "(robust to vehicles metres off), move it down by the hub height and write SCENE_OUT: SCENE with that plane "
         "as its ground_plane. Solves and tracks of the rig's later scenes can then use it: it holds each vehicle's "
-        "height, roll and pitch to the road (docs/factors.md, \"Ground plane\"; docs/results.md, \"The road plane "
-        "from the traffic\").",
+        "height, roll and pitch to the road (docs/factors.md, \"A plane nobody surveyed\"; docs/results.md, \"The "
+        "road plane from the traffic\").",
     )
     p.add_argument("scene", help="scene file (JSON, docs/scene-format.md) without a ground_plane")
     p.add_argument("--out", required=True, help="scene file to write: SCENE with the fitted ground_plane (atomically)")

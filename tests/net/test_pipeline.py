@@ -157,6 +157,16 @@ def test_cli_track_runs_the_network_too(rendered, tmp_path, capsys):
     assert all(v.ok for f in load_results(out) for v in f.vehicles)
 
 
+def test_cli_fit_ground_runs_the_network_on_image_boxes(rendered, tmp_path, capsys):
+    """fit-ground finds the keypoints of a scene given as image boxes before it tracks; two frames of one vehicle
+    are too little traffic for a plane, said in one line (the network ran: two poses were tracked)."""
+    sim, r = rendered
+    out = tmp_path / "with_plane.json"
+    assert main(["fit-ground", str(r.path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "2 solved vehicle poses; a road plane needs at least 10" in err and not out.exists()
+
+
 def test_cli_eval_images(rendered, tmp_path, capsys):
     md = tmp_path / "images.md"
     assert main(["eval", "images", "--frames", "2", "--seed", "4", "--markdown", str(md)]) == 0

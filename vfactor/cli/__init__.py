@@ -167,6 +167,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--hub-height", type=float, default=0.34,
                    help="height of the wheel hubs above the road, metres (default: 0.34, GraphConfig.hub_height)")
     p.add_argument("--batch", action="store_true", help="fit to batch-smoothed tracks instead of iSAM2's")
+    p.add_argument("--weights", help="keypoint-network weights for detections given as image boxes (default: the "
+                   "shipped weights; needs torch); the scene is written with its boxes as given")
     p.add_argument("--allow-outside-paths", action="store_true",
                    help="accept heatmap and image paths outside the scene file's folder (refused by default)")
 

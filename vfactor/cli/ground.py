@@ -4,16 +4,18 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from types import SimpleNamespace
 
-from vfactor.cli.common import EXIT_OK, check_out_file, progress
+from vfactor.cli.common import EXIT_OK, check_out_file, detect, progress
 from vfactor.errors import InputError
 
 __all__ = ["fit_ground"]
 
 
 def fit_ground(args) -> int:
-    """``vfactor fit-ground SCENE --out SCENE_OUT [--hub-height M] [--batch]``: tracks SCENE (no plane), fits
-    the road plane to the tracks' hub centres and writes SCENE with it as its ``ground_plane``."""
+    """``vfactor fit-ground SCENE --out SCENE_OUT [--hub-height M] [--batch] [--weights W]``: tracks SCENE (no
+    plane; detections given as image boxes through the keypoint network first), fits the road plane to the tracks'
+    hub centres and writes SCENE, as it was given, with the plane as its ``ground_plane``."""
     from vfactor.ground_fit import fit_ground_plane
     from vfactor.scene import load_scene, save_scene
     from vfactor.solve import SolveOptions
@@ -25,12 +27,13 @@ def fit_ground(args) -> int:
     scene = load_scene(args.scene, allow_outside_paths=args.allow_outside_paths)
     if scene.ground_plane is not None:
         raise InputError("ground_plane", f"{args.scene} gives a road plane already; remove it to fit one")
+    detected = detect(scene, SimpleNamespace(weights=args.weights, save_detections=None, quiet=args.quiet))
     options = TrackOptions(solve=SolveOptions(covariance=False), covariance=False)
     t0 = time.perf_counter()
     if args.batch:
-        results = smooth_scene(scene, options, progress=progress("smoothing", not args.quiet))
+        results = smooth_scene(detected, options, progress=progress("smoothing", not args.quiet))
     else:
-        results = track_scene(scene, options, progress=progress("tracking", not args.quiet)).frames
+        results = track_scene(detected, options, progress=progress("tracking", not args.quiet)).frames
     try:
         fit = fit_ground_plane(results, args.hub_height)
     except InputError as exc:  # the scene's traffic does not make a plane

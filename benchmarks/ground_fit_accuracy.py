@@ -12,9 +12,11 @@ NEES (as a ratio to 6) of the one-frame solves (``frame_by_frame``, as
 ``vfactor solve``) and of the smoothed (isam2), online, fixed-lag (0.5 s) and
 batch estimates.
 
-Run: ``python benchmarks/ground_fit_accuracy.py [--images]`` (``--images``: the
-scenes rendered and their keypoints found by the shipped network, as ``vfactor
-eval images``; needs the ``net`` and ``render`` extras, about 40 s a scene).
+Run: ``python benchmarks/ground_fit_accuracy.py [--images] [--detector-offsets]``
+(``--images``: the scenes rendered and their keypoints found by the shipped
+network, as ``vfactor eval images``; needs the ``net`` and ``render`` extras,
+about 40 s a scene; ``--detector-offsets``: a fourth way, the fitted plane with
+``TrackOptions(detector_offsets=True)``, which acts on the network's detections only).
 """
 
 from __future__ import annotations
@@ -76,6 +78,8 @@ def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--images", action="store_true", help="the network's keypoints on rendered images")
     parser.add_argument("--lag", type=float, default=0.5)
+    parser.add_argument("--detector-offsets", action="store_true",
+                        help="also track with the fitted plane and each camera's detector pose offsets")
     args = parser.parse_args(argv)
 
     fitted = []
@@ -86,6 +90,8 @@ def main(argv=None) -> dict:
     print(f"plane fitted to {', '.join(CALIBRATION)} ({fit.points} tracked poses): {fit.tilt_deg:.2f} deg from "
           f"the true road's, offset {100 * fit.plane.offset:.1f} cm (the road at 0, hubs at 0.34 m above the plane)")
     planes = {"no plane": None, "fitted plane": fit.plane, "true plane": TRUE_PLANE}
+    if args.detector_offsets:
+        planes["fitted plane, offsets"] = fit.plane
     methods = ("frame_by_frame", "isam2", "isam2_online", "isam2_lag", "batch")
     pooled = defaultdict(list)
     print(f"\n| scene | plane | {' | '.join(methods)} | not solved (frame by frame) |\n| --- | --- | "
@@ -95,11 +101,12 @@ def main(argv=None) -> dict:
         model = held_out_scene_model(sim)
         for name, plane in planes.items():
             scene = dataclasses.replace(sim.scene, ground_plane=plane)
-            run = track_scene(scene, TrackOptions(), prior=model)
+            options = TrackOptions(detector_offsets=name.endswith("offsets"))
+            run = track_scene(scene, options, prior=model)
             runs = {"frame_by_frame": solve_scene(scene, SolveOptions(), prior=model),
                     "isam2": run.frames, "isam2_online": run.online,
-                    "isam2_lag": track_scene(scene, TrackOptions(lag=args.lag), prior=model).frames,
-                    "batch": smooth_scene(scene, TrackOptions(), prior=model)}
+                    "isam2_lag": track_scene(scene, dataclasses.replace(options, lag=args.lag), prior=model).frames,
+                    "batch": smooth_scene(scene, options, prior=model)}
             rows = {m: _rows(sim, scene, frames) for m, frames in runs.items()}
             failed = sum(not v.ok for frame in runs["frame_by_frame"] for v in frame.vehicles)
             for m in methods:

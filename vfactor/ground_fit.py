@@ -64,10 +64,6 @@ class GroundFit:
     tilt_deg: float
     hub_height: float
 
-    def to_dict(self) -> dict:
-        """The scene file's ``ground_plane`` (docs/scene-format.md)."""
-        return {"normal": list(self.plane.normal), "offset": self.plane.offset}
-
 
 def _hub_centres(results: Iterable[FrameResult]) -> np.ndarray:
     hubs = list(LAYERS["wheel"])
@@ -92,12 +88,12 @@ def fit_ground_plane(results: Iterable[FrameResult], hub_height: float = 0.34) -
             than :data:`MIN_SPREAD` across it), or a plane whose upward normal is more than 45 degrees from the
             world's z (the world frame's z must point up: docs/conventions.md).
     """
+    if not np.isfinite(hub_height) or hub_height < 0:
+        raise InputError("hub_height", f"expected a non-negative number of metres, got {hub_height!r}")
     points = _hub_centres(results)
     if len(points) < MIN_GROUND_POINTS:
         raise InputError("results", f"{len(points)} solved vehicle poses; a road plane needs at least "
                                     f"{MIN_GROUND_POINTS} (more frames, or tracks seen longer)")
-    if not np.isfinite(hub_height) or hub_height < 0:
-        raise InputError("hub_height", f"expected a non-negative number of metres, got {hub_height!r}")
     weights = np.ones(len(points))
     for _ in range(_ITERATIONS):
         centre = weights @ points / weights.sum()

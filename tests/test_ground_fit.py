@@ -101,3 +101,21 @@ def test_fit_ground_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
         assert field in err and len(err.strip().splitlines()) == 1
         assert not out.exists()
 
+
+def test_fit_ground_pools_the_traffic_of_one_rig(tmp_path, capsys):
+    """``--traffic`` adds other scenes of the same cameras to the fit (here too little traffic alone makes one);
+    a scene of another rig is refused, naming the option."""
+    short, other, elsewhere = tmp_path / "short.json", tmp_path / "other.json", tmp_path / "multi.json"
+    assert main(["simulate", "intersection_2cam", "--out", str(short)]) == 0  # 8 poses: too few on their own
+    assert main(["simulate", "tracks_3veh", "--seed", "20", "--out", str(other)]) == 0  # the same two cameras
+    assert main(["simulate", "intersection_multi", "--out", str(elsewhere)]) == 0
+    out = tmp_path / "with_plane.json"
+    capsys.readouterr()
+    assert main(["fit-ground", str(short), "--traffic", str(other), "--out", str(out)]) == 0
+    assert "of 2 scene(s)" in capsys.readouterr().out
+    plane = load_scene(out).ground_plane
+    assert _tilt_deg(plane.normal, [0.0, 0.0, 1.0]) < 0.5 and len(load_scene(out).frames) == 8
+    assert main(["fit-ground", str(short), "--traffic", str(elsewhere), "--out", str(tmp_path / "no.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("vfactor fit-ground: error: --traffic:") and not (tmp_path / "no.json").exists()
+

@@ -166,6 +166,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="scene file to write: SCENE with the fitted ground_plane (atomically)")
     p.add_argument("--hub-height", type=float, default=0.34,
                    help="height of the wheel hubs above the road, metres (default: 0.34, GraphConfig.hub_height)")
+    p.add_argument("--traffic", action="append", metavar="FILE",
+                   help="another scene file of the same cameras whose tracks join the fit (repeatable): more traffic, "
+                   "a better plane")
     p.add_argument("--batch", action="store_true", help="fit to batch-smoothed tracks instead of iSAM2's")
     p.add_argument("--weights", help="keypoint-network weights for detections given as image boxes (default: the "
                    "shipped weights; needs torch); the scene is written with its boxes as given")

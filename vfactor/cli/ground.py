@@ -6,6 +6,8 @@ import dataclasses
 import time
 from types import SimpleNamespace
 
+import numpy as np
+
 from vfactor.cli.common import EXIT_OK, check_out_file, detect, progress
 from vfactor.errors import InputError
 
@@ -13,35 +15,55 @@ __all__ = ["fit_ground"]
 
 
 def fit_ground(args) -> int:
-    """``vfactor fit-ground SCENE --out SCENE_OUT [--hub-height M] [--batch] [--weights W]``: tracks SCENE (no
-    plane; detections given as image boxes through the keypoint network first), fits the road plane to the tracks'
-    hub centres and writes SCENE, as it was given, with the plane as its ``ground_plane``."""
+    """``vfactor fit-ground SCENE --out SCENE_OUT [--traffic FILE ...] [--hub-height M] [--batch] [--weights W]``:
+    tracks SCENE and the ``--traffic`` scenes of the same cameras (none giving a plane; detections given as image
+    boxes through the keypoint network first), fits the road plane to all their tracks' hub centres and writes
+    SCENE, as it was given, with the plane as its ``ground_plane``."""
     from vfactor.ground_fit import fit_ground_plane
     from vfactor.scene import load_scene, save_scene
     from vfactor.solve import SolveOptions
     from vfactor.track import TrackOptions, smooth_scene, track_scene
 
-    out = check_out_file(args.out, "--out", [("scene file", args.scene)])
+    traffic = list(args.traffic or [])
+    out = check_out_file(args.out, "--out", [("scene file", args.scene)] + [("--traffic file", t) for t in traffic])
     if not (args.hub_height >= 0 and args.hub_height < float("inf")):
         raise InputError("--hub-height", f"expected a non-negative number of metres, got {args.hub_height}")
     scene = load_scene(args.scene, allow_outside_paths=args.allow_outside_paths)
-    if scene.ground_plane is not None:
-        raise InputError("ground_plane", f"{args.scene} gives a road plane already; remove it to fit one")
-    detected = detect(scene, SimpleNamespace(weights=args.weights, save_detections=None, quiet=args.quiet))
+    scenes = [(args.scene, scene)] + [(t, load_scene(t, allow_outside_paths=args.allow_outside_paths))
+                                      for t in traffic]
+    for name, other in scenes:
+        if other.ground_plane is not None:
+            raise InputError("ground_plane", f"{name} gives a road plane already; remove it to fit one")
+        _same_cameras(scene, other, name)
     options = TrackOptions(solve=SolveOptions(covariance=False), covariance=False)
     t0 = time.perf_counter()
-    if args.batch:
-        results = smooth_scene(detected, options, progress=progress("smoothing", not args.quiet))
-    else:
-        results = track_scene(detected, options, progress=progress("tracking", not args.quiet)).frames
+    results = []
+    for name, other in scenes:
+        detected = detect(other, SimpleNamespace(weights=args.weights, save_detections=None, quiet=args.quiet))
+        if args.batch:
+            results += smooth_scene(detected, options, progress=progress("smoothing", not args.quiet))
+        else:
+            results += track_scene(detected, options, progress=progress("tracking", not args.quiet)).frames
     try:
         fit = fit_ground_plane(results, args.hub_height)
-    except InputError as exc:  # the scene's traffic does not make a plane
-        raise InputError(args.scene, exc.problem) from None
+    except InputError as exc:  # the scenes' traffic does not make a plane
+        raise InputError(", ".join(name for name, _ in scenes), exc.problem) from None
     save_scene(dataclasses.replace(scene, ground_plane=fit.plane), out)
     if not args.quiet:
         n, d = fit.plane.normal, fit.plane.offset
         print(f"road plane {n[0]:.4f} x + {n[1]:.4f} y + {n[2]:.4f} z = {d:.3f} m ({fit.tilt_deg:.2f} deg from "
-              f"horizontal), from {fit.points} tracked poses ({fit.inliers} within 3 robust scales; scale "
-              f"{100 * fit.scale:.1f} cm), {time.perf_counter() - t0:.2f} s; wrote {out}")
+              f"horizontal), from {fit.points} tracked poses of {len(scenes)} scene(s) ({fit.inliers} within 3 "
+              f"robust scales; scale {100 * fit.scale:.1f} cm), {time.perf_counter() - t0:.2f} s; wrote {out}")
     return EXIT_OK
+
+
+def _same_cameras(scene, other, name: str) -> None:
+    """Raises InputError (``--traffic``) unless ``other`` has ``scene``'s cameras where they were: one rig."""
+    if set(other.cameras) != set(scene.cameras):
+        raise InputError("--traffic", f"{name} has cameras {sorted(other.cameras)}, the scene {sorted(scene.cameras)}: "
+                                      "a road plane is fitted to the traffic of one rig")
+    for camera, given in scene.cameras.items():
+        moved = np.abs(np.asarray(other.cameras[camera].world_T_camera) - np.asarray(given.world_T_camera)).max()
+        if moved > 1e-3:
+            raise InputError("--traffic", f"{name}: camera {camera!r} is not where the scene has it "
+                                          f"(world_T_camera differs by up to {moved:.3g}): one rig only")

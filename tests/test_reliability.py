@@ -575,6 +575,7 @@ def test_a_cut_view_that_the_joint_solve_followed_is_left_out():
     extrinsic), the vehicle is solved without the cut view, with a message and ``cut_cameras_left_out``; its
     covariance covers its one-camera error. Without boxes the same vehicles fail as before (here cam0 turned by
     10 deg stands for a detector that drew a whole vehicle in the part it saw)."""
+    from vfactor.graph import observations_from_detections
     from vfactor.metrics import pose_nees
     from vfactor.sim import simulate
     from vfactor.solve import solve_frame
@@ -598,6 +599,9 @@ def test_a_cut_view_that_the_joint_solve_followed_is_left_out():
             if plain[v.id].status == Status.FAILED and plain[v.id].extras["disagreeing_cameras"] == ["cam1"]:
                 assert v.status == Status.CONVERGED, v.message
                 assert v.extras["cut_cameras_left_out"] == ["cam0"]
+                obs = observations_from_detections(cut.detections_of(v.id), cameras, options.graph)
+                cam0 = obs.camera_index == [c.name for c in obs.cameras].index("cam0")  # weights in this order
+                assert len(v.extras["inlier_weights"]) == len(obs) and not v.extras["inlier_weights"][cam0].any()
                 assert "'cam0', whose view the image border cuts, disagree with those of camera(s) 'cam1'" in v.message
                 nees.append(pose_nees(v.world_T_vehicle, v.pose_covariance, sim.truth[f][v.id].world_T_vehicle))
     assert len(nees) >= 4 and np.mean(nees) < 12.0

@@ -317,16 +317,24 @@ def solve_observations(
         whitened_residuals(strict, world_T_vehicle, wireframe.vehicle_p_keypoints), axis=1))
     problem, rejected, cut = _camera_disagreement(strict, strict_weights, mean, options)
     if problem:
-        suspects = _cut_views(obs, exclude=rejected)
-        if suspects:  # the joint solve followed a view the image border cuts: solve without it
-            kept = ~np.isin(obs.camera_index, [c for c, camera in enumerate(obs.cameras) if camera.name in suspects])
-            alone = solve_observations(obs.subset(kept), options, vehicle_id, prior, bounds, None, hints)
+        suspects = _cut_views(as_given, exclude=rejected)
+        if suspects:  # the joint solve followed a view the image border cuts: solve without it (the keypoints as given)
+            kept = ~np.isin(as_given.camera_index,
+                            [c for c, camera in enumerate(as_given.cameras) if camera.name in suspects])
+            alone = solve_observations(as_given.subset(kept), options, vehicle_id, prior, bounds, None, hints)
             if alone.ok:
                 note = (f"the keypoints of camera(s) {', '.join(repr(n) for n in suspects)}, whose view the image "
                         f"border cuts, disagree with those of camera(s) {', '.join(repr(n) for n in rejected)}: "
                         "left out")
                 alone.message = f"{alone.message}; {note}" if alone.message else note
                 alone.extras["cut_cameras_left_out"] = suspects
+                rows = np.flatnonzero(kept)  # the subset's observations among all of them (the cut views' weigh 0)
+                if "inlier_weights" in alone.extras:
+                    weights = np.zeros(len(as_given))
+                    weights[rows] = alone.extras["inlier_weights"]
+                    alone.extras["inlier_weights"] = weights
+                if "outliers_left_out" in alone.extras:
+                    alone.extras["outliers_left_out"] = rows[np.asarray(alone.extras["outliers_left_out"], dtype=int)]
                 return alone
         return VehicleResult(vehicle_id, Status.FAILED, message=problem, extras={"disagreeing_cameras": rejected})
     if cut:  # a view cut by the image border: a detector's keypoints there may be a whole vehicle drawn in the part seen

@@ -463,3 +463,24 @@ def test_one_frame_of_a_vehicle_turned_round_is_left_out_not_a_new_segment(sim):
                        sim.truth[10]["v1"].keypoints_world)["rotation_deg"] < 5
     lagged = track_scene(dataclasses.replace(sim.scene, frames=frames), TrackOptions(lag=0.3))
     assert not any("jumps" in m for m in lagged.messages) and "left out" in lagged.frames[10].vehicles[0].message
+
+
+def test_a_frame_that_does_not_join_a_young_track_leaves_its_shape_choice_as_it_was(sim):
+    """Another vehicle's keypoints under a young track's id: the track is re-solved with them to see whether it
+    was the track that was off (Tracker._rejoined); they do not join, and the segment the jump ends keeps the
+    prior, noise scale and body type it had, not those the trial re-solve chose with the stranger's frame."""
+    frames = [dataclasses.replace(f, detections=[d for d in f.detections if d.camera == "cam1"])
+              for f in sim.scene.frames[:8]]  # one camera: the track stays young
+    jumped = dataclasses.replace(frames[2], t=frames[-1].t + frames[-1].t - frames[-2].t)  # where it was 6 frames ago
+    tracker = Tracker(sim.scene.cameras, TrackOptions(covariance=False))
+    for i, frame in enumerate(frames):
+        tracker.add_frame(frame, i)
+    track = tracker._tracks["v1"]
+    assert track.young and len(track.poses) >= 5
+    kept = {name: getattr(track, name) for name in ("noise_scale", "body_type", "body_type_probability")}
+    prior_mean = np.asarray(track.prior.mean).copy()
+    result = tracker.add_frame(jumped, len(frames)).vehicles[0]
+    assert "a new segment of the track" in result.message
+    ended = track.previous
+    assert {name: ended[name] for name in kept} == kept
+    np.testing.assert_array_equal(np.asarray(ended["prior"].mean), prior_mean)

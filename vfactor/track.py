@@ -18,6 +18,7 @@ gives a road plane, the ground-plane factor on every pose.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import logging
 import math
@@ -163,12 +164,15 @@ _JUMP_COST_RATIO = 0.25
 _REJOIN_COST_RATIO = 2.0
 #: ... and only a track of at least this many poses (Tracker._rejoined).
 _REJOIN_POSES = 5
-#: The frame after a jump resumes the segment the jump ended (Tracker._resumed) where that segment's prediction
+#: The frame after a jump resumes the segment the jump ended (Tracker._resume) where that segment's prediction
 #: explains it at under this share of the cost at the new segment's.
 _RESUME_COST_RATIO = 0.5
-#: What a track's segment is (Tracker._resumed keeps them for one frame after a jump ends a segment).
+#: What a track's segment is (Tracker._resume keeps them for one frame after a jump ends a segment).
 _SEGMENT_STATE = ("smoother", "poses", "hwc_added", "young", "young_frames", "multiview_frames", "reanchored", "prior",
                   "body_type", "body_type_probability", "noise_scale", "offsets", "offset_priors")
+#: What a re-solve with a frame that does not join changes and Tracker._rejoined puts back: the shape choice and
+#: the detector offsets made for that frame.
+_REJOIN_STATE = ("prior", "noise_scale", "body_type", "body_type_probability", "offsets", "offset_priors")
 #: With a fixed lag, a young track's poses stay in its smoother (re-stamped with each new frame) while it has fewer
 #: than this many young frames, so that re-anchoring and re-joining can still re-solve them all.
 _YOUNG_HOLD_FRAMES = 30
@@ -213,7 +217,7 @@ class _TrackState:
     # each offset key the smoother was given -> its prior (their count numbers the next key)
     offsets: dict = field(default_factory=dict)
     offset_priors: dict = field(default_factory=dict)
-    # the segment a jump ended, kept for one frame (Tracker._resumed): its smoother and state, or None
+    # the segment a jump ended, kept for one frame (Tracker._resume): its smoother and state, or None
     previous: dict | None = None
 
     def restart(self) -> None:
@@ -552,18 +556,19 @@ class Tracker:
         motion = gtsam.NonlinearFactorGraph()
         _add_pose_factors(motion, track.poses, key, t, self.options)
         values = gtsam.Values()
+        before = {name: copy.copy(getattr(track, name)) for name in _REJOIN_STATE}
         offsets = self._offsets(track, obs, values, estimate)
         frames = track.young_frames + [(frame_index, raw, motion, None, offsets)]
         values.insert(key, start.world_T_vehicle)
         estimate.insert(values)
-        if not all(estimate.exists(k) for k in self._young_graph(track, frames).keyVector()):
-            return False  # poses already marginalised (fixed lag)
-        prior, scale = track.prior, track.noise_scale
-        graph, solved = self._solved_young(track, frames, estimate, [k for *_, k in track.poses] + [key], fresh=True)
-        cost = cross_projection_cost(obs, solved.atPose3(key), wireframe_from_values(solved, self.keys, track.index),
-                                     self.options.solve.graph.loss)
-        if cost > _REJOIN_COST_RATIO * start.cost:
-            track.prior, track.noise_scale = prior, scale
+        solved = None
+        if all(estimate.exists(k) for k in self._young_graph(track, frames).keyVector()):  # else marginalised (lag)
+            graph, solved = self._solved_young(track, frames, estimate, [k for *_, k in track.poses] + [key],
+                                               fresh=True)
+        if solved is None or cross_projection_cost(obs, solved.atPose3(key), wireframe_from_values(
+                solved, self.keys, track.index), self.options.solve.graph.loss) > _REJOIN_COST_RATIO * start.cost:
+            for name, value in before.items():  # the track as it was: its shape choice and detector offsets
+                setattr(track, name, value)
             return False
         track.young_frames, track.reanchored = frames, True
         track.notes[key] = ("the young track re-solved with this frame, whose keypoints lay beyond the motion "
@@ -575,8 +580,8 @@ class Tracker:
         self._restart_smoother(track, graph, solved, t, held)
         return True
 
-    def _resumed(self, track: _TrackState, t: float, raw: KeypointObservations) -> bool:
-        """Whether the frame after a jump follows the segment the jump ended, and if so that segment resumed.
+    def _resume(self, track: _TrackState, t: float, raw: KeypointObservations) -> None:
+        """Resumes the segment a jump ended where the frame after the jump follows it.
 
         A learnt detector now and then gives one frame's keypoints of a vehicle turned round or elsewhere
         (``library_tracks_2cam`` seed 12 from the network's keypoints: both cameras' keypoints of one frame
@@ -589,7 +594,7 @@ class Tracker:
         """
         previous, track.previous = track.previous, None
         if len(track.poses) != 1:
-            return False
+            return
         loss = self.options.solve.graph.loss
         now = track.smoother.calculateEstimate()
         cost_now = cross_projection_cost(raw.scaled_above_calibrated(track.noise_scale),
@@ -599,7 +604,7 @@ class Tracker:
                                             self._predict(previous["poses"], before, t), self._wireframe(before, track),
                                             loss)
         if not cost_before < _RESUME_COST_RATIO * cost_now:
-            return False
+            return
         (frame_index, t_bad, key), = track.poses
         for name, value in previous.items():
             setattr(track, name, value)
@@ -619,7 +624,6 @@ class Tracker:
         track.poses.append((frame_index, t_bad, key))
         track.notes[key] = ("its keypoints lay beyond the motion model's gate, and the next frame's followed the "
                             "track again: left out of the track, the pose from the track's motion alone")
-        return True
 
     def _add(self, vid: str, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
         track = self._track(vid)
@@ -635,7 +639,7 @@ class Tracker:
         if track.smoother is None:
             return self._start(track, frame_index, t, obs)
         if track.previous is not None:
-            self._resumed(track, t, obs)
+            self._resume(track, t, obs)
         raw, obs = obs, obs.scaled_above_calibrated(track.noise_scale)
         options = self.options.solve
         # once both motion factors fix the pose any keypoint helps, as in smooth_scene; a younger track needs three

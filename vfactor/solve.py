@@ -326,7 +326,7 @@ def solve_observations(
                 note = (f"the keypoints of camera(s) {', '.join(repr(n) for n in suspects)}, whose view the image "
                         f"border cuts, disagree with those of camera(s) {', '.join(repr(n) for n in rejected)}: "
                         "left out")
-                alone.message = f"{alone.message}; {note}" if alone.message else note
+                _add_note(alone, note)
                 alone.extras["cut_cameras_left_out"] = suspects
                 rows = np.flatnonzero(kept)  # the subset's observations among all of them (the cut views' weigh 0)
                 if "inlier_weights" in alone.extras:
@@ -341,7 +341,7 @@ def solve_observations(
         result.extras["disagreeing_cut_cameras"] = cut
         note = (f"the keypoints of camera(s) {', '.join(repr(n) for n in cut)} disagree with the other cameras where "
                 "the image border cuts the vehicle: left to the robust loss")
-        result.message = f"{result.message}; {note}" if result.message else note
+        _add_note(result, note)
     joint = None
     if options.covariance:
         try:
@@ -766,12 +766,21 @@ DISAGREEMENT_JOINT_INLIERS = 0.3
 DISAGREEMENT_MARGIN = 0.55
 
 
+def _add_note(result: VehicleResult, note: str) -> None:
+    """Appends ``note`` to a result's message (``"; "`` between them)."""
+    result.message = f"{result.message}; {note}" if result.message else note
+
+
+def _view_cut(obs: KeypointObservations, rows: np.ndarray) -> bool:
+    """Whether the image border cuts the view of the vehicle that the observations ``rows`` (one camera's) come
+    from (``obs.cut``)."""
+    return obs.cut is not None and bool(rows.any()) and bool(obs.cut[rows].all())
+
+
 def _cut_views(obs: KeypointObservations, exclude=()) -> list[str]:
-    """Names of the cameras (but ``exclude``) whose view of the vehicle the image border cuts (``obs.cut``)."""
-    if obs.cut is None:
-        return []
-    return [camera.name for c, camera in enumerate(obs.cameras) if camera.name not in exclude
-            and (obs.camera_index == c).any() and obs.cut[obs.camera_index == c].all()]
+    """Names of the cameras (but ``exclude``) whose view of the vehicle the image border cuts."""
+    return [camera.name for c, camera in enumerate(obs.cameras)
+            if camera.name not in exclude and _view_cut(obs, obs.camera_index == c)]
 
 
 def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: Wireframe,
@@ -814,7 +823,7 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
         alone = options.graph.loss.weight(np.linalg.norm(
             whitened_residuals(obs.subset(rows), own_pose(c), mean.vehicle_p_keypoints), axis=1))
         if float(np.mean(alone > 0.5)) - joint >= DISAGREEMENT_MARGIN - 1e-9:
-            (cut if obs.cut is not None and obs.cut[rows].all() else rejected).append(camera.name)
+            (cut if _view_cut(obs, rows) else rejected).append(camera.name)
     if not rejected:
         return "", [], cut
     details = []

@@ -27,10 +27,10 @@ from collections import defaultdict
 
 import numpy as np
 
-from vfactor.evaluation import body_type_of, held_out_scene_model
+from vfactor.evaluation import body_type_of, held_out_scene_model, pose_rows
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.ground_fit import fit_ground_plane
-from vfactor.metrics import nees_summary, pose_errors, pose_nees
+from vfactor.metrics import nees_summary
 from vfactor.sim import load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_scene
 from vfactor.track import TrackOptions, smooth_scene, track_scene
@@ -54,15 +54,12 @@ def _scene(spec: str, images: bool):
 def _rows(sim, scene, frames) -> list[tuple]:
     """(body type, cameras that saw it, rotation deg, translation cm, pose NEES) of each solved pose."""
     out = []
-    for f, frame in enumerate(frames):
-        for v in frame.vehicles:
-            if v.ok:
-                truth = sim.truth[f][v.id]
-                e = pose_errors(v.world_T_vehicle, v.keypoints_world, truth.world_T_vehicle, truth.keypoints_world)
-                nees = pose_nees(v.world_T_vehicle, v.pose_covariance, truth.world_T_vehicle)
-                cameras = len({d.camera for d in scene.frames[f].detections if d.vehicle == v.id})
-                out.append((body_type_of(truth.preset), f"{cameras} camera{'s' if cameras > 1 else ''}",
-                            e["rotation_deg"], e["translation_cm"], nees))
+    for row in pose_rows(sim, frames):
+        if "pose_nees" in row:
+            f, vid = row["frame"], row["vehicle"]
+            cameras = len({d.camera for d in scene.frames[f].detections if d.vehicle == vid})
+            out.append((body_type_of(sim.truth[f][vid].preset), f"{cameras} camera{'s' if cameras > 1 else ''}",
+                        row["rotation_deg"], row["translation_cm"], row["pose_nees"]))
     return out
 
 

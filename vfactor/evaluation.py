@@ -29,7 +29,7 @@ from vfactor.solve import SolveOptions, solve_observations
 from vfactor.vehicle_library import BODY_TYPES, vehicle_library
 
 __all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held_out_model", "held_out_scene_model",
-           "compare_methods", "covariance_errors", "held_out_box_model", "solve_held_out", "true_box", "summarise_methods", "accuracy_table", "keypoint_table",
+           "compare_methods", "covariance_errors", "pose_rows", "held_out_box_model", "solve_held_out", "true_box", "summarise_methods", "accuracy_table", "keypoint_table",
            "body_type_table", "consistency_table", "poor_fit_summary",
            "noise_variant", "run_accuracy", "compare_tracking", "tracking_table", "final_shape_errors",
            "shape_over_noise_draws", "shape_draws_table"]
@@ -377,17 +377,7 @@ def compare_tracking(sim: Simulation, options=None, lag: float = 0.5) -> dict:
     seconds["batch"] = time.perf_counter() - t0
     errors, shapes = {}, {}
     for method, frames in runs.items():
-        rows = []
-        for f, frame in enumerate(frames):
-            for v in frame.vehicles:
-                row = {"frame": f, "vehicle": v.id, "status": v.status.value}
-                if v.ok:
-                    truth = sim.truth[f][v.id]
-                    row.update(pose_errors(v.world_T_vehicle, v.keypoints_world, truth.world_T_vehicle,
-                                           truth.keypoints_world))
-                    row.update(covariance_errors(v, truth))
-                rows.append(row)
-        errors[method] = rows
+        errors[method] = pose_rows(sim, frames)
         shapes[method] = {vid: 100 * float(np.linalg.norm(e, axis=1).mean())
                           for vid, e in final_shape_errors(sim, frames).items()}
     diffs = [(100 * np.linalg.norm(a.world_T_vehicle.translation() - b.world_T_vehicle.translation()),
@@ -395,6 +385,23 @@ def compare_tracking(sim: Simulation, options=None, lag: float = 0.5) -> dict:
              for fa, fb in zip(runs["isam2"], runs["batch"]) for a, b in zip(fa.vehicles, fb.vehicles) if a.ok and b.ok]
     worst = tuple(np.max(diffs, axis=0)) if diffs else (float("nan"), float("nan"))
     return {"errors": errors, "shape_cm": shapes, "isam2_vs_batch": worst, "seconds": seconds}
+
+
+def pose_rows(sim: Simulation, frames) -> list[dict]:
+    """One row per vehicle of each frame of ``frames`` (results of ``sim.scene``): ``frame``, ``vehicle``,
+    ``status`` and, where solved, its :func:`~vfactor.metrics.pose_errors` and :func:`covariance_errors`
+    against ``sim``'s truth."""
+    rows = []
+    for f, frame in enumerate(frames):
+        for v in frame.vehicles:
+            row = {"frame": f, "vehicle": v.id, "status": v.status.value}
+            if v.ok:
+                truth = sim.truth[f][v.id]
+                row.update(pose_errors(v.world_T_vehicle, v.keypoints_world, truth.world_T_vehicle,
+                                       truth.keypoints_world))
+                row.update(covariance_errors(v, truth))
+            rows.append(row)
+    return rows
 
 
 def tracking_table(comparison: dict) -> str:

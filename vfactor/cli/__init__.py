@@ -174,6 +174,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "shipped weights; needs torch); the scene is written with its boxes as given")
     p.add_argument("--allow-outside-paths", action="store_true",
                    help="accept heatmap and image paths outside the scene file's folder (refused by default)")
+    p.set_defaults(save_detections=None)  # of the keypoint network's options (vfactor.cli.common.detect) only --weights
 
     for name, text in NET_COMMANDS.items():
         p = sub.add_parser(name, help=text, add_help=False)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -39,7 +38,7 @@ def fit_ground(args) -> int:
     t0 = time.perf_counter()
     results = []
     for name, other in scenes:
-        detected = detect(other, SimpleNamespace(weights=args.weights, save_detections=None, quiet=args.quiet))
+        detected = detect(other, args)
         if args.batch:
             results += smooth_scene(detected, options, progress=progress("smoothing", not args.quiet))
         else:

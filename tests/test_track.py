@@ -484,3 +484,50 @@ def test_a_frame_that_does_not_join_a_young_track_leaves_its_shape_choice_as_it_
     ended = track.previous
     assert {name: ended[name] for name in kept} == kept
     np.testing.assert_array_equal(np.asarray(ended["prior"].mean), prior_mean)
+
+
+@pytest.fixture(scope="module")
+def entering():
+    """tracks_3veh seed 9, frames 5-15, v1 alone: cam1 alone sees it enter its view, and its first frame's solve is
+    64 cm off in depth; the second frame's keypoints lie 3.6 m from where that pose (no velocity yet) puts it."""
+    sim = simulate(load_scenario("tracks_3veh"), seed=9)
+    frames = [dataclasses.replace(f, detections=[d for d in f.detections if d.vehicle == "v1"])
+              for f in sim.scene.frames[5:16]]
+    return sim, frames, sim.truth[5:16]
+
+
+def _translations_cm(results, truth):
+    return np.array([pose_errors(fr.vehicles[0].world_T_vehicle, fr.vehicles[0].keypoints_world,
+                                 truth[f]["v1"].world_T_vehicle, truth[f]["v1"].keypoints_world)["translation_cm"]
+                     for f, fr in enumerate(results)])
+
+
+@pytest.mark.parametrize("lag", [None, 0.3])
+def test_a_first_pose_off_in_depth_is_taken_back_when_the_next_segment_knows_the_motion(entering, lag):
+    """The jump after a one-pose track split it and left that pose as it was solved alone (64 cm off here, 1-2.5 m
+    on other scenes); once the segment after the jump has five poses, its motion leads back to the ended pose,
+    which is solved again with it (Tracker._take_back) and the jump withdrawn. The new segment's own estimates are
+    untouched (online the same as before)."""
+    sim, frames, truth = entering
+    run = track_scene(dataclasses.replace(sim.scene, frames=frames), TrackOptions(lag=lag))
+    online, final = _translations_cm(run.online, truth), _translations_cm(run.frames, truth)
+    assert online[0] > 50 and online[1] > 200  # the first two frames alone, each off in depth
+    assert not any("jumps" in m for m in run.messages), run.messages
+    assert "taken back into the track" in run.frames[0].vehicles[0].message
+    assert final[0] < 15 and final.max() < 15, final
+    covariance = run.frames[0].vehicles[0].pose_covariance
+    assert covariance is not None and np.all(np.linalg.eigvalsh(covariance) > 0)
+
+
+def test_another_vehicles_pose_before_a_jump_is_not_taken_back(entering):
+    """The keypoints of another vehicle (v2, 14 m away) under v1's id in the first frame: the segment after the
+    jump cannot explain them with its motion, so the ended pose keeps its own estimate and the jump is reported."""
+    sim, frames, truth = entering
+    stranger = [dataclasses.replace(d, vehicle="v1") for d in sim.scene.frames[5].detections
+                if d.vehicle == "v2" and d.camera == "cam1"]
+    frames = [dataclasses.replace(frames[0], detections=stranger)] + frames[1:]
+    run = track_scene(dataclasses.replace(sim.scene, frames=frames), TrackOptions(covariance=False))
+    assert any("1 jumps beyond the motion model" in m for m in run.messages), run.messages
+    assert "taken back" not in run.frames[0].vehicles[0].message
+    assert run.frames[0].vehicles[0].world_T_vehicle.equals(run.online[0].vehicles[0].world_T_vehicle, 1e-3)
+    assert _translations_cm(run.frames, truth)[1:].max() < 15

@@ -167,6 +167,10 @@ _REJOIN_POSES = 5
 #: The frame after a jump resumes the segment the jump ended (Tracker._resume) where that segment's prediction
 #: explains it at under this share of the cost at the new segment's.
 _RESUME_COST_RATIO = 0.5
+#: A young segment of fewer than :data:`_REJOIN_POSES` poses that a jump ended is kept (Tracker._take_back) until the
+#: segment after it has this many poses, and is then taken back into it where that segment's motion explains its
+#: keypoints (the ended segment's depth, from one camera, may have been what was off, not the id).
+_TAKE_BACK_POSES = _REJOIN_POSES
 #: What a track's segment is (Tracker._resume keeps them for one frame after a jump ends a segment).
 _SEGMENT_STATE = ("smoother", "poses", "hwc_added", "young", "young_frames", "multiview_frames", "reanchored", "prior",
                   "body_type", "body_type_probability", "noise_scale", "offsets", "offset_priors")
@@ -219,11 +223,18 @@ class _TrackState:
     offset_priors: dict = field(default_factory=dict)
     # the segment a jump ended, kept for one frame (Tracker._resume): its smoother and state, or None
     previous: dict | None = None
+    # a young segment of a few poses a jump ended, kept until the segment after it can take it back
+    # (Tracker._take_back): its poses and young frames, or None
+    ended_young: dict | None = None
+    # the ended poses the segment took back (Tracker._take_back): (their poses, their young frames, the motion
+    # factors that join them to the segment's first two poses), solved again when the segment is converged
+    taken_back: list = field(default_factory=list)
 
     def restart(self) -> None:
         """Drops the smoother and the young-track state: the track starts again from its next solvable frame."""
         self.smoother, self.poses, self.hwc_added, self.young, self.young_frames = None, [], False, False, []
-        self.offsets, self.offset_priors, self.previous = {}, {}, None
+        self.offsets, self.offset_priors, self.previous, self.ended_young = {}, {}, None, None
+        self.taken_back = []
 
 
 def frame_order(scene: Scene) -> list[int]:
@@ -608,6 +619,7 @@ class Tracker:
         (frame_index, t_bad, key), = track.poses
         for name, value in previous.items():
             setattr(track, name, value)
+        track.ended_young = None  # the ended segment goes on: nothing to take back
         for index, _, _ in track.poses:  # the ended segment's poses are live again
             track.retired.pop((index, track.id), None)
         if track.jumps and track.jumps[-1][0] == frame_index:
@@ -624,6 +636,129 @@ class Tracker:
         track.poses.append((frame_index, t_bad, key))
         track.notes[key] = ("its keypoints lay beyond the motion model's gate, and the next frame's followed the "
                             "track again: left out of the track, the pose from the track's motion alone")
+
+    def _take_back(self, track: _TrackState) -> None:
+        """The poses of the young segment a jump ended, solved again with the segment after it, where its motion
+        explains the ended segment's keypoints: the ended poses were this vehicle, off in depth, not another's.
+
+        A track that one far camera starts fixes its depth only through the shape prior, and a vehicle entering a
+        view may be solved metres off: the next frame's keypoints then lie beyond the jump gate of a one-pose
+        track, and the track split, its first poses left metres off for good (``tracks_3veh`` and
+        ``library_tracks_2cam``: about one scene in seven, the first pose of a vehicle entering cam1's view 1-2.5 m
+        off). With too few poses for :meth:`_rejoined`'s test at the jump, the ended segment (fewer than
+        :data:`_TAKE_BACK_POSES` poses) is kept until the new one has :data:`_TAKE_BACK_POSES` poses and so knows
+        the vehicle's speed and turning. Then both are solved as one young track by LM: the ended poses start where
+        the new segment's motion, run backwards, puts them, motion factors join the two, each camera keeps one
+        detector offset. Where the solution explains every ended frame's keypoints within
+        :data:`_REJOIN_COST_RATIO` of the cost of that frame's own best start (PnP / triangulation of the solved
+        shape), and the new segment's frames within that multiple of their cost before, the ended poses take
+        their estimates from it (smoothed over both segments as they were then, with their covariances, said in
+        their messages) and the jump is withdrawn; keypoints of another vehicle cannot follow the new segment's
+        motion back at that cost. The new segment itself goes on as it was (its estimates, shape choice and
+        smoother untouched: a pose off by metres and seen by one camera would only drag it).
+        """
+        ended, track.ended_young = track.ended_young, None
+        if [p[0] for p in track.poses] != [f[0] for f in track.young_frames] or len(track.poses) < 2:
+            return
+        estimate = track.smoother.calculateEstimate()
+        if not all(estimate.exists(k) for k in self._young_graph(track).keyVector()):  # marginalised (lag)
+            return
+        loss = self.options.solve.graph.loss
+        old_poses = ended["poses"]
+        before = {name: copy.copy(getattr(track, name)) for name in _REJOIN_STATE}
+        values = gtsam.Values()
+        backwards = [track.poses[1], track.poses[0]]  # the new segment's motion, run back in time
+        for _, t_old, key in old_poses:
+            values.insert(key, self._predict(backwards, estimate, t_old))
+        frames = [(index, obs, motion, alone, self._offsets(track, obs, values, estimate))
+                  for index, obs, motion, alone, _ in ended["young_frames"]]
+        merged = old_poses + track.poses
+        for i, (index, obs, motion, alone, offsets) in enumerate(track.young_frames):
+            if i < 2:  # the new segment's first two poses get the motion factors to the ended ones
+                motion = gtsam.NonlinearFactorGraph()
+                _add_pose_factors(motion, merged[:len(old_poses) + i], track.poses[i][2], track.poses[i][1],
+                                  self.options)
+            frames.append((index, obs, motion, alone, offsets))
+        scale, wireframe = track.noise_scale, self._wireframe(estimate, track)  # costs at the segment's noise scale
+        cost_before = sum(cross_projection_cost(obs.scaled_above_calibrated(scale), estimate.atPose3(key), wireframe,
+                                                loss)
+                          for (_, obs, *_), (_, _, key) in zip(track.young_frames, track.poses) if len(obs))
+        estimate.insert(values)
+        try:
+            graph, solved = self._solved_young(track, frames, estimate, [k for *_, k in merged], fresh=False)
+        finally:
+            for name, value in before.items():  # the new segment's shape choice and detector offsets, as they were
+                setattr(track, name, value)
+        shape = self._wireframe(solved, track)
+
+        def cost(obs, key):
+            return cross_projection_cost(obs.scaled_above_calibrated(scale), solved.atPose3(key), shape, loss)
+
+        if not cost_before > 0 or sum(cost(obs, key) for (_, obs, *_), (_, _, key) in zip(
+                frames[len(old_poses):], track.poses) if len(obs)) > _REJOIN_COST_RATIO * cost_before:
+            return
+        for (_, obs, *_), (_, _, key) in zip(frames, old_poses):
+            if len(obs):
+                starts = best_candidates(obs.scaled_above_calibrated(scale), shape, loss, 1,
+                                         min_keypoints_in_one_view=self.options.solve.min_keypoints_in_one_view)
+                if not starts or cost(obs, key) > _REJOIN_COST_RATIO * starts[0].cost:
+                    return
+        marginals = gtsam.Marginals(graph, solved) if self.options.covariance else None
+        for index, _, key in old_poses:
+            track.notes[key] = ("taken back into the track: the segment a jump ended here was this vehicle, off in "
+                                "depth; solved again with the segment after the jump, whose motion leads back to it")
+            covariance = marginals.marginalCovariance(key) if marginals is not None else None
+            track.retired[(index, track.id)] = result = self._result(track, solved, key, shape, covariance)
+            if covariance is not None:
+                result.extras["covariance"] = "smoothed"
+        track.notes.pop(track.poses[0][2], None)
+        track.jumps = [jump for jump in track.jumps if jump[0] != ended["jump"]]
+        if not any(offsets for *_, offsets in frames):
+            links = gtsam.NonlinearFactorGraph()
+            for frame in frames[len(old_poses):len(old_poses) + 2]:
+                links.push_back(frame[2])
+            track.taken_back.append((old_poses, frames[:len(old_poses)], links, [p[2] for p in track.poses[:2]]))
+
+    def _refit_taken_back(self, track: _TrackState) -> None:
+        """The poses a segment took back (:meth:`_take_back`) solved again at the converged segment: their frames'
+        keypoints and motion, joined to the segment's first two poses and its shape, which enter through their
+        marginals (each a Gaussian prior at the segment's estimate). Poses whose link the smoother no longer holds
+        (a fixed lag) keep the estimates they were taken back with; so do frames with detector pose offsets."""
+        if not track.taken_back or track.smoother is None:
+            return
+        estimate, smoother = track.smoother.calculateEstimate(), track.smoother
+        config = self.options.solve.graph
+        layer_keys = self.keys.layer_keys(track.index)
+        for old_poses, frames, links, link_keys in track.taken_back:
+            if not all(estimate.exists(k) for k in [*link_keys, *layer_keys]):
+                continue
+            graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+            for (index, obs, motion, *_), (_, _, key) in zip(frames, old_poses):
+                if len(obs):
+                    add_observation_factor(graph, self.keys, obs.scaled_above_calibrated(track.noise_scale),
+                                           track.index, index, config)
+                graph.push_back(motion)
+                values.insert(key, track.retired[(index, track.id)].world_T_vehicle)
+            graph.push_back(links)
+            for key in link_keys:
+                graph.add(gtsam.PriorFactorPose3(key, estimate.atPose3(key), gtsam.noiseModel.Gaussian.Covariance(
+                    smoother.marginalCovariance(key))))
+                values.insert(key, estimate.atPose3(key))
+            for key in layer_keys:
+                graph.add(gtsam.PriorFactorVector(key, estimate.atVector(key), gtsam.noiseModel.Gaussian.Covariance(
+                    smoother.marginalCovariance(key))))
+                values.insert(key, estimate.atVector(key))
+            try:
+                solved = gtsam.LevenbergMarquardtOptimizer(graph, values, self.options.solve.lm_params()).optimize()
+                marginals = gtsam.Marginals(graph, solved) if self.options.covariance else None
+            except RuntimeError:
+                continue
+            wireframe = self._wireframe(estimate, track)
+            for index, _, key in old_poses:
+                covariance = marginals.marginalCovariance(key) if marginals is not None else None
+                track.retired[(index, track.id)] = result = self._result(track, solved, key, wireframe, covariance)
+                if covariance is not None:
+                    result.extras["covariance"] = "smoothed"
 
     def _add(self, vid: str, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
         track = self._track(vid)
@@ -667,6 +802,10 @@ class Tracker:
                     ended = {name: getattr(track, name) for name in _SEGMENT_STATE}
                     track.restart()
                     track.previous = ended
+                    if ended["young"] and len(ended["poses"]) < _TAKE_BACK_POSES and \
+                            [p[0] for p in ended["poses"]] == [f[0] for f in ended["young_frames"]]:
+                        track.ended_young = {"poses": ended["poses"], "young_frames": ended["young_frames"],
+                                             "jump": frame_index}
                     track.jumps.append((frame_index, t, jump))
                     track.notes[key] = f"a new segment of the track: {jump}; the detections' id may not follow one vehicle"
                     return self._start(track, frame_index, t, raw)
@@ -689,6 +828,8 @@ class Tracker:
         track.poses.append((frame_index, t, key))
         if track.young:
             track.young_frames.append((frame_index, raw, motion, None, offsets))
+            if track.ended_young is not None and len(track.poses) >= _TAKE_BACK_POSES:
+                self._take_back(track)
             if _camera_count(obs) >= 2:
                 track.multiview_frames += 1
                 self._reanchor(track, t)
@@ -728,6 +869,7 @@ class Tracker:
         if track.smoother is None or not track.poses:
             return
         self._settle(track, max_updates, recent=None)
+        self._refit_taken_back(track)
         track.retired.update(self._segment_estimates(track, self.options.covariance))
 
     def finish(self, max_updates: int = 50) -> None:
@@ -735,6 +877,7 @@ class Tracker:
         for track in self._tracks.values():
             if track.smoother is not None and track.poses:
                 self._settle(track, max_updates, recent=None)
+                self._refit_taken_back(track)
 
     def _finish(self, track: _TrackState, key: int, t: float) -> VehicleResult:
         """Extra iSAM2 updates until the track settles, lazy HWC, and the frame's result."""

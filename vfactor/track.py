@@ -722,8 +722,9 @@ class Tracker:
     def _refit_taken_back(self, track: _TrackState) -> None:
         """The poses a segment took back (:meth:`_take_back`) solved again at the converged segment: their frames'
         keypoints and motion, joined to the segment's first two poses and its shape, which enter through their
-        marginals (each a Gaussian prior at the segment's estimate). Poses whose link the smoother no longer holds
-        (a fixed lag) keep the estimates they were taken back with; so do frames with detector pose offsets."""
+        marginals (each a Gaussian prior at the segment's estimate). At the end of the segment (:meth:`finish`,
+        :meth:`_retire`), or with a fixed lag when its poses stop being held (the track grown up), after which
+        they keep these estimates; frames with detector pose offsets keep the estimates they were taken back with."""
         if not track.taken_back or track.smoother is None:
             return
         estimate, smoother = track.smoother.calculateEstimate(), track.smoother
@@ -883,6 +884,10 @@ class Tracker:
         """Extra iSAM2 updates until the track settles, lazy HWC, and the frame's result."""
         smoother = track.smoother
         self._settle(track, self.options.max_updates)
+        if track.taken_back and self.options.lag is not None and not _held(track):
+            # the poses the taken-back ones are joined to leave the fixed lag from now on: solved again while held
+            self._refit_taken_back(track)
+            track.taken_back = []
         estimate = smoother.calculateEstimate()
         wireframe = self._wireframe(estimate, track)
         config = self.options.solve.graph

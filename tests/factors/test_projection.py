@@ -172,15 +172,16 @@ def test_detector_offset_prior_is_the_keypoints_sigma_on_rigid_motions():
 
 def test_kernel_matches_numpy_projection_for_every_lens():
     """The compiled factor's residuals equal the NumPy projection's (project_pinhole) for mixed lenses."""
-    from vfactor.factors.projection import whitened_residuals
+    from vfactor.factors.projection import whitened_residuals, whitened_residuals_numpy
 
     for cameras in (LENS_CAMERAS, CAMERAS + LENS_CAMERAS[2:]):
         obs = observations(2.0, np.random.default_rng(3), cameras=cameras)
         values = ProjectionContract().make_values(np.random.default_rng(8))
         factor = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, RobustLoss("none"))
         points = np.concatenate([values.atVector(k) for k in KEYS.layer_keys()]).reshape(12, 3)
-        e = whitened_residuals(obs, values.atPose3(KEYS.pose_key()), points)
+        e = whitened_residuals_numpy(obs, values.atPose3(KEYS.pose_key()), points)
         assert np.isclose(factor.error(values), 0.5 * np.sum(e * e), rtol=1e-12)
+        assert np.allclose(whitened_residuals(obs, values.atPose3(KEYS.pose_key()), points), e, rtol=1e-12, atol=1e-12)
 
 
 def test_every_lens_matches_opencv_in_the_factor():
@@ -256,7 +257,7 @@ def test_jacobians_hold_for_points_behind_a_camera():
 @pytest.mark.parametrize("name", LOSSES)
 def test_compiled_kernel_matches_the_numpy_projection_and_loss(name):
     """The factor's compiled residuals equal NumPy's projection, whitening and robust scaling."""
-    from vfactor.factors.projection import whitened_residuals
+    from vfactor.factors.projection import whitened_residuals, whitened_residuals_numpy
     from vfactor.testing import whitened_error
 
     loss = RobustLoss(name, 1.5)
@@ -264,7 +265,8 @@ def test_compiled_kernel_matches_the_numpy_projection_and_loss(name):
     values = ProjectionContract().make_values(np.random.default_rng(9))
     factor = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, loss)
     points = np.concatenate([values.atVector(k) for k in KEYS.layer_keys()]).reshape(12, 3)
-    e = whitened_residuals(obs, values.atPose3(KEYS.pose_key()), points)
+    e = whitened_residuals_numpy(obs, values.atPose3(KEYS.pose_key()), points)
+    assert np.allclose(whitened_residuals(obs, values.atPose3(KEYS.pose_key()), points), e, rtol=1e-12, atol=1e-12)
     s, _ = loss.scale(np.linalg.norm(e, axis=1))
     assert np.allclose(whitened_error(factor, values), (e * s[:, None]).ravel(), rtol=1e-10, atol=1e-10)
 
@@ -298,7 +300,7 @@ class TestProjectionTruncated(ProjectionContract):
         assert factor.error(self.make_truth_values()) < 1e-12
 
     def test_kernel_matches_numpy(self):
-        from vfactor.factors.projection import whitened_residuals
+        from vfactor.factors.projection import whitened_residuals, whitened_residuals_numpy
         from vfactor.testing import whitened_error
 
         factor = self.make_factor()
@@ -307,7 +309,8 @@ class TestProjectionTruncated(ProjectionContract):
                                    self.window(obs))
         values = self.make_values(np.random.default_rng(4))
         points = np.concatenate([values.atVector(k) for k in KEYS.layer_keys()]).reshape(12, 3)
-        e = whitened_residuals(obs, values.atPose3(KEYS.pose_key()), points)
+        e = whitened_residuals_numpy(obs, values.atPose3(KEYS.pose_key()), points)
+        assert np.allclose(whitened_residuals(obs, values.atPose3(KEYS.pose_key()), points), e, rtol=1e-12, atol=1e-12)
         s, _ = self.loss.scale(np.linalg.norm(e, axis=1))
         assert np.allclose(whitened_error(factor, values), (e * s[:, None]).ravel(), rtol=1e-10, atol=1e-10)
 

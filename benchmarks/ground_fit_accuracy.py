@@ -12,11 +12,12 @@ NEES (as a ratio to 6) of the one-frame solves (``frame_by_frame``, as
 ``vfactor solve``) and of the smoothed (isam2), online, fixed-lag (0.5 s) and
 batch estimates.
 
-Run: ``python benchmarks/ground_fit_accuracy.py [--images] [--detector-offsets]``
+Run: ``python benchmarks/ground_fit_accuracy.py [--images] [--detector-offsets] [--scenes S ...]``
 (``--images``: the scenes rendered and their keypoints found by the shipped
 network, as ``vfactor eval images``; needs the ``net`` and ``render`` extras,
 about 40 s a scene; ``--detector-offsets``: a fourth way, the fitted plane with
-``TrackOptions(detector_offsets=True)``, which acts on the network's detections only).
+``TrackOptions(detector_offsets=True)``, which acts on the network's detections only;
+``--scenes``: other held-out scenes of the rig, each ``scenario:seed``, instead of :data:`HELD_OUT`).
 """
 
 from __future__ import annotations
@@ -77,6 +78,8 @@ def main(argv=None) -> dict:
     parser.add_argument("--lag", type=float, default=0.5)
     parser.add_argument("--detector-offsets", action="store_true",
                         help="also track with the fitted plane and each camera's detector pose offsets")
+    parser.add_argument("--scenes", nargs="+", default=list(HELD_OUT), metavar="SCENARIO:SEED",
+                        help="held-out scenes of the two-camera rig (default: %(default)s)")
     args = parser.parse_args(argv)
 
     fitted = []
@@ -93,7 +96,9 @@ def main(argv=None) -> dict:
     pooled = defaultdict(list)
     print(f"\n| scene | plane | {' | '.join(methods)} | not solved (frame by frame) |\n| --- | --- | "
           f"{' | '.join('---' for _ in methods)} | --- |")
-    for spec in HELD_OUT:
+    for spec in args.scenes:
+        if spec in CALIBRATION:
+            parser.error(f"--scenes: {spec} is a calibration scene (the plane is fitted to it)")
         sim = _scene(spec, args.images)
         model = held_out_scene_model(sim)
         for name, plane in planes.items():

@@ -1,4 +1,4 @@
-"""Benchmark: the final shapes of two-camera tracks without a road plane, with the plane fitted to other traffic
+"""Accuracy: the final shapes of two-camera tracks without a road plane, with the plane fitted to other traffic
 (``vfactor fit-ground``), and with the true plane, per body type.
 
 The plane is fitted, as ``benchmarks/ground_fit_accuracy.py`` fits it, to the tracks of its calibration scenes
@@ -6,9 +6,13 @@ The plane is fitted, as ``benchmarks/ground_fit_accuracy.py`` fits it, to the tr
 model held out (:func:`vfactor.evaluation.held_out_scene_model`), and each track's final shape compared with the
 truth (mean body-frame keypoint error, cm). Issue 10's goal: every vehicle within 5 cm.
 
-Run: ``python benchmarks/track_shape_plane.py A B C D``: ``tracks_3veh`` seeds A..B-1 and ``library_tracks_2cam``
-seeds C..D-1 (about 6 s a scene).
+Run: ``python benchmarks/track_shape_plane.py [--tracks-3veh A B] [--library-tracks-2cam C D]``: ``tracks_3veh``
+seeds A..B-1 and ``library_tracks_2cam`` seeds C..D-1 (defaults 41-60 and 53-72; about 6 s a scene).
 """
+
+from __future__ import annotations
+
+import argparse
 import dataclasses
 import pathlib
 import sys
@@ -21,25 +25,43 @@ from vfactor.evaluation import body_type_of, final_shape_errors, held_out_scene_
 from vfactor.ground_fit import fit_ground_plane  # noqa: E402
 from vfactor.sim import load_scenario, simulate  # noqa: E402
 from vfactor.track import TrackOptions, track_scene  # noqa: E402
-fitted = []
-for spec in CALIBRATION:
-    scen, seed = spec.split(":"); sim = simulate(load_scenario(scen), seed=int(seed))
-    fitted += track_scene(sim.scene, TrackOptions(covariance=False), prior=held_out_scene_model(sim)).frames
-fit = fit_ground_plane(fitted)
-print(f"plane fitted to {', '.join(CALIBRATION)}: {fit.tilt_deg:.2f} deg from the road, offset "
-      f"{100 * fit.plane.offset:.1f} cm", flush=True)
-planes = {"none": None, "fitted": fit.plane, "true": TRUE_PLANE}
-out = {p: {} for p in planes}
-for scen, a, b in (("tracks_3veh", int(sys.argv[1]), int(sys.argv[2])), ("library_tracks_2cam", int(sys.argv[3]), int(sys.argv[4]))):
-    for seed in range(a, b):
-        sim = simulate(load_scenario(scen), seed=seed); model = held_out_scene_model(sim)
-        for name, plane in planes.items():
-            scene = dataclasses.replace(sim.scene, ground_plane=plane)
-            run = track_scene(scene, TrackOptions(covariance=False), prior=model)
-            for vid, e in final_shape_errors(sim, run.frames).items():
-                preset = next(t[vid].preset for t in sim.truth if vid in t)
-                out[name].setdefault(body_type_of(preset), []).append(100 * float(np.linalg.norm(e, axis=1).mean()))
-print("\n| plane | " + " | ".join(sorted(out["none"])) + " |\n| --- |" + " --- |" * len(out["none"]))
-for name, d in out.items():
-    print(f"| {name} | " + " | ".join(f"{np.mean(v):.2f} (worst {np.max(v):.2f}, {sum(x > 5 for x in v)}/{len(v)} over 5 cm)"
-                                     for _, v in sorted(d.items())) + " |")
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--tracks-3veh", type=int, nargs=2, default=(41, 61), metavar=("FIRST", "END"))
+    parser.add_argument("--library-tracks-2cam", type=int, nargs=2, default=(53, 73), metavar=("FIRST", "END"))
+    args = parser.parse_args(argv)
+
+    fitted = []
+    for spec in CALIBRATION:
+        scenario, seed = spec.split(":")
+        sim = simulate(load_scenario(scenario), seed=int(seed))
+        fitted += track_scene(sim.scene, TrackOptions(covariance=False), prior=held_out_scene_model(sim)).frames
+    fit = fit_ground_plane(fitted)
+    print(f"plane fitted to {', '.join(CALIBRATION)}: {fit.tilt_deg:.2f} deg from the road, offset "
+          f"{100 * fit.plane.offset:.1f} cm", flush=True)
+    planes = {"none": None, "fitted": fit.plane, "true": TRUE_PLANE}
+    errors = {name: {} for name in planes}  # plane -> body type -> final shape errors (cm)
+    for scenario, (first, end) in (("tracks_3veh", args.tracks_3veh), ("library_tracks_2cam", args.library_tracks_2cam)):
+        for seed in range(first, end):
+            sim = simulate(load_scenario(scenario), seed=seed)
+            model = held_out_scene_model(sim)
+            for name, plane in planes.items():
+                run = track_scene(dataclasses.replace(sim.scene, ground_plane=plane), TrackOptions(covariance=False),
+                                  prior=model)
+                for vid, e in final_shape_errors(sim, run.frames).items():
+                    preset = next(truth[vid].preset for truth in sim.truth if vid in truth)
+                    errors[name].setdefault(body_type_of(preset), []).append(
+                        100 * float(np.linalg.norm(e, axis=1).mean()))
+    types = sorted(errors["none"])
+    print(f"\n| plane | {' | '.join(types)} |\n| --- |{' --- |' * len(types)}")
+    for name, by_type in errors.items():
+        cells = [f"{np.mean(v):.2f} (worst {np.max(v):.2f}, {sum(x > 5 for x in v)}/{len(v)} over 5 cm)"
+                 for v in (by_type[t] for t in types)]
+        print(f"| {name} | {' | '.join(cells)} |")
+    return {"fit": fit, "errors": errors}
+
+
+if __name__ == "__main__":
+    main()

@@ -653,8 +653,8 @@ class Tracker:
         :data:`_REJOIN_COST_RATIO` of the cost of that frame's own best start (PnP / triangulation of the solved
         shape), and the new segment's frames within that multiple of their cost before, the ended poses take
         their estimates from it (with their covariances, said in their messages; solved again at the converged
-        segment by :meth:`_refit_taken_back`) and the jump is withdrawn; keypoints of another vehicle cannot follow the new segment's
-        motion back at that cost. The new segment itself goes on as it was (its estimates, shape choice and
+        segment by :meth:`_refit_taken_back`) and the jump is withdrawn; keypoints of another vehicle cannot
+        follow the new segment's motion back at that cost. The new segment itself goes on as it was (its estimates, shape choice and
         smoother untouched: a pose off by metres and seen by one camera would only drag it).
         """
         ended, track.ended_young = track.ended_young, None

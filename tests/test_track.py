@@ -319,7 +319,7 @@ def test_detector_offsets_model_errors_that_repeat_from_frame_to_frame(sim):
                                 noise=NoiseModel(relative_sigma=0.003, outlier_rate=0, swap_rate=0, missing_rate=0))
     truth = simulate(clean, seed=1)
     scene = _with_detector_offsets(truth, 0.04, seed=5)
-    plain = track_scene(scene)
+    plain = track_scene(scene, TrackOptions(detector_offsets=False))
     tracker_options = TrackOptions(detector_offsets=True)
     offsets = track_scene(scene, tracker_options)
     batch = smooth_scene(scene, tracker_options)
@@ -339,6 +339,33 @@ def test_detector_offsets_need_a_shape_sigma(sim):
     for a, b in zip(plain.frames, offsets.frames):
         np.testing.assert_array_equal(a.vehicles[0].world_T_vehicle.matrix(), b.vehicles[0].world_T_vehicle.matrix())
         np.testing.assert_array_equal(a.vehicles[0].pose_covariance, b.vehicles[0].pose_covariance)
+
+
+def test_detector_offsets_default_to_on_where_the_track_has_a_road_plane(sim):
+    """``detector_offsets=None`` (the default): offsets where the scene gives a road plane (with a plane they made
+    the network's two-camera tracks' covariances consistent: docs/results.md), none without one; True / False
+    force them."""
+    from vfactor.factors.ground_plane import GroundPlane
+
+    plane = GroundPlane((0.0, 0.0, 1.0), 0.0)
+    assert not TrackOptions().uses_detector_offsets
+    assert TrackOptions(solve=SolveOptions(ground_plane=plane)).uses_detector_offsets
+    assert not TrackOptions(solve=SolveOptions(ground_plane=plane), detector_offsets=False).uses_detector_offsets
+    assert TrackOptions(detector_offsets=True).uses_detector_offsets
+    with pytest.raises(ValueError, match="detector_offsets"):
+        TrackOptions(detector_offsets="yes")
+    scene = _with_detector_offsets(sim, 0.04, seed=5)
+    frames = dataclasses.replace(scene, frames=scene.frames[:6])
+    for given, expected in ((None, False), (plane, True)):
+        tracker = Tracker(scene.cameras, TrackOptions(solve=SolveOptions(ground_plane=given), covariance=False))
+        for i, frame in enumerate(frames.frames):
+            tracker.add_frame(frame, i)
+        assert bool(tracker._tracks["v1"].offsets) == expected
+    on = track_scene(dataclasses.replace(frames, ground_plane=plane), TrackOptions(covariance=False))
+    forced = track_scene(dataclasses.replace(frames, ground_plane=plane),
+                         TrackOptions(covariance=False, detector_offsets=True))
+    for a, b in zip(on.frames, forced.frames):
+        np.testing.assert_array_equal(a.vehicles[0].world_T_vehicle.matrix(), b.vehicles[0].world_T_vehicle.matrix())
 
 
 def test_a_track_does_not_narrow_calibrated_covariances(sim):

@@ -112,13 +112,16 @@ class TrackOptions:
         covariance: compute each pose's marginal covariance.
         detector_offsets: give each camera's detections of a track their own pose offset (a ``gtsam.Pose3``
             variable: the small rigid motion of the vehicle as that camera's detector sees it, its prior from the
-            detections' ``shape_sigma``; detections without one get none): the model of a detector whose
-            errors repeat from frame to frame (docs/factors.md, "The detector's pose offset in tracks"). Off by
-            default: from the keypoint network's detections with three cameras it makes rotations better and
-            the poses' covariances nearer their errors, translations -0.1 to +1.2 cm; with two cameras of
-            little overlap rotations are mostly worse, unless the scene gives a road plane (``vfactor
-            fit-ground``): then the NEES of such tracks 2.7x -> 2.0x (docs/results.md, "Tracking from images",
-            "The road plane from the traffic"). It costs 1.2-1.5x per frame in iSAM2.
+            detections' ``shape_sigma``; detections without one, as the simulator's, get none): the model of a
+            detector whose errors repeat from frame to frame (docs/factors.md, "The detector's pose offset in
+            tracks"). ``None`` (the default): on where the track has a road plane (``solve.ground_plane``: the
+            scene's, or fitted with ``vfactor fit-ground``), off without one; ``True`` / ``False``: always / never.
+            With a plane, from the keypoint network's detections, it brings the poses' covariances nearer their
+            errors and rotations down (two cameras, twelve scenes, six of them fresh: pose NEES 2.5x -> 1.8x and
+            2.7x -> 2.0x, rotation 0.88 -> 0.78 deg; three cameras: NEES 1.1x-2.9x -> 0.86x-2.2x), translations
+            -0.2 to +1.2 cm; without a plane, with two cameras of little overlap, rotations are mostly worse
+            (docs/results.md, "Tracking from images", "The road plane from the traffic"). It costs 1.2-1.5x per
+            frame in iSAM2.
         optimizer: iSAM2's step: ``"dogleg"`` (Powell's dogleg, a trust region;
             the default, as Gauss-Newton steps can diverge when a weakly
             constrained track is suddenly well seen) or ``"gn"`` (Gauss-Newton).
@@ -134,7 +137,7 @@ class TrackOptions:
     update_tolerance: float = 1e-4
     relinearize_threshold: float = 1e-4
     covariance: bool = True
-    detector_offsets: bool = False
+    detector_offsets: bool | None = None
     optimizer: str = "dogleg"
     dogleg_delta: float = 1.0
 
@@ -149,9 +152,21 @@ class TrackOptions:
             raise ValueError(f"TrackOptions.max_updates: expected an integer >= 0, got {self.max_updates!r}")
         if not isinstance(self.shape_prior_loss, RobustLoss):
             raise ValueError(f"TrackOptions.shape_prior_loss: expected a RobustLoss, got {self.shape_prior_loss!r}")
+        if self.detector_offsets not in (None, True, False):
+            raise ValueError(f"TrackOptions.detector_offsets: expected True, False or None (on where the track has a "
+                             f"road plane), got {self.detector_offsets!r}")
         if self.solve.graph.shape_prior_loss != self.shape_prior_loss:  # the tracks' prior, wherever solve is used
             graph = dataclasses.replace(self.solve.graph, shape_prior_loss=self.shape_prior_loss)
             object.__setattr__(self, "solve", dataclasses.replace(self.solve, graph=graph))
+
+
+    @property
+    def uses_detector_offsets(self) -> bool:
+        """Whether tracks get detector pose offsets: :attr:`detector_offsets`, or where it is ``None`` whether the
+        track has a road plane (``solve.ground_plane``)."""
+        if self.detector_offsets is None:
+            return self.solve.ground_plane is not None
+        return bool(self.detector_offsets)
 
 
 _REANCHOR_FRAMES = 5  # frames seen by two cameras over which a young track is re-solved by LM
@@ -447,7 +462,7 @@ class Tracker:
         itself, :meth:`_young_graph`).
         """
         out = {}
-        if not self.options.detector_offsets:
+        if not self.options.uses_detector_offsets:
             return out
         for name, sigma in detector_shape_sigmas(obs).items():
             key = track.offsets.get(name)
@@ -1227,7 +1242,7 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         key = keys.pose_key(index, i)
         if posed and t - posed[-1][1] > options.max_gap:
             segments[i] = _segment_message(t - posed[-1][1], options.max_gap)
-        for name, sigma in detector_shape_sigmas(obs).items() if options.detector_offsets else ():
+        for name, sigma in detector_shape_sigmas(obs).items() if options.uses_detector_offsets else ():
             if name not in offsets:
                 offsets[name], prior = _new_offset(keys, index, len(offsets), sigma, values, values)
                 graph.add(prior)

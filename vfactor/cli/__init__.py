@@ -142,10 +142,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lag", type=float, help="fixed lag in seconds: bounded memory and time per frame for long streams")
     p.add_argument("--batch", action="store_true", help="offline batch smoothing (Levenberg-Marquardt over each whole track)")
     p.add_argument("--online", action="store_true", help="write the estimates as each frame arrived (filtered)")
-    p.add_argument("--detector-offsets", action="store_true",
+    p.add_argument("--detector-offsets", action=argparse.BooleanOptionalAction, default=None,
                    help="give each camera's detections of a track a pose offset (a small rigid motion of the vehicle as "
                    "that camera sees it) whose prior comes from their shape_sigma (keypoint-network detections: "
-                   "errors that repeat from frame to frame; docs/factors.md)")
+                   "errors that repeat from frame to frame; docs/factors.md); default: on where the scene gives a "
+                   "road plane (vfactor fit-ground), off without one")
     p.add_argument("--plot", help="also write a PNG of the trajectories with covariance ellipses")
     g = p.add_argument_group("live streams (docs/scaling.md): SCENE '-' reads JSON Lines from standard input")
     g.add_argument("--follow", action="store_true",
@@ -307,8 +308,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="tracks: the fixed lag of the isam2_lag row, seconds (default: 0.5)")
     p.add_argument("--markdown", help="also write the tables to this Markdown file")
     p.add_argument("--weights", help="images: keypoint-network weights to evaluate (default: the shipped weights)")
-    p.add_argument("--detector-offsets", action="store_true",
-                   help="images: track with each camera's detector pose offset (TrackOptions.detector_offsets)")
+    p.add_argument("--detector-offsets", action=argparse.BooleanOptionalAction, default=None,
+                   help="images: track with each camera's detector pose offset (TrackOptions.detector_offsets; "
+                   "default: on where the scene gives a road plane)")
     _scale_options(p, "frames, tracks, association: spread the simulated scenes (one per noise level and seed) over")
     return parser
 

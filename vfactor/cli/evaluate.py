@@ -104,7 +104,7 @@ def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper"
 
 
 def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = None,
-                 detector_offsets: bool = False) -> list[str]:
+                 detector_offsets: bool | None = None) -> list[str]:
     try:
         from vfactor.net.end_to_end import evaluate_images, images_report
         from vfactor.net.infer import KeypointDetector

@@ -572,7 +572,7 @@ def test_an_outlier_among_a_leaving_vehicles_last_keypoints_is_gated_on_the_pred
     truth = sim.truth[12:27]
     run = track_scene(dataclasses.replace(sim.scene, frames=frames), TrackOptions(lag=lag, covariance=False))
     assert not any("jumps" in m for m in run.messages), run.messages
-    assert "1 of its 4 keypoints (keypoint 0) left out" in run.frames[12].vehicles[0].message
+    assert "1 of its 4 keypoints (cam1 keypoint 0) left out" in run.frames[12].vehicles[0].message
     errors = [pose_errors(fr.vehicles[0].world_T_vehicle, fr.vehicles[0].keypoints_world,
                           truth[f]["v2"].world_T_vehicle, truth[f]["v2"].keypoints_world)
               for f, fr in enumerate(run.frames)]

@@ -883,8 +883,9 @@ class Tracker:
         beyond = residual > GROSS_OUTLIER_SIGMAS
         if not beyond.any() or beyond.sum() >= 0.5 * len(obs):
             return raw, obs
-        labels = ", ".join(str(k) for k in obs.keypoint_index[beyond])
-        track.notes[key] = (f"{int(beyond.sum())} of its {len(obs)} keypoints (keypoint {labels}) left out: beyond "
+        labels = ", ".join(f"{obs.cameras[c].name} keypoint {k}"
+                           for c, k in zip(obs.camera_index[beyond], obs.keypoint_index[beyond]))
+        track.notes[key] = (f"{int(beyond.sum())} of its {len(obs)} keypoints ({labels}) left out: beyond "
                             f"{GROSS_OUTLIER_SIGMAS:g} sigmas of the track's prediction, with too few keypoints for "
                             "the robust loss to outvote them")
         return raw.subset(~beyond), obs.subset(~beyond)

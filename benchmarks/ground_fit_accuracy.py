@@ -26,12 +26,9 @@ import argparse
 import dataclasses
 from collections import defaultdict
 
-import numpy as np
-
-from vfactor.evaluation import body_type_of, held_out_scene_model, pose_rows
+from vfactor.evaluation import class_cell, class_rows, class_tables, held_out_scene_model, pose_rows
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.ground_fit import fit_ground_plane
-from vfactor.metrics import nees_summary
 from vfactor.sim import load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_scene
 from vfactor.track import TrackOptions, smooth_scene, track_scene
@@ -50,26 +47,6 @@ def _scene(spec: str, images: bool):
         sim, _, detected, _ = render_and_detect(scenario, int(seed))
         return dataclasses.replace(sim, scene=detected)
     return simulate(load_scenario(scenario), seed=int(seed))
-
-
-def _rows(sim, scene, frames) -> list[tuple]:
-    """(body type, cameras that saw it, rotation deg, translation cm, pose NEES) of each solved pose."""
-    out = []
-    for row in pose_rows(sim, frames):
-        if "pose_nees" in row:
-            f, vid = row["frame"], row["vehicle"]
-            cameras = len({d.camera for d in scene.frames[f].detections if d.vehicle == vid})
-            out.append((body_type_of(sim.truth[f][vid].preset), f"{cameras} camera{'s' if cameras > 1 else ''}",
-                        row["rotation_deg"], row["translation_cm"], row["pose_nees"]))
-    return out
-
-
-def _cell(rows) -> str:
-    if not rows:
-        return "-"
-    r = np.array([row[2:4] for row in rows])
-    nees = nees_summary([row[4] for row in rows], 6)
-    return f"{r[:, 0].mean():.2f} / {r[:, 1].mean():.1f} / {nees['ratio']:.2f}x"
 
 
 def main(argv=None) -> dict:
@@ -109,20 +86,13 @@ def main(argv=None) -> dict:
                     "isam2": run.frames, "isam2_online": run.online,
                     "isam2_lag": track_scene(scene, dataclasses.replace(options, lag=args.lag), prior=model).frames,
                     "batch": smooth_scene(scene, options, prior=model)}
-            rows = {m: _rows(sim, scene, frames) for m, frames in runs.items()}
+            rows = {m: class_rows(sim, pose_rows(sim, frames), scene) for m, frames in runs.items()}
             failed = sum(not v.ok for frame in runs["frame_by_frame"] for v in frame.vehicles)
             for m in methods:
                 pooled[(name, m)] += rows[m]
-            print(f"| {spec.replace(':', ' ')} | {name} | {' | '.join(_cell(rows[m]) for m in methods)} | {failed} |",
-                  flush=True)
-    for what, column in (("body type", 0), ("cameras", 1)):
-        print(f"\nPooled, per {what} (rotation deg / translation cm / pose NEES):\n\n| {what} | plane | "
-              f"{' | '.join(methods)} |\n| --- | --- | {' | '.join('---' for _ in methods)} |")
-        keys = sorted({row[column] for rows in pooled.values() for row in rows})
-        for key in keys + ["all"]:
-            for name in planes:
-                cells = [_cell([r for r in pooled[(name, m)] if key in ("all", r[column])]) for m in methods]
-                print(f"| {key} | {name} | {' | '.join(cells)} |")
+            cells = " | ".join(class_cell(rows[m]) for m in methods)
+            print(f"| {spec.replace(':', ' ')} | {name} | {cells} | {failed} |", flush=True)
+    print("\n" + class_tables(pooled, methods, list(planes), "plane"))
     return {"fit": fit, "pooled": pooled}
 
 

@@ -142,6 +142,22 @@ def test_eval_tracks_over_noise_draws(capsys):
     assert "no motion" in capsys.readouterr().err
 
 
+def test_eval_tracks_pools_its_seeds_per_body_type_and_camera_count(capsys):
+    """With several seeds, ``vfactor eval tracks`` ends with the seeds pooled per body type and per camera count, and
+    each body type's final shapes against 5 cm (the project reports per class, not only means)."""
+    assert main(["eval", "tracks", "--scenario", "intersection_2cam_track", "--frames", "6", "--seeds", "2"]) == 0
+    out = capsys.readouterr().out
+    pooled = out[out.index("### intersection_2cam_track, seeds 0-1 pooled"):]
+    assert "Pooled, per body type" in pooled and "Pooled, per cameras" in pooled and "| 2 cameras |" in pooled
+    table = pooled[pooled.index("| body type | tracks |"):].splitlines()
+    tracks = sum(int(line.split("|")[2]) for line in table[2:] if line.startswith("| "))
+    assert tracks == 2  # one vehicle a seed
+    row = next(line for line in pooled.splitlines() if line.startswith("| all | intersection_2cam_track"))
+    isam2 = row.split("|")[5]  # frame_by_frame, isam2_online, isam2: rotation / translation / NEES
+    rotation, translation = (float(x) for x in isam2.split("/")[:2])
+    assert 0 < rotation < 5 and 0 < translation < 30, row
+
+
 def test_unknown_scenario_and_bad_counts_exit_2(tmp_path, capsys):
     assert main(["simulate", "no_such_rig", "--out", str(tmp_path / "s.json")]) == 2
     assert "packaged" in capsys.readouterr().err

@@ -32,7 +32,7 @@ __all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held
            "compare_methods", "covariance_errors", "pose_rows", "held_out_box_model", "solve_held_out", "true_box", "summarise_methods", "accuracy_table", "keypoint_table",
            "body_type_table", "consistency_table", "poor_fit_summary",
            "noise_variant", "run_accuracy", "compare_tracking", "tracking_table", "final_shape_errors",
-           "shape_over_noise_draws", "shape_draws_table"]
+           "shape_over_noise_draws", "shape_draws_table", "class_rows", "class_cell", "class_tables"]
 
 #: Method name -> description, in table order.
 METHODS = {
@@ -352,7 +352,8 @@ def compare_tracking(sim: Simulation, options=None, lag: float = 0.5) -> dict:
         ``{"errors": method -> rows (pose_errors + frame, vehicle), "shape_cm": method ->
         {track id: mean body-frame keypoint error of the last frame's shape, cm},
         "isam2_vs_batch": (max translation difference cm, max rotation difference deg),
-        "seconds": method -> wall time}``.
+        "seconds": method -> wall time, "classes": method -> :func:`class_rows`,
+        "shape_types": track id -> body type}``.
     """
     import dataclasses
 
@@ -384,7 +385,10 @@ def compare_tracking(sim: Simulation, options=None, lag: float = 0.5) -> dict:
               np.degrees(np.linalg.norm(a.world_T_vehicle.rotation().logmap(b.world_T_vehicle.rotation()))))
              for fa, fb in zip(runs["isam2"], runs["batch"]) for a, b in zip(fa.vehicles, fb.vehicles) if a.ok and b.ok]
     worst = tuple(np.max(diffs, axis=0)) if diffs else (float("nan"), float("nan"))
-    return {"errors": errors, "shape_cm": shapes, "isam2_vs_batch": worst, "seconds": seconds}
+    types = {vid: body_type_of(truth[vid].preset) for truth in sim.truth for vid in truth}
+    return {"errors": errors, "shape_cm": shapes, "isam2_vs_batch": worst, "seconds": seconds,
+            "classes": {method: class_rows(sim, rows) for method, rows in errors.items()},
+            "shape_types": {vid: types[vid] for vid in shapes["isam2"]}}
 
 
 def pose_rows(sim: Simulation, frames) -> list[dict]:
@@ -402,6 +406,54 @@ def pose_rows(sim: Simulation, frames) -> list[dict]:
                 row.update(covariance_errors(v, truth))
             rows.append(row)
     return rows
+
+
+def class_rows(sim: Simulation, rows: list[dict], scene=None) -> list[tuple]:
+    """(body type, cameras that saw the vehicle in that frame, rotation deg, translation cm, pose NEES or NaN) of each
+    solved pose of :func:`pose_rows` ``rows`` (of results of ``scene``, default ``sim.scene``: the frames the cameras
+    are counted in), for tables per class (:func:`class_tables`)."""
+    scene = scene or sim.scene
+    out = []
+    for row in rows:
+        if "rotation_deg" in row:
+            f, vid = row["frame"], row["vehicle"]
+            cameras = len({d.camera for d in scene.frames[f].detections if d.vehicle == vid})
+            out.append((body_type_of(sim.truth[f][vid].preset), f"{cameras} camera{'s' if cameras > 1 else ''}",
+                        row["rotation_deg"], row["translation_cm"], row.get("pose_nees", float("nan"))))
+    return out
+
+
+def class_cell(rows) -> str:
+    """``rotation deg / translation cm / pose NEES (ratio to 6)`` of :func:`class_rows` rows; "-" for none."""
+    if not rows:
+        return "-"
+    r = np.array([row[2:4] for row in rows])
+    nees = [row[4] for row in rows if np.isfinite(row[4])]
+    text = f"{r[:, 0].mean():.2f} / {r[:, 1].mean():.1f}"
+    return text + (f" / {nees_summary(nees, 6)['ratio']:.2f}x" if nees else "")
+
+
+def class_tables(pooled: dict, methods, variants, variant_label: str) -> str:
+    """Markdown tables of pooled :func:`class_rows` per body type and per camera count.
+
+    Args:
+        pooled: (variant, method) -> rows.
+        methods: the columns; variants: the rows within each class (e.g. with and without a road plane), named in a
+            column ``variant_label``.
+    """
+    sections = []
+    for what, column in (("body type", 0), ("cameras", 1)):
+        lines = [f"Pooled, per {what} (rotation deg / translation cm / pose NEES):", "",
+                 f"| {what} | {variant_label} | {' | '.join(methods)} |",
+                 f"| --- | --- | {' | '.join('---' for _ in methods)} |"]
+        keys = sorted({row[column] for rows in pooled.values() for row in rows})
+        for key in keys + ["all"]:
+            for variant in variants:
+                cells = [class_cell([r for r in pooled.get((variant, m), []) if key in ("all", r[column])])
+                         for m in methods]
+                lines.append(f"| {key} | {variant} | {' | '.join(cells)} |")
+        sections.append("\n".join(lines))
+    return "\n\n".join(sections)
 
 
 def tracking_table(comparison: dict) -> str:

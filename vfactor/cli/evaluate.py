@@ -150,11 +150,40 @@ def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int =
         raise InputError("--scenario", f"{scenario.name!r} has no motion: each frame holds new vehicles, so there "
                          "is nothing to track; use a scenario with tracks, e.g. tracks_3veh or tracks_3cam")
     units = [(scenario, s, frames, draws, lag) for s in range(seed, seed + seeds)]
-    return [section for sections in (engine or InProcess()).map(_tracks_unit, units) for section in sections]
+    done = list((engine or InProcess()).map(_tracks_unit, units))
+    sections = [section for unit_sections, _, _ in done for section in unit_sections]
+    if seeds > 1:
+        sections.append(_tracks_pooled(scenario.name, seed, seeds, [c for _, c, _ in done], [s for _, _, s in done]))
+    return sections
 
 
-def _tracks_unit(unit: tuple) -> list[str]:
-    """One seed of ``vfactor eval tracks``: its sections."""
+def _tracks_pooled(name: str, seed: int, seeds: int, classes: list[dict], shapes: list[list]) -> str:
+    """The seeds of ``vfactor eval tracks`` pooled per body type and camera count, and each body type's final
+    shapes (isam2) against issue 10's 5 cm."""
+    from collections import defaultdict
+
+    import numpy as np
+
+    from vfactor.evaluation import class_tables
+
+    methods = ("frame_by_frame", "isam2_online", "isam2", "isam2_lag", "batch")
+    pooled = defaultdict(list)
+    for unit in classes:
+        for method, rows in unit.items():
+            pooled[(name, method)] += rows
+    by_type = defaultdict(list)
+    for body_type, cm in (pair for unit in shapes for pair in unit):
+        by_type[body_type].append(cm)
+    lines = ["| body type | tracks | mean (cm) | worst (cm) | over 5 cm |", "| --- | --- | --- | --- | --- |"]
+    lines += [f"| {t} | {len(v)} | {np.mean(v):.2f} | {np.max(v):.2f} | {sum(x > 5 for x in v)} |"
+              for t, v in sorted(by_type.items())]
+    return (f"### {name}, seeds {seed}-{seed + seeds - 1} pooled\n\n{class_tables(pooled, methods, [name], 'scene')}"
+            f"\n\nFinal shapes (isam2, mean body-frame keypoint error):\n\n" + "\n".join(lines) + "\n")
+
+
+def _tracks_unit(unit: tuple) -> tuple[list[str], dict, list]:
+    """One seed of ``vfactor eval tracks``: its sections, its poses' :func:`~vfactor.evaluation.class_rows` per
+    method, and (body type, final shape error cm) of each track (isam2)."""
     from vfactor.evaluation import compare_tracking, shape_draws_table, shape_over_noise_draws, tracking_table
     from vfactor.sim import simulate
 
@@ -163,8 +192,10 @@ def _tracks_unit(unit: tuple) -> list[str]:
     ids = sorted({vid for f in sim.scene.frames for vid in f.vehicle_ids()})
     title = (f"### {scenario.name}, seed {s}: {len(sim.scene.frames)} frames, {len(ids)} vehicles, "
              f"{len(sim.scene.cameras)} cameras" + (", road plane given" if sim.scene.ground_plane else ""))
-    sections = [f"{title}\n\n{tracking_table(compare_tracking(sim, lag=lag))}\n"]
+    comparison = compare_tracking(sim, lag=lag)
+    sections = [f"{title}\n\n{tracking_table(comparison)}\n"]
     if draws:
         sections.append(f"Final shapes of batch smoothing over {draws} draws of the keypoint noise (same "
                         f"vehicles and motion):\n\n{shape_draws_table(shape_over_noise_draws(sim, draws))}\n")
-    return sections
+    shapes = [(comparison["shape_types"][vid], cm) for vid, cm in comparison["shape_cm"]["isam2"].items()]
+    return sections, comparison["classes"], shapes

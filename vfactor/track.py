@@ -686,14 +686,13 @@ class Tracker:
         for _, t_old, key in old_poses:
             values.insert(key, self._predict(backwards, estimate, t_old))
         frames = [(index, obs, motion, alone, self._offsets(track, obs, values, estimate))
-                  for index, obs, motion, alone, _ in ended["young_frames"]]
+                  for index, obs, motion, alone, _ in ended["young_frames"]] + list(track.young_frames)
         merged = old_poses + track.poses
-        for i, (index, obs, motion, alone, offsets) in enumerate(track.young_frames):
-            if i < 2:  # the new segment's first two poses get the motion factors to the ended ones
+        for start in ended["starts"][1:] + [len(old_poses)]:  # each segment's first two poses get the motion
+            for i in range(start, min(start + 2, len(merged))):  # factors to the poses before it
                 motion = gtsam.NonlinearFactorGraph()
-                _add_pose_factors(motion, merged[:len(old_poses) + i], track.poses[i][2], track.poses[i][1],
-                                  self.options)
-            frames.append((index, obs, motion, alone, offsets))
+                _add_pose_factors(motion, merged[:i], merged[i][2], merged[i][1], self.options)
+                frames[i] = (*frames[i][:2], motion, *frames[i][3:])
         scale, wireframe = track.noise_scale, self._wireframe(estimate, track)  # costs at the segment's noise scale
         cost_before = sum(cross_projection_cost(obs.scaled_above_calibrated(scale), estimate.atPose3(key), wireframe,
                                                 loss)
@@ -732,7 +731,7 @@ class Tracker:
             if covariance is not None:
                 result.extras["covariance"] = "smoothed"
         track.notes.pop(track.poses[0][2], None)
-        track.jumps = [jump for jump in track.jumps if jump[0] != ended["jump"]]
+        track.jumps = [jump for jump in track.jumps if jump[0] not in ended["jumps"]]
         if not any(offsets for *_, offsets in frames):
             links = gtsam.NonlinearFactorGraph()
             for frame in frames[len(old_poses):len(old_poses) + 2]:
@@ -824,12 +823,20 @@ class Tracker:
                     # the keypoints are those of a vehicle elsewhere: the id does not follow one vehicle here
                     self._retire(track)
                     ended = {name: getattr(track, name) for name in _SEGMENT_STATE}
+                    pending = track.ended_young  # an earlier young segment this one was to take back
                     track.restart()
                     track.previous = ended
                     if ended["young"] and len(ended["poses"]) < _TAKE_BACK_POSES and \
                             [p[0] for p in ended["poses"]] == [f[0] for f in ended["young_frames"]]:
                         track.ended_young = {"poses": ended["poses"], "young_frames": ended["young_frames"],
-                                             "jump": frame_index}
+                                             "starts": [0], "jumps": [frame_index]}
+                        if pending is not None and len(pending["poses"]) + len(ended["poses"]) < _TAKE_BACK_POSES:
+                            # two short segments in a row (a first pose off, then a second): taken back together
+                            track.ended_young = {
+                                "poses": pending["poses"] + ended["poses"],
+                                "young_frames": pending["young_frames"] + ended["young_frames"],
+                                "starts": pending["starts"] + [len(pending["poses"])],
+                                "jumps": pending["jumps"] + [frame_index]}
                     track.jumps.append((frame_index, t, jump))
                     track.notes[key] = f"a new segment of the track: {jump}; the detections' id may not follow one vehicle"
                     return self._start(track, frame_index, t, raw)

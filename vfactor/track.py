@@ -159,7 +159,6 @@ class TrackOptions:
             graph = dataclasses.replace(self.solve.graph, shape_prior_loss=self.shape_prior_loss)
             object.__setattr__(self, "solve", dataclasses.replace(self.solve, graph=graph))
 
-
     @property
     def uses_detector_offsets(self) -> bool:
         """Whether tracks get detector pose offsets: :attr:`detector_offsets`, or where it is ``None`` whether the
@@ -238,8 +237,8 @@ class _TrackState:
     offset_priors: dict = field(default_factory=dict)
     # the segment a jump ended, kept for one frame (Tracker._resume): its smoother and state, or None
     previous: dict | None = None
-    # a young segment of a few poses a jump ended, kept until the segment after it can take it back
-    # (Tracker._take_back): its poses and young frames, or None
+    # the young segments of a few poses that jumps ended, kept until the segment after them can take them back
+    # (Tracker._take_back): their poses, young frames and where each segment starts among them, or None
     ended_young: dict | None = None
     # the ended poses the segment took back (Tracker._take_back): (their poses, their young frames, the motion
     # factors that join them to the segment's first two poses), solved again when the segment is converged
@@ -371,10 +370,16 @@ class Tracker:
         for frame_index, _, key in track.poses:
             if estimate.exists(key):
                 cov = track.smoother.marginalCovariance(key) if covariance else None
-                out[(frame_index, track.id)] = result = self._result(track, estimate, key, wireframe, cov)
-                if cov is not None:
-                    result.extras["covariance"] = "smoothed"
+                out[(frame_index, track.id)] = self._smoothed(track, estimate, key, wireframe, cov)
         return out
+
+    def _smoothed(self, track: _TrackState, estimate: gtsam.Values, key: int, wireframe: Wireframe,
+                  covariance: np.ndarray | None) -> VehicleResult:
+        """:meth:`_result` of a pose smoothed over its segment, its covariance (if any) labelled ``smoothed``."""
+        result = self._result(track, estimate, key, wireframe, covariance)
+        if covariance is not None:
+            result.extras["covariance"] = "smoothed"
+        return result
 
     def forget(self, t: float) -> list[str]:
         """Drops every track not seen after ``t - options.max_gap`` (seconds): it would start a new segment, from
@@ -669,11 +674,12 @@ class Tracker:
         shape), and the new segment's frames within that multiple of their cost before, the ended poses take
         their estimates from it (with their covariances, said in their messages; solved again at the converged
         segment by :meth:`_refit_taken_back`) and the jump is withdrawn; keypoints of another vehicle cannot
-        follow the new segment's motion back at that cost. The new segment itself goes on as it was (its estimates, shape choice and
-        smoother untouched: a pose off by metres and seen by one camera would only drag it).
+        follow the new segment's motion back at that cost. The new segment itself goes on as it was (its
+        estimates, shape choice and smoother untouched: a pose off by metres and seen by one camera would only
+        drag it).
         """
         ended, track.ended_young = track.ended_young, None
-        if [p[0] for p in track.poses] != [f[0] for f in track.young_frames] or len(track.poses) < 2:
+        if [p[0] for p in track.poses] != [f[0] for f in track.young_frames]:
             return
         estimate = track.smoother.calculateEstimate()
         if not all(estimate.exists(k) for k in self._young_graph(track).keyVector()):  # marginalised (lag)
@@ -727,11 +733,10 @@ class Tracker:
             track.notes[key] = ("taken back into the track: the segment a jump ended here was this vehicle, off in "
                                 "depth; solved again with the segment after the jump, whose motion leads back to it")
             covariance = marginals.marginalCovariance(key) if marginals is not None else None
-            track.retired[(index, track.id)] = result = self._result(track, solved, key, shape, covariance)
-            if covariance is not None:
-                result.extras["covariance"] = "smoothed"
+            track.retired[(index, track.id)] = self._smoothed(track, solved, key, shape, covariance)
         track.notes.pop(track.poses[0][2], None)
-        track.jumps = [jump for jump in track.jumps if jump[0] not in ended["jumps"]]
+        jumped = {merged[start][0] for start in ended["starts"][1:] + [len(old_poses)]}  # each segment's first frame
+        track.jumps = [jump for jump in track.jumps if jump[0] not in jumped]
         if not any(offsets for *_, offsets in frames):
             links = gtsam.NonlinearFactorGraph()
             for frame in frames[len(old_poses):len(old_poses) + 2]:
@@ -777,9 +782,7 @@ class Tracker:
             wireframe = self._wireframe(estimate, track)
             for index, _, key in old_poses:
                 covariance = marginals.marginalCovariance(key) if marginals is not None else None
-                track.retired[(index, track.id)] = result = self._result(track, solved, key, wireframe, covariance)
-                if covariance is not None:
-                    result.extras["covariance"] = "smoothed"
+                track.retired[(index, track.id)] = self._smoothed(track, solved, key, wireframe, covariance)
 
     def _add(self, vid: str, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
         track = self._track(vid)
@@ -829,14 +832,13 @@ class Tracker:
                     if ended["young"] and len(ended["poses"]) < _TAKE_BACK_POSES and \
                             [p[0] for p in ended["poses"]] == [f[0] for f in ended["young_frames"]]:
                         track.ended_young = {"poses": ended["poses"], "young_frames": ended["young_frames"],
-                                             "starts": [0], "jumps": [frame_index]}
+                                             "starts": [0]}
                         if pending is not None and len(pending["poses"]) + len(ended["poses"]) < _TAKE_BACK_POSES:
                             # two short segments in a row (a first pose off, then a second): taken back together
                             track.ended_young = {
                                 "poses": pending["poses"] + ended["poses"],
                                 "young_frames": pending["young_frames"] + ended["young_frames"],
-                                "starts": pending["starts"] + [len(pending["poses"])],
-                                "jumps": pending["jumps"] + [frame_index]}
+                                "starts": pending["starts"] + [len(pending["poses"])]}
                     track.jumps.append((frame_index, t, jump))
                     track.notes[key] = f"a new segment of the track: {jump}; the detections' id may not follow one vehicle"
                     return self._start(track, frame_index, t, raw)

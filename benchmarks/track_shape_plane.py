@@ -21,7 +21,7 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from benchmarks.ground_fit_accuracy import CALIBRATION, TRUE_PLANE  # noqa: E402
-from vfactor.evaluation import body_type_of, final_shape_errors, held_out_scene_model  # noqa: E402
+from vfactor.evaluation import final_shape_errors, final_shape_table, held_out_scene_model, track_body_types  # noqa: E402
 from vfactor.ground_fit import fit_ground_plane  # noqa: E402
 from vfactor.sim import load_scenario, simulate  # noqa: E402
 from vfactor.track import TrackOptions, track_scene  # noqa: E402
@@ -46,20 +46,13 @@ def main(argv=None) -> dict:
     for scenario, (first, end) in (("tracks_3veh", args.tracks_3veh), ("library_tracks_2cam", args.library_tracks_2cam)):
         for seed in range(first, end):
             sim = simulate(load_scenario(scenario), seed=seed)
-            model = held_out_scene_model(sim)
+            model, types = held_out_scene_model(sim), track_body_types(sim)
             for name, plane in planes.items():
                 run = track_scene(dataclasses.replace(sim.scene, ground_plane=plane), TrackOptions(covariance=False),
                                   prior=model)
                 for vid, e in final_shape_errors(sim, run.frames).items():
-                    preset = next(truth[vid].preset for truth in sim.truth if vid in truth)
-                    errors[name].setdefault(body_type_of(preset), []).append(
-                        100 * float(np.linalg.norm(e, axis=1).mean()))
-    types = sorted(errors["none"])
-    print(f"\n| plane | {' | '.join(types)} |\n| --- |{' --- |' * len(types)}")
-    for name, by_type in errors.items():
-        cells = [f"{np.mean(v):.2f} (worst {np.max(v):.2f}, {sum(x > 5 for x in v)}/{len(v)} over 5 cm)"
-                 for v in (by_type[t] for t in types)]
-        print(f"| {name} | {' | '.join(cells)} |")
+                    errors[name].setdefault(types[vid], []).append(100 * float(np.linalg.norm(e, axis=1).mean()))
+    print("\n" + final_shape_table(errors, "plane"))
     return {"fit": fit, "errors": errors}
 
 

@@ -149,8 +149,8 @@ def test_eval_tracks_pools_its_seeds_per_body_type_and_camera_count(capsys):
     out = capsys.readouterr().out
     pooled = out[out.index("### intersection_2cam_track, seeds 0-1 pooled"):]
     assert "Pooled, per body type" in pooled and "Pooled, per cameras" in pooled and "| 2 cameras |" in pooled
-    table = pooled[pooled.index("| body type | tracks |"):].splitlines()
-    tracks = sum(int(line.split("|")[2]) for line in table[2:] if line.startswith("| "))
+    table = pooled[pooled.index("| body type | scene | tracks |"):].splitlines()
+    tracks = sum(int(line.split("|")[3]) for line in table[2:] if line.startswith("| "))
     assert tracks == 2  # one vehicle a seed
     row = next(line for line in pooled.splitlines() if line.startswith("| all | intersection_2cam_track"))
     isam2 = row.split("|")[5]  # frame_by_frame, isam2_online, isam2: rotation / translation / NEES

@@ -32,7 +32,8 @@ __all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held
            "compare_methods", "covariance_errors", "pose_rows", "held_out_box_model", "solve_held_out", "true_box", "summarise_methods", "accuracy_table", "keypoint_table",
            "body_type_table", "consistency_table", "poor_fit_summary",
            "noise_variant", "run_accuracy", "compare_tracking", "tracking_table", "final_shape_errors",
-           "shape_over_noise_draws", "shape_draws_table", "class_rows", "class_cell", "class_tables"]
+           "shape_over_noise_draws", "shape_draws_table", "class_rows", "class_cell", "class_tables",
+           "track_body_types", "final_shape_table"]
 
 #: Method name -> description, in table order.
 METHODS = {
@@ -385,10 +386,34 @@ def compare_tracking(sim: Simulation, options=None, lag: float = 0.5) -> dict:
               np.degrees(np.linalg.norm(a.world_T_vehicle.rotation().logmap(b.world_T_vehicle.rotation()))))
              for fa, fb in zip(runs["isam2"], runs["batch"]) for a, b in zip(fa.vehicles, fb.vehicles) if a.ok and b.ok]
     worst = tuple(np.max(diffs, axis=0)) if diffs else (float("nan"), float("nan"))
-    types = {vid: body_type_of(truth[vid].preset) for truth in sim.truth for vid in truth}
+    types = track_body_types(sim)
     return {"errors": errors, "shape_cm": shapes, "isam2_vs_batch": worst, "seconds": seconds,
             "classes": {method: class_rows(sim, rows) for method, rows in errors.items()},
             "shape_types": {vid: types[vid] for vid in shapes["isam2"]}}
+
+
+def track_body_types(sim: Simulation) -> dict[str, str]:
+    """Track id -> body type of the simulated vehicle (:func:`body_type_of`)."""
+    return {vid: body_type_of(truth[vid].preset) for truth in sim.truth for vid in truth}
+
+
+def final_shape_table(shapes: dict, variant_label: str) -> str:
+    """Markdown table of tracks' final shape errors per body type against issue 10's 5 cm.
+
+    Args:
+        shapes: variant (e.g. a scene, a road plane) -> body type -> final shape errors (cm, mean body-frame
+            keypoint error of each track).
+        variant_label: the header of the variants' column.
+    """
+    lines = [f"| body type | {variant_label} | tracks | mean (cm) | worst (cm) | over 5 cm |",
+             "| --- | --- | --- | --- | --- | --- |"]
+    for body_type in sorted({t for by_type in shapes.values() for t in by_type}):
+        for variant, by_type in shapes.items():
+            v = by_type.get(body_type, [])
+            if v:
+                lines.append(f"| {body_type} | {variant} | {len(v)} | {np.mean(v):.2f} | {np.max(v):.2f} | "
+                             f"{sum(x > 5 for x in v)} |")
+    return "\n".join(lines)
 
 
 def pose_rows(sim: Simulation, frames) -> list[dict]:

@@ -162,9 +162,7 @@ def _tracks_pooled(name: str, seed: int, seeds: int, classes: list[dict], shapes
     shapes (isam2) against issue 10's 5 cm."""
     from collections import defaultdict
 
-    import numpy as np
-
-    from vfactor.evaluation import class_tables
+    from vfactor.evaluation import class_tables, final_shape_table
 
     methods = ("frame_by_frame", "isam2_online", "isam2", "isam2_lag", "batch")
     pooled = defaultdict(list)
@@ -174,11 +172,8 @@ def _tracks_pooled(name: str, seed: int, seeds: int, classes: list[dict], shapes
     by_type = defaultdict(list)
     for body_type, cm in (pair for unit in shapes for pair in unit):
         by_type[body_type].append(cm)
-    lines = ["| body type | tracks | mean (cm) | worst (cm) | over 5 cm |", "| --- | --- | --- | --- | --- |"]
-    lines += [f"| {t} | {len(v)} | {np.mean(v):.2f} | {np.max(v):.2f} | {sum(x > 5 for x in v)} |"
-              for t, v in sorted(by_type.items())]
     return (f"### {name}, seeds {seed}-{seed + seeds - 1} pooled\n\n{class_tables(pooled, methods, [name], 'scene')}"
-            f"\n\nFinal shapes (isam2, mean body-frame keypoint error):\n\n" + "\n".join(lines) + "\n")
+            f"\n\nFinal shapes (isam2, mean body-frame keypoint error):\n\n{final_shape_table({name: by_type}, 'scene')}\n")
 
 
 def _tracks_unit(unit: tuple) -> tuple[list[str], dict, list]:

@@ -113,3 +113,27 @@ def test_evaluate_matches_results_to_the_truth_by_frame_and_id():
     assert summarise(rows)["count"] == 1
     with pytest.raises(ValueError, match="frames"):
         evaluate(results[:1], truth)
+
+
+def test_ray_nees_splits_the_error_along_and_across_the_camera_ray():
+    from vfactor.metrics import CHI2_95, ray_nees
+    from vfactor.stats import chi2_quantile
+
+    # the vehicle 10 m along world x from the camera, turned by 90 deg: the ray is body -y
+    world_T_est = gtsam.Pose3(gtsam.Rot3.Yaw(math.pi / 2), np.array([10.0, 0.0, 0.0]))
+    body_error = np.array([0.1, -0.2, 0.05])  # body frame: 0.2 m along the ray (away), 0.1 and 0.05 across
+    world_T_true = world_T_est.compose(gtsam.Pose3(gtsam.Rot3(), body_error))
+    P = np.diag([1e-4, 1e-4, 1e-4, 0.01, 0.04, 0.0025])
+    along, along_z2, across_z2 = ray_nees(world_T_est, P, world_T_true, [0.0, 0.0, 0.0])
+    assert along == pytest.approx(0.2)
+    assert along_z2 == pytest.approx(0.2**2 / 0.04)
+    assert across_z2 == pytest.approx(0.1**2 / 0.01 + 0.05**2 / 0.0025)
+    # a correlated covariance: across the ray the 2x2 block's own inverse, not the diagonal
+    P[3, 5] = P[5, 3] = 0.004
+    block = P[[3, 5]][:, [3, 5]]
+    e = body_error[[0, 2]]
+    assert ray_nees(world_T_est, P, world_T_true, np.zeros(3))[2] == pytest.approx(e @ np.linalg.solve(block, e))
+    for dof in (1, 2, 3, 6):
+        assert CHI2_95[dof] == pytest.approx(chi2_quantile(dof, 0.95), rel=1e-6)
+    with pytest.raises(ValueError, match="pose_covariance"):
+        ray_nees(world_T_est, np.eye(3), world_T_true, np.zeros(3))

@@ -36,11 +36,12 @@ __all__ = [
     "CHI2_95",
     "pose_nees",
     "keypoint_nees",
+    "ray_nees",
     "nees_summary",
 ]
 
 #: The 95 % points of chi2 with 3 and 6 degrees of freedom: a keypoint's and a pose's NEES bound.
-CHI2_95 = {3: 7.814727903251178, 6: 12.591587243743977}
+CHI2_95 = {1: 3.841458820694124, 2: 5.991464547107979, 3: 7.814727903251178, 6: 12.591587243743977}
 
 
 def _rotation_matrix(R, name: str) -> np.ndarray:
@@ -198,6 +199,39 @@ def keypoint_nees(kp_world_est, keypoint_covariances_world, kp_world_true) -> np
         raise ValueError(f"keypoints and covariances: shapes {a.shape}, {b.shape}, {C.shape} do not match")
     e = a - b
     return np.einsum("ni,ni->n", e, np.linalg.solve(C, e[..., None])[..., 0])
+
+
+def ray_nees(world_T_vehicle_est: gtsam.Pose3, pose_covariance, world_T_vehicle_true: gtsam.Pose3,
+             world_p_camera) -> tuple[float, float, float]:
+    """A pose's translation error along one camera's ray (its depth) and across it, each under its covariance.
+
+    The error is the translation part of ``Logmap(est^-1 true)`` (body frame, the tangent convention of
+    :func:`pose_nees`); the ray runs from the camera centre to the estimated vehicle origin. A single view fixes
+    a vehicle's position across its ray far better than along it, so the two are judged apart.
+
+    Args:
+        world_T_vehicle_est, world_T_vehicle_true: the estimate and the truth (metres).
+        pose_covariance: the estimate's (6, 6) covariance (rotation first, then translation; rad, m).
+        world_p_camera: (3,) the camera centre, world frame, metres.
+
+    Returns:
+        (the error along the ray, m, positive away from the camera; its squared Mahalanobis norm, 1 dof, bound
+        ``CHI2_95[1]``; the squared Mahalanobis norm of the error across the ray, 2 dof, bound ``CHI2_95[2]``).
+    """
+    P = np.asarray(pose_covariance, dtype=float)
+    if P.shape != (6, 6):
+        raise ValueError(f"pose_covariance: expected shape (6, 6), got {P.shape}")
+    ray_world = world_T_vehicle_est.translation() - np.asarray(world_p_camera, dtype=float).reshape(3)
+    distance = np.linalg.norm(ray_world)
+    if not distance > 0:
+        raise ValueError("world_p_camera: the camera centre is at the vehicle origin")
+    ray = world_T_vehicle_est.rotation().matrix().T @ (ray_world / distance)
+    error = gtsam.Pose3.Logmap(world_T_vehicle_est.between(world_T_vehicle_true))[3:]
+    P = P[3:, 3:]
+    along = float(error @ ray)
+    across = np.linalg.svd(np.eye(3) - np.outer(ray, ray))[0][:, :2]  # an orthonormal basis of the plane across
+    e = across.T @ error
+    return along, along**2 / float(ray @ P @ ray), float(e @ np.linalg.solve(across.T @ P @ across, e))
 
 
 def nees_summary(values, dim: int) -> dict:

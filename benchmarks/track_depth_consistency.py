@@ -24,9 +24,9 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from vfactor.evaluation import held_out_scene_model, noise_variant  # noqa: E402
+from vfactor.factors.motion import MotionModel  # noqa: E402
 from vfactor.metrics import CHI2_95, pose_nees, ray_nees  # noqa: E402
 from vfactor.sim import load_scenario, simulate  # noqa: E402
-from vfactor.factors.motion import MotionModel  # noqa: E402
 from vfactor.track import TrackOptions, smooth_scene, track_scene  # noqa: E402
 
 DEFAULT_SCENES = ([f"library_tracks_2cam:{s}" for s in range(90, 96)] + [f"tracks_3veh:{s}" for s in range(80, 86)])
@@ -81,7 +81,10 @@ def main(argv=None) -> dict[str, list[tuple]]:
     parser.add_argument("--motion", nargs="+", default=[], metavar="FIELD=VALUE",
                         help="motion model settings (vfactor.factors.motion.MotionModel), e.g. sigma_acceleration=4")
     args = parser.parse_args(argv)
-    motion = MotionModel(**{k: float(v) for k, v in (item.split("=", 1) for item in args.motion)})
+    try:
+        motion = MotionModel(**{k: float(v) for k, v in (item.split("=", 1) for item in args.motion)})
+    except (TypeError, ValueError) as exc:
+        parser.error(f"--motion: expected FIELD=NUMBER with FIELD a MotionModel field ({exc})")
     options = TrackOptions(motion=motion)
     rows: dict[str, list[tuple]] = {}
     for spec in args.scenes:

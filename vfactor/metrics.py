@@ -40,7 +40,8 @@ __all__ = [
     "nees_summary",
 ]
 
-#: The 95 % points of chi2 with 3 and 6 degrees of freedom: a keypoint's and a pose's NEES bound.
+#: The 95 % points of chi2 by degrees of freedom: the NEES bound of a pose (6), a keypoint (3), and of a position
+#: across (2) and along (1) a camera's ray (:func:`ray_nees`).
 CHI2_95 = {1: 3.841458820694124, 2: 5.991464547107979, 3: 7.814727903251178, 6: 12.591587243743977}
 
 

@@ -39,6 +39,7 @@ from vfactor.wireframe import Wireframe
 __all__ = [
     "GraphConfig",
     "observations_from_detections",
+    "vehicle_image_sizes",
     "add_shape_factors",
     "add_observation_factor",
     "detector_shape_sigmas",
@@ -150,17 +151,28 @@ class GraphConfig:
 
 
 def observations_from_detections(
-    detections: list[Detection], cameras: dict[str, Camera], config: GraphConfig = GraphConfig()
+    detections: list[Detection], cameras: dict[str, Camera], config: GraphConfig = GraphConfig(),
+    vehicle_sizes: dict[str, float] | None = None,
 ) -> KeypointObservations:
     """Stacks the seen keypoints of one vehicle's detections, with their noise.
 
     The pixel noise of keypoint k is the detection's 2x2 covariance where one is
     given (marked ``calibrated`` when the detection says it is,
     ``Detection.covariance_calibrated``), else isotropic with sigma ``max(min_pixel_sigma, relative_pixel_sigma *
-    box_diagonal) / confidence``; each observation keeps its detection's ``shape_sigma``, and is marked ``cut``
+    size) / confidence``: ``size`` the diagonal of the detection's ``roi`` where it has one, else of the box
+    around its seen keypoints, or the vehicle's size in that camera's image (``vehicle_sizes``) where that is
+    larger; each observation keeps its detection's ``shape_sigma``, and is marked ``cut``
     where its detection's ``roi`` reaches beyond its camera's image (``image_size``). With
     ``config.truncation``, a detection whose camera has an ``image_size`` and whose seen keypoints all lie in
     the image gets the image as its truncation window.
+
+    Args:
+        vehicle_sizes: camera name -> the diagonal (pixels) of the box around the vehicle's 12 keypoints projected
+            at an estimate of it (:func:`vehicle_image_sizes`). A detector's keypoint error follows the vehicle's
+            size in the image, and the few keypoints a detector keeps of a vehicle the image border cuts (or
+            another vehicle hides) span a box far smaller than the vehicle: sized by that box, they were weighed
+            as if several times more precise than they are (docs/factors.md, "Keypoint noise"). Detections with an
+            ``roi`` keep the ``roi``'s size.
 
     Raises:
         InputError: a detection names a camera that is not in ``cameras``.
@@ -174,7 +186,10 @@ def observations_from_detections(
         if len(seen) == 0:
             continue
         edges = _truncation_window(cameras[d.camera], d.keypoints[seen]) if config.truncation else None
-        base_sigma = max(config.min_pixel_sigma, config.relative_pixel_sigma * d.box_diagonal())
+        size = d.box_diagonal()
+        if d.roi is None and vehicle_sizes and d.camera in vehicle_sizes:
+            size = max(size, float(vehicle_sizes[d.camera]))
+        base_sigma = max(config.min_pixel_sigma, config.relative_pixel_sigma * size)
         L = np.asarray(d.confidence[seen], dtype=float)[:, None, None] / base_sigma * np.eye(2)
         given = np.zeros(len(seen), dtype=bool)
         if d.covariance is not None:
@@ -204,6 +219,27 @@ def observations_from_detections(
         shape_sigma=shape_sigma if np.any(shape_sigma > 0) else None,
         cut=cut if cut.any() else None,
     )
+
+
+def vehicle_image_sizes(cameras: dict[str, Camera], world_T_vehicle: gtsam.Pose3, wireframe: Wireframe,
+                        names=None) -> dict[str, float]:
+    """Camera name -> the diagonal (pixels) of the box around the vehicle's 12 keypoints projected into that
+    camera's image at ``world_T_vehicle`` (those in front of the camera; none where fewer than two are), for
+    :func:`observations_from_detections`'s ``vehicle_sizes``. The box is not clipped to the image: the vehicle's
+    size, not the part of it in view.
+
+    Args:
+        cameras: the cameras by name; ``names`` (default: all of them) the ones to size the vehicle in.
+        world_T_vehicle: the vehicle's pose (world frame, metres); ``wireframe`` its shape (body frame).
+    """
+    world_p = world_T_vehicle.transformFrom(np.asarray(wireframe.vehicle_p_keypoints, dtype=float).T).T
+    sizes = {}
+    for name in cameras if names is None else names:
+        uv, depth = cameras[name].project(world_p)
+        front = (depth > 0) & np.all(np.isfinite(uv), axis=1)
+        if front.sum() >= 2:
+            sizes[name] = float(np.linalg.norm(uv[front].max(0) - uv[front].min(0)))
+    return sizes
 
 
 _NO_WINDOW = np.full(4, np.nan)

@@ -46,6 +46,7 @@ from vfactor.graph import (
     hwc_violation,
     insert_vehicle_values,
     observations_from_detections,
+    vehicle_image_sizes,
     wireframe_from_values,
 )
 from vfactor.init import best_candidates, cross_projection_cost
@@ -1168,6 +1169,20 @@ def _refresh(final: dict, estimates: dict, kind: str) -> None:
         final[key] = v
 
 
+#: Batch smoothing solves a frame alone again where sizing its keypoints' sigmas by the vehicle
+#: (:func:`_sized_observations`) changed a sigma by more than this share.
+_RESIZED = 0.1
+
+
+def _sized_observations(detections: list, cameras: dict[str, Camera], config, world_T_vehicle: gtsam.Pose3,
+                        wireframe: Wireframe) -> KeypointObservations:
+    """A vehicle's observations with each keypoint's sigma sized by the vehicle at ``world_T_vehicle`` with
+    ``wireframe`` in each camera's image (:func:`vfactor.graph.vehicle_image_sizes`), not by the box of the few
+    keypoints a detector kept of a vehicle the image border cuts."""
+    sizes = vehicle_image_sizes(cameras, world_T_vehicle, wireframe, sorted({d.camera for d in detections}))
+    return observations_from_detections(detections, cameras, config, sizes)
+
+
 def _solve_alone(obs: KeypointObservations, options: SolveOptions, vid: str, prior, bounds) -> VehicleResult:
     """One frame of a track solved on its own; a numerical failure is a ``failed`` result, not an exception."""
     try:
@@ -1218,7 +1233,14 @@ def _new_offset(keys: KeyScheme, index: int, number: int, sigma: float, shape: g
 
 
 def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
-    """Batch smoothing of one track (a :func:`_track_units` unit): its results by frame index."""
+    """Batch smoothing of one track (a :func:`_track_units` unit): its results by frame index.
+
+    The track's graph is solved by Levenberg-Marquardt from the frames' own solves; then each keypoint's sigma
+    is sized by the vehicle that solution puts in each image (:func:`_sized_observations`: a frame's own solve
+    is poorest where the image border cuts the vehicle, the frames where the size matters), the frames whose
+    sigmas that changed by more than :data:`_RESIZED` are solved alone again, the track's prior and noise scale
+    chosen again from the frames' solves, and the graph built and solved again from the first solution.
+    """
     vid, index, ((cameras, options, prior, bounds), frames) = unit
     model, prior, bounds = resolve_shape_prior(prior, bounds)
     keys = KeyScheme()
@@ -1229,45 +1251,51 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     firsts = [_solve_alone(obs, alone, vid, model or prior, bounds) if len(obs) else None for _, _, obs in items]
     shape = track_shape(firsts, model, prior)
     track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability
-    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-    add_shape_factors(graph, keys, index, config, track_prior, bounds)
-    posed, best, segments = [], -1, {}
-    offsets: dict[str, int] = {}  # camera name -> the key of its detector pose offset (one per camera, no lag)
     swaps = {}  # frame index -> the left/right pairs that frame's own solve relabelled, taken over by the batch graph
-    for (i, t, obs), first in zip(items, firsts):
-        obs = obs.scaled_above_calibrated(scale)
-        if first is not None and first.ok and first.extras.get("swapped_keypoints"):
-            swaps[i] = first.extras["swapped_keypoints"]
-            obs = apply_swaps(obs, swaps[i])
-        if first is None or not first.ok:
-            if not posed:
-                results[i] = first or VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen")
-                continue
-            guess = values.atPose3(posed[-1][2])
-        else:
-            guess = first.world_T_vehicle
-            if len(obs) > best:
-                best = len(obs)
-                insert_vehicle_values(values, keys, None, first.wireframe, index)
-        key = keys.pose_key(index, i)
-        if posed and t - posed[-1][1] > options.max_gap:
-            segments[i] = _segment_message(t - posed[-1][1], options.max_gap)
-        for name, sigma in detector_shape_sigmas(obs).items() if options.uses_detector_offsets else ():
-            if name not in offsets:
-                offsets[name], prior = _new_offset(keys, index, len(offsets), sigma, values, values)
-                graph.add(prior)
-        add_observation_factor(graph, keys, obs, index, i, config, offsets)
-        _add_pose_factors(graph, posed, key, t, options)
-        values.insert(key, guess)
-        posed.append((i, t, key))
-    if not posed:
-        return results
-    try:
+
+    def build(track_prior, scale):
+        """The track's graph, initial values, posed frames ``(index, t, key)``, segment messages and offsets'
+        keys, with the track's shape prior and noise scale."""
+        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        add_shape_factors(graph, keys, index, config, track_prior, bounds)
+        posed, best, segments = [], -1, {}
+        offsets: dict[str, int] = {}  # camera name -> the key of its detector pose offset (one per camera, no lag)
+        swaps.clear()
+        for (i, t, obs), first in zip(items, firsts):
+            key = keys.pose_key(index, i)
+            obs = obs.scaled_above_calibrated(scale)
+            if first is not None and first.ok and first.extras.get("swapped_keypoints"):
+                swaps[i] = first.extras["swapped_keypoints"]
+                obs = apply_swaps(obs, swaps[i])
+            if first is None or not first.ok:
+                if not posed:
+                    results[i] = first or VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen")
+                    continue
+                guess = values.atPose3(posed[-1][2])
+            else:
+                guess = first.world_T_vehicle
+                if len(obs) > best:
+                    best = len(obs)
+                    insert_vehicle_values(values, keys, None, first.wireframe, index)
+            if posed and t - posed[-1][1] > options.max_gap:
+                segments[i] = _segment_message(t - posed[-1][1], options.max_gap)
+            for name, sigma in detector_shape_sigmas(obs).items() if options.uses_detector_offsets else ():
+                if name not in offsets:
+                    offsets[name], offset_prior = _new_offset(keys, index, len(offsets), sigma, values, values)
+                    graph.add(offset_prior)
+            add_observation_factor(graph, keys, obs, index, i, config, offsets)
+            _add_pose_factors(graph, posed, key, t, options)
+            values.insert(key, guess)
+            posed.append((i, t, key))
+        return graph, values, posed, segments, offsets
+
+    def solve(graph, values, posed, offsets):
+        """LM, again with the HWC factor where the shape breaks HWC, and again from the convention's body frame
+        where the solution's is turned front to back: (optimizer, estimate, graph)."""
         optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.solve.lm_params())
         estimate = optimizer.optimize()
-        terms = hwc_terms(config, bounds)
-        shape = wireframe_from_values(estimate, keys, index)
-        if config.hwc == "lazy" and hwc_violation(shape, terms) > config.hwc_tolerance:
+        if config.hwc == "lazy" and hwc_violation(wireframe_from_values(estimate, keys, index), terms) > \
+                config.hwc_tolerance:
             graph.add(hwc_factor(keys, index, terms=terms))
             optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.solve.lm_params())
             estimate = optimizer.optimize()
@@ -1275,6 +1303,29 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         if turned is not None:  # the body frame turned front to back (vfactor.factors.body_frame): on from the convention's
             optimizer = gtsam.LevenbergMarquardtOptimizer(graph, turned, options.solve.lm_params())
             estimate = optimizer.optimize()
+        return optimizer, estimate, graph
+
+    terms = hwc_terms(config, bounds)
+    graph, values, posed, segments, offsets = build(track_prior, scale)
+    if not posed:
+        return results
+    try:
+        optimizer, estimate, graph = solve(graph, values, posed, offsets)
+        wireframe = wireframe_from_values(estimate, keys, index)
+        for k, ((i, t, obs), (_, frame)) in enumerate(zip(items, frames)):
+            key = keys.pose_key(index, i)
+            if not len(obs) or not estimate.exists(key):
+                continue
+            sized = _sized_observations(frame.detections, cameras, config, estimate.atPose3(key), wireframe)
+            items[k] = (i, t, sized)
+            change = np.abs(sized.sqrt_information[:, 0, 0] / obs.sqrt_information[:, 0, 0] - 1.0)
+            if change.max() > _RESIZED:
+                again = _solve_alone(sized, alone, vid, model or prior, bounds)
+                firsts[k] = again if again.ok or firsts[k] is None or not firsts[k].ok else firsts[k]
+        shape = track_shape(firsts, model, prior)
+        track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability
+        graph, _, posed, segments, offsets = build(track_prior, scale)
+        optimizer, estimate, graph = solve(graph, estimate, posed, offsets)
         marginals = gtsam.Marginals(graph, estimate) if options.covariance else None
     except RuntimeError as exc:
         for i, _, _ in posed:

@@ -533,15 +533,19 @@ def _translations_cm(results, truth):
 def test_a_first_pose_off_in_depth_is_taken_back_when_the_next_segment_knows_the_motion(entering, lag):
     """The jump after a one-pose track split it and left that pose as it was solved alone (64 cm off here, 1-2.5 m
     on other scenes); once the segment after the jump has five poses, its motion leads back to the ended pose,
-    which is solved again with it (Tracker._take_back) and the jump withdrawn. The new segment's own estimates are
-    untouched (online the same as before)."""
+    which is solved again with it (Tracker._take_back) and the jump withdrawn: the taken-back pose ends where
+    batch smoothing of the same frames puts it. The new segment's own estimates are untouched (online the same as
+    before). (Since the keypoints' sigmas follow the vehicle's size, cam0's 2-9 keypoints of the vehicle entering
+    its view count for less, and this track, batch smoothing's too, is 11-31 cm off, from 3-11 cm.)"""
     sim, frames, truth = entering
-    run = track_scene(dataclasses.replace(sim.scene, frames=frames), TrackOptions(lag=lag))
+    scene = dataclasses.replace(sim.scene, frames=frames)
+    run = track_scene(scene, TrackOptions(lag=lag))
     online, final = _translations_cm(run.online, truth), _translations_cm(run.frames, truth)
+    batch = _translations_cm(smooth_scene(scene, TrackOptions(covariance=False)), truth)
     assert online[0] > 50 and online[1] > 200  # the first two frames alone, each off in depth
     assert not any("jumps" in m for m in run.messages), run.messages
     assert "taken back into the track" in run.frames[0].vehicles[0].message
-    assert final[0] < 15 and final.max() < 15, final
+    assert np.abs(final - batch).max() < 5 and final.max() < 40, (final, batch)
     covariance = run.frames[0].vehicles[0].pose_covariance
     assert covariance is not None and np.all(np.linalg.eigvalsh(covariance) > 0)
 
@@ -574,7 +578,9 @@ def test_another_vehicles_pose_before_a_jump_is_not_taken_back(entering):
     assert any("1 jumps beyond the motion model" in m for m in run.messages), run.messages
     assert "taken back" not in run.frames[0].vehicles[0].message
     assert run.frames[0].vehicles[0].world_T_vehicle.equals(run.online[0].vehicles[0].world_T_vehicle, 1e-3)
-    assert _translations_cm(run.frames, truth)[1:].max() < 15
+    alone = track_scene(dataclasses.replace(sim.scene, frames=frames[1:]), TrackOptions(covariance=False))
+    assert all(a.vehicles[0].world_T_vehicle.equals(b.vehicles[0].world_T_vehicle, 1e-3)  # as if tracked alone
+               for a, b in zip(run.frames[1:], alone.frames))
 
 
 @pytest.mark.parametrize("lag", [None, 0.5])

@@ -171,8 +171,8 @@ def observations_from_detections(
             at an estimate of it (:func:`vehicle_image_sizes`). A detector's keypoint error follows the vehicle's
             size in the image, and the few keypoints a detector keeps of a vehicle the image border cuts (or
             another vehicle hides) span a box far smaller than the vehicle: sized by that box, they were weighed
-            as if several times more precise than they are (docs/factors.md, "Keypoint noise"). Detections with an
-            ``roi`` keep the ``roi``'s size.
+            as if several times more precise than they are (docs/factors.md, "Keypoint noise sized by the
+            vehicle"). Detections with an ``roi`` keep the ``roi``'s size.
 
     Raises:
         InputError: a detection names a camera that is not in ``cameras``.

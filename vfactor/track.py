@@ -326,8 +326,9 @@ class Tracker:
         vehicles = []
         for vid in frame.vehicle_ids():
             try:
-                obs = observations_from_detections(frame.detections_of(vid), self.cameras, self.options.solve.graph)
-                result = self._add(vid, index, frame.t, obs)
+                detections = frame.detections_of(vid)
+                obs = observations_from_detections(detections, self.cameras, self.options.solve.graph)
+                result = self._add(vid, index, frame.t, obs, detections)
                 if result.pose_covariance is not None:
                     result.extras["covariance"] = "filtered"  # from the frames so far
                 vehicles.append(checked(result, _seen_by(frame, vid, self.cameras), self.options.covariance))
@@ -456,6 +457,11 @@ class Tracker:
         track.poses.append((frame_index, t, key))
         track.multiview_frames, track.reanchored = int(_camera_count(obs) >= 2), False
         return self._finish(track, key, t)
+
+    def _sized(self, detections: list, world_T_vehicle: gtsam.Pose3, wireframe: Wireframe) -> KeypointObservations:
+        """The detections' observations (at the detector's sigmas), each keypoint's sigma sized by the vehicle at
+        ``world_T_vehicle`` (:func:`_sized_observations`)."""
+        return _sized_observations(detections, self.cameras, self.options.solve.graph, world_T_vehicle, wireframe)
 
     def _offsets(self, track: _TrackState, obs: KeypointObservations, values: gtsam.Values,
                  estimate: gtsam.Values, graph: gtsam.NonlinearFactorGraph | None = None) -> dict[str, int]:
@@ -785,7 +791,8 @@ class Tracker:
                 covariance = marginals.marginalCovariance(key) if marginals is not None else None
                 track.retired[(index, track.id)] = self._smoothed(track, solved, key, wireframe, covariance)
 
-    def _add(self, vid: str, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
+    def _add(self, vid: str, frame_index: int, t: float, obs: KeypointObservations,
+             detections: list | None = None) -> VehicleResult:
         track = self._track(vid)
         track.last_seen = t
         if len(obs) == 0:
@@ -812,8 +819,11 @@ class Tracker:
         # a poor prediction (a long gap, a sharp manoeuvre) is replaced by the best PnP/triangulation start
         loss = options.graph.loss
         key = self.keys.pose_key(track.index, frame_index)
+        kept = None
         if fixed_by_motion and len(obs) < options.min_observations:
-            raw, obs = self._gated(track, key, raw, obs, guess, wireframe)
+            kept = self._gated(track, key, obs, guess, wireframe)
+            if kept is not None:
+                raw, obs = raw.subset(kept), obs.subset(kept)
         predicted_cost = cross_projection_cost(obs, guess, wireframe, loss)
         if predicted_cost > 2.0 * len(obs):
             starts = best_candidates(obs, wireframe, loss, 1, min_keypoints_in_one_view=options.min_keypoints_in_one_view)
@@ -844,6 +854,10 @@ class Tracker:
                     track.notes[key] = f"a new segment of the track: {jump}; the detections' id may not follow one vehicle"
                     return self._start(track, frame_index, t, raw)
                 guess = starts[0].world_T_vehicle
+        if detections:  # the keypoints the track takes: their sigmas sized by the vehicle where it is taken to be
+            raw = self._sized(detections, guess, wireframe)
+            raw = raw if kept is None else raw.subset(kept)
+            obs = raw.scaled_above_calibrated(track.noise_scale)
         if options.relabel_swaps:  # left/right pairs that the track's shape at the prediction says are swapped
             obs, swaps = relabel_swaps(obs, guess, wireframe.vehicle_p_keypoints, loss)
             if swaps:
@@ -873,8 +887,8 @@ class Tracker:
                 track.young, track.young_frames = False, []
         return self._finish(track, key, t)
 
-    def _gated(self, track: _TrackState, key: int, raw: KeypointObservations, obs: KeypointObservations,
-               guess: gtsam.Pose3, wireframe: Wireframe) -> tuple[KeypointObservations, KeypointObservations]:
+    def _gated(self, track: _TrackState, key: int, obs: KeypointObservations, guess: gtsam.Pose3,
+               wireframe: Wireframe) -> np.ndarray | None:
         """A frame's few keypoints without those its prediction puts beyond :data:`~vfactor.solve.GROSS_OUTLIER_SIGMAS`.
 
         With fewer keypoints than a frame needs alone (``SolveOptions.min_observations``: a vehicle leaving a view,
@@ -887,18 +901,18 @@ class Tracker:
         most keypoints disagree with is the jump test's to judge), and the result says so.
 
         Returns:
-            (raw, obs): the nominal and the scaled observations kept.
+            Which of ``obs`` (the frame's observations at the track's noise scale) are kept; None: all of them.
         """
         residual = np.linalg.norm(whitened_residuals(obs, guess, wireframe.vehicle_p_keypoints), axis=1)
         beyond = residual > GROSS_OUTLIER_SIGMAS
         if not beyond.any() or beyond.sum() >= 0.5 * len(obs):
-            return raw, obs
+            return None
         labels = ", ".join(f"{obs.cameras[c].name} keypoint {k}"
                            for c, k in zip(obs.camera_index[beyond], obs.keypoint_index[beyond]))
         track.notes[key] = (f"{int(beyond.sum())} of its {len(obs)} keypoints ({labels}) left out: beyond "
                             f"{GROSS_OUTLIER_SIGMAS:g} sigmas of the track's prediction, with too few keypoints for "
                             "the robust loss to outvote them")
-        return raw.subset(~beyond), obs.subset(~beyond)
+        return ~beyond
 
     def _settle(self, track: _TrackState, max_updates: int, recent: int | None = 20) -> None:
         """Extra iSAM2 updates (relinearisation) until no pose moves more than the tolerance.

@@ -8,10 +8,11 @@ along the ray (chi2 with 1 dof: median 0.45, 5 % beyond 3.84) and 1 across it (2
 by two or more cameras get their pose NEES (ratio to 6) for comparison.
 
 Run: ``python benchmarks/track_depth_consistency.py [--scenes SCENARIO:SEED ...] [--gaussian-only]
-[--motion FIELD=VALUE ...]``; defaults
+[--motion FIELD=VALUE ...] [--noise FIELD=VALUE ...]``; defaults
 ``library_tracks_2cam`` seeds 90-95 and ``tracks_3veh`` seeds 80-85 (about 5 s a scene); ``--gaussian-only``
 simulates the keypoints without outliers, left/right swaps or misses; ``--motion`` sets the motion model's
-fields (:class:`vfactor.factors.motion.MotionModel`).
+fields (:class:`vfactor.factors.motion.MotionModel`), ``--noise`` the simulated keypoints' (:class:`vfactor.sim.noise.NoiseModel`,
+pairs as ``a,b``).
 """
 
 from __future__ import annotations
@@ -32,12 +33,13 @@ from vfactor.track import TrackOptions, smooth_scene, track_scene  # noqa: E402
 DEFAULT_SCENES = ([f"library_tracks_2cam:{s}" for s in range(90, 96)] + [f"tracks_3veh:{s}" for s in range(80, 86)])
 
 
-def scene_rows(spec: str, gaussian_only: bool, options: TrackOptions = TrackOptions()) -> dict[str, list[tuple]]:
-    """Method -> rows ``(cameras, along m, along z2, across z2, pose NEES)`` of every pose with a covariance."""
+def scene_rows(spec: str, noise: dict | None = None, options: TrackOptions = TrackOptions()) -> dict[str, list[tuple]]:
+    """Method -> rows ``(cameras, along m, along z2, across z2, pose NEES)`` of every pose with a covariance;
+    ``noise``: :class:`~vfactor.sim.noise.NoiseModel` fields changed in the scenario."""
     scenario, seed = spec.split(":")
     scenario = load_scenario(scenario)
-    if gaussian_only:
-        scenario = noise_variant(scenario, outlier_rate=0.0, swap_rate=0.0, missing_rate=0.0)
+    if noise:
+        scenario = noise_variant(scenario, **noise)
     sim = simulate(scenario, seed=int(seed))
     model = held_out_scene_model(sim)
     methods = {"isam2": track_scene(sim.scene, options, prior=model).frames,
@@ -80,18 +82,31 @@ def main(argv=None) -> dict[str, list[tuple]]:
     parser.add_argument("--gaussian-only", action="store_true")
     parser.add_argument("--motion", nargs="+", default=[], metavar="FIELD=VALUE",
                         help="motion model settings (vfactor.factors.motion.MotionModel), e.g. sigma_acceleration=4")
+    parser.add_argument("--noise", nargs="+", default=[], metavar="FIELD=VALUE",
+                        help="keypoint noise settings (vfactor.sim.noise.NoiseModel), e.g. relative_sigma=0.003 "
+                             "confidence_visible=1,1")
     args = parser.parse_args(argv)
     try:
         motion = MotionModel(**{k: float(v) for k, v in (item.split("=", 1) for item in args.motion)})
     except (TypeError, ValueError) as exc:
         parser.error(f"--motion: expected FIELD=NUMBER with FIELD a MotionModel field ({exc})")
+    noise = {"outlier_rate": 0.0, "swap_rate": 0.0, "missing_rate": 0.0} if args.gaussian_only else {}
+    try:
+        for item in args.noise:
+            field, value = item.split("=", 1)
+            numbers = tuple(float(x) for x in value.split(","))
+            noise[field] = numbers[0] if len(numbers) == 1 else numbers
+        noise_variant(load_scenario(args.scenes[0].split(":")[0]), **noise)  # unknown fields fail here, not later
+    except (TypeError, ValueError) as exc:
+        parser.error(f"--noise: expected FIELD=NUMBER[,NUMBER] with FIELD a NoiseModel field ({exc})")
     options = TrackOptions(motion=motion)
     rows: dict[str, list[tuple]] = {}
     for spec in args.scenes:
-        for method, mine in scene_rows(spec, args.gaussian_only, options).items():
+        for method, mine in scene_rows(spec, noise, options).items():
             rows.setdefault(method, []).extend(mine)
         print(f"  {spec}", flush=True)
     print(f"\n{len(args.scenes)} scenes{', Gaussian pixel noise only' if args.gaussian_only else ''}"
+          f"{', noise ' + ' '.join(args.noise) if args.noise else ''}"
           f"{', motion ' + ' '.join(args.motion) if args.motion else ''}\n")
     print(table(rows))
     return rows

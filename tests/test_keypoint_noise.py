@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from vfactor.evaluation import held_out_scene_model
-from vfactor.graph import GraphConfig, observations_from_detections, vehicle_image_sizes
+from vfactor.graph import MAX_SIZE_IN_IMAGES, GraphConfig, observations_from_detections, vehicle_image_sizes
 from vfactor.metrics import ray_nees
 from vfactor.observations import Detection
 from vfactor.sim import load_scenario, simulate
@@ -53,9 +53,13 @@ def test_a_cut_detection_sized_by_the_vehicle_gets_the_sigma_of_the_whole_vehicl
     assert np.allclose(sigma(whole, {camera: 1.0}), whole_sigma)  # never smaller than the box of the seen keypoints
     roi = (0.0, 0.0, 30.0, 40.0)  # a detector's box is the detector's word for the vehicle's size
     assert np.allclose(sigma(dataclasses.replace(cut, roi=roi), sizes), config.relative_pixel_sigma * 50.0)
-    behind = gtsam.Pose3(np.asarray(sim.scene.cameras[camera].world_T_camera)).compose(
-        gtsam.Pose3(gtsam.Rot3(), np.array([0.0, 0.0, -10.0])))  # the vehicle behind the camera: no size there
-    assert camera not in vehicle_image_sizes(sim.scene.cameras, behind, truth.wireframe)
+    world_T_camera = gtsam.Pose3(np.asarray(sim.scene.cameras[camera].world_T_camera))
+    behind = world_T_camera.compose(gtsam.Pose3(gtsam.Rot3(), np.array([0.0, 0.0, -10.0])))
+    assert camera not in vehicle_image_sizes(sim.scene.cameras, behind, truth.wireframe)  # no size behind it
+    straddling = world_T_camera.compose(gtsam.Pose3(gtsam.Rot3(), np.array([0.0, 0.0, 0.5])))  # through its plane
+    width, height = sim.scene.cameras[camera].image_size
+    assert vehicle_image_sizes(sim.scene.cameras, straddling, truth.wireframe)[camera] == \
+        MAX_SIZE_IN_IMAGES * np.hypot(width, height)
 
 
 @pytest.mark.parametrize("method", ["isam2", "batch"])

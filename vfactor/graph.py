@@ -40,6 +40,7 @@ __all__ = [
     "GraphConfig",
     "observations_from_detections",
     "vehicle_image_sizes",
+    "MAX_SIZE_IN_IMAGES",
     "add_shape_factors",
     "add_observation_factor",
     "detector_shape_sigmas",
@@ -226,7 +227,8 @@ def vehicle_image_sizes(cameras: dict[str, Camera], world_T_vehicle: gtsam.Pose3
     """Camera name -> the diagonal (pixels) of the box around the vehicle's 12 keypoints projected into that
     camera's image at ``world_T_vehicle`` (those in front of the camera; none where fewer than two are), for
     :func:`observations_from_detections`'s ``vehicle_sizes``. The box is not clipped to the image: the vehicle's
-    size, not the part of it in view.
+    size, not the part of it in view; but it is at most :data:`MAX_SIZE_IN_IMAGES` image diagonals (a vehicle
+    reaching behind the camera projects its nearest keypoints without bound).
 
     Args:
         cameras: the cameras by name; ``names`` (default: all of them) the ones to size the vehicle in.
@@ -238,8 +240,15 @@ def vehicle_image_sizes(cameras: dict[str, Camera], world_T_vehicle: gtsam.Pose3
         uv, depth = cameras[name].project(world_p)
         front = (depth > 0) & np.all(np.isfinite(uv), axis=1)
         if front.sum() >= 2:
-            sizes[name] = float(np.linalg.norm(uv[front].max(0) - uv[front].min(0)))
+            size = float(np.linalg.norm(uv[front].max(0) - uv[front].min(0)))
+            if cameras[name].image_size is not None:
+                size = min(size, MAX_SIZE_IN_IMAGES * float(np.hypot(*cameras[name].image_size)))
+            sizes[name] = size
     return sizes
+
+
+#: :func:`vehicle_image_sizes` caps a vehicle's size at this many diagonals of the camera's image.
+MAX_SIZE_IN_IMAGES = 2.0
 
 
 _NO_WINDOW = np.full(4, np.nan)

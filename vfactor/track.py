@@ -1197,10 +1197,12 @@ def _sized_observations(detections: list, cameras: dict[str, Camera], config, wo
     return observations_from_detections(detections, cameras, config, sizes)
 
 
-def _solve_alone(obs: KeypointObservations, options: SolveOptions, vid: str, prior, bounds) -> VehicleResult:
-    """One frame of a track solved on its own; a numerical failure is a ``failed`` result, not an exception."""
+def _solve_alone(obs: KeypointObservations, options: SolveOptions, vid: str, prior, bounds,
+                 initial: tuple[gtsam.Pose3, Wireframe] | None = None) -> VehicleResult:
+    """One frame of a track solved on its own (from ``initial`` where given); a numerical failure is a ``failed``
+    result, not an exception."""
     try:
-        return solve_observations(obs, options, vid, prior, bounds)
+        return solve_observations(obs, options, vid, prior, bounds, initial)
     except (RuntimeError, np.linalg.LinAlgError) as exc:
         return VehicleResult(vid, Status.FAILED, message=summarise_error(exc))
 
@@ -1334,7 +1336,8 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
             items[k] = (i, t, sized)
             change = np.abs(sized.sqrt_information[:, 0, 0] / obs.sqrt_information[:, 0, 0] - 1.0)
             if change.max() > _RESIZED:
-                again = _solve_alone(sized, alone, vid, model or prior, bounds)
+                again = _solve_alone(sized, dataclasses.replace(alone, covariance=False), vid, model or prior, bounds,
+                                     (estimate.atPose3(key), wireframe))  # for its noise scale and shape evidence
                 firsts[k] = again if again.ok or firsts[k] is None or not firsts[k].ok else firsts[k]
         shape = track_shape(firsts, model, prior)
         track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability

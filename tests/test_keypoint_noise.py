@@ -4,9 +4,9 @@ A detector keeps only the keypoints inside the image of a vehicle the image
 border cuts; the box around them can be a small part of the vehicle (with one
 keypoint, none at all: the 1 px floor), so those keypoints were weighed as if
 several times more precise than they are. The tracker sizes them by the
-vehicle where it takes the vehicle to be (its prediction), batch smoothing by
-the vehicle its first solution puts in each image (docs/factors.md, "Keypoint
-noise sized by the vehicle").
+vehicle where it takes the vehicle to be (its prediction), batch smoothing and
+the one-frame solve by the vehicle their first solution puts in each image
+(docs/factors.md, "Keypoint noise sized by the vehicle").
 """
 
 from __future__ import annotations
@@ -18,10 +18,12 @@ import numpy as np
 import pytest
 
 from vfactor.evaluation import held_out_scene_model
-from vfactor.graph import MAX_SIZE_IN_IMAGES, GraphConfig, observations_from_detections, vehicle_image_sizes
+from vfactor.graph import (MAX_SIZE_IN_IMAGES, RESIZE_SHARE, GraphConfig, observations_from_detections,
+                           vehicle_image_sizes)
 from vfactor.metrics import ray_nees
 from vfactor.observations import Detection
 from vfactor.sim import load_scenario, simulate
+from vfactor.solve import SolveOptions, solve_observations, solve_vehicle
 from vfactor.track import TrackOptions, smooth_scene, track_scene
 
 
@@ -82,3 +84,29 @@ def test_tracks_keep_one_camera_depths_within_their_covariance(method):
                     along.append(ray_nees(v.world_T_vehicle, v.pose_covariance, sim.truth[f][v.id].world_T_vehicle,
                                           centre)[1])
         assert len(along) >= 5 and np.mean(along) < 2.0, (seed, np.mean(along), len(along))
+
+
+def test_a_one_frame_solve_sizes_a_cut_views_keypoints_by_the_vehicle_it_finds():
+    """solve_vehicle refines at sigmas sized by its first solution where that moves them by more than
+    RESIZE_SHARE (a camera seeing few keypoints of a vehicle entering its view), and only there: the one-frame
+    evaluation's vehicles, all in view, are solved as before."""
+    sim = simulate(load_scenario("library_tracks_2cam"), seed=3)
+    resized = []
+    for f, frame in enumerate(sim.scene.frames[:12]):
+        for vid in frame.vehicle_ids():
+            detections = frame.detections_of(vid)
+            result = solve_vehicle(detections, sim.scene.cameras, SolveOptions(covariance=False))
+            if "resized" in result.extras:
+                assert result.extras["resized"] > RESIZE_SHARE
+                kept = [int((d.confidence > 0).sum()) for d in detections]
+                resized.append(min(kept))
+    assert resized and min(resized) <= 6, resized  # views of a few keypoints among them
+    sim = simulate(load_scenario("library_2cam"), seed=20, num_frames=3)
+    for frame in sim.scene.frames:
+        for vid in frame.vehicle_ids():
+            detections = frame.detections_of(vid)
+            result = solve_vehicle(detections, sim.scene.cameras, SolveOptions(covariance=False))
+            plain = solve_observations(observations_from_detections(detections, sim.scene.cameras),
+                                       SolveOptions(covariance=False), vid)
+            assert "resized" not in result.extras
+            assert result.world_T_vehicle.equals(plain.world_T_vehicle, 1e-9)

@@ -15,13 +15,14 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from functools import partial
 
 import gtsam
 import numpy as np
 
 from vfactor.baselines import known_shape, pnp, triangulation
 from vfactor.box import BoxModel, default_box_model, published_box
-from vfactor.graph import observations_from_detections
+from vfactor.graph import observations_from_detections, sized_observations
 from vfactor.metrics import keypoint_nees, nees_summary, pose_errors, pose_nees
 from vfactor.shape_model import ShapeModel, car_hwc_bounds, default_shape_model, default_shape_prior, pascal3d_wireframes
 from vfactor.sim import Scenario, Simulation, load_scenario, simulate
@@ -106,8 +107,9 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
             hints = tuple(d.vehicle_class for d in detections if d.vehicle_class)
             for method in methods:
                 t0 = time.perf_counter()
-                if method == "factor_graph":
-                    result = solve_held_out(obs, truth.preset, options, vid, hints)
+                if method == "factor_graph":  # as solve_vehicle: the sigmas sized by the vehicle it finds
+                    result = solve_held_out(obs, truth.preset, options, vid, hints, resize=partial(
+                        sized_observations, detections, sim.scene.cameras, options.graph))
                 elif method == "car_prior":
                     result = solve_observations(obs, car_options, vid, default_shape_prior(), car_hwc_bounds())
                 elif method == "triangulation":
@@ -128,12 +130,12 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
 
 
 def solve_held_out(obs, model: str, options: SolveOptions = SolveOptions(), vehicle_id: str = "vehicle",
-                   hints: tuple[str, ...] = ()):
+                   hints: tuple[str, ...] = (), resize=None):
     """The factor graph's one-frame solve of a simulated vehicle of model ``model`` (a library id, preset name or
     ``pascal3d_<index>``) with the shape model and box offsets learnt without it (:func:`held_out_model`,
-    :func:`held_out_box_model`)."""
+    :func:`held_out_box_model`); ``resize`` as :func:`vfactor.solve.solve_observations`'."""
     return solve_observations(obs, dataclasses.replace(options, box_model=held_out_box_model(model)), vehicle_id,
-                              held_out_model(model), hints=hints)
+                              held_out_model(model), hints=hints, resize=resize)
 
 
 def held_out_box_model(model: str) -> BoxModel:

@@ -34,8 +34,11 @@ from vfactor.graph import (
     hwc_factor,
     hwc_residuals,
     hwc_terms,
+    RESIZE_SHARE,
     insert_vehicle_values,
     observations_from_detections,
+    sigma_change,
+    sized_observations,
     wireframe_from_values,
 )
 from vfactor.init import best_candidates, distinct_poses
@@ -171,6 +174,7 @@ def solve_observations(
     bounds: HwcBounds | None = None,
     initial: tuple[gtsam.Pose3, Wireframe] | None = None,
     hints: tuple[str, ...] = (),
+    resize: Callable[[gtsam.Pose3, Wireframe], KeypointObservations] | None = None,
 ) -> VehicleResult:
     """Solves one vehicle from stacked observations (see :func:`solve_vehicle`).
 
@@ -195,6 +199,13 @@ def solve_observations(
         hints: 2D-detector classes of the vehicle (``"car"``, ``"truck"``,
             ``"bus"`` or a body type), weighing the body types
             (:data:`vfactor.shape_model.CLASS_HINTS`); never a hard rule.
+        resize: ``resize(world_T_vehicle, wireframe)`` -> the same observations with each keypoint's sigma sized
+            by that vehicle (:func:`vfactor.graph.sized_observations`; :func:`solve_vehicle` passes it). Where the
+            first solution sizes them otherwise by more than :data:`vfactor.graph.RESIZE_SHARE`, the refinement
+            starts with one LM at those sigmas (``extras["resized"]``: the largest relative change): a detector's
+            few keypoints of a vehicle the image border cuts, sized by their own small box, were weighed as if
+            several times more precise than they are (docs/factors.md, "Keypoint noise sized by the vehicle").
+            Only with the refinement (a shape model or ``options.estimate_noise``).
     """
     model, single, bounds = resolve_shape_prior(prior, bounds)
     first_prior = model.pooled if model is not None else single
@@ -256,15 +267,21 @@ def solve_observations(
         )
     if best is None:
         return VehicleResult(vehicle_id, Status.FAILED, message=f"optimisation failed: {failure}")
-    swaps, as_given, left_out, fit_scale, hypotheses = [], obs, None, None, None
+    swaps, as_given, left_out, fit_scale, hypotheses, resized = [], obs, None, None, None, None
     if options.relabel_swaps:
         best, obs, swaps = _relabelled(best, obs, options, first_prior, keys, bounds, terms, hwc)
+    refining = model is not None or options.estimate_noise
+    if resize is not None and refining:  # the keypoints' sigmas sized by the vehicle the first solution found
+        sized = resize(best[0].atPose3(keys.pose_key()), wireframe_from_values(best[0], keys))
+        change = sigma_change(as_given, sized)
+        if change > RESIZE_SHARE:
+            as_given, obs, resized = sized, apply_swaps(sized, swaps) if swaps else sized, change
     extras = {}
     nominal = obs
-    if model is not None or options.estimate_noise:
-        try:
-            best, obs, extras, prior = _refine(best, nominal, options, model, first_prior, hints, keys, bounds, terms,
-                                               hwc)
+    if refining:
+        try:  # at other sigmas than the first solution's: one LM at them first (_rerefined)
+            best, obs, extras, prior = (_refine if resized is None else _rerefined)(
+                best, nominal, options, model, first_prior, hints, keys, bounds, terms, hwc)
         except (RuntimeError, np.linalg.LinAlgError) as exc:
             extras = {"refinement": f"kept the first solve: {exc}"}
         else:
@@ -296,6 +313,8 @@ def solve_observations(
     result.extras.update(extras)
     if fit_scale is not None:
         result.extras["fit_noise_scale"] = fit_scale
+    if resized is not None:
+        result.extras["resized"] = resized
     if hypotheses is not None:
         result.extras["swap_hypotheses"] = hypotheses
     if swaps:
@@ -870,7 +889,9 @@ def solve_vehicle(
     vehicle_id = vehicle_id or (detections[0].vehicle if detections else "vehicle")
     obs = observations_from_detections(detections, cameras, options.graph)
     hints = tuple(d.vehicle_class for d in detections if d.vehicle_class)
-    return solve_observations(obs, options, vehicle_id, prior, bounds, hints=hints)
+    return solve_observations(obs, options, vehicle_id, prior, bounds, hints=hints,
+                              resize=lambda world_T_vehicle, wireframe: sized_observations(
+                                  detections, cameras, options.graph, world_T_vehicle, wireframe))
 
 
 def solve_frame(frame: Frame, cameras: dict[str, Camera], options: SolveOptions = SolveOptions(), **kwargs) -> FrameResult:

@@ -36,6 +36,7 @@ from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomi
 from vfactor.factors.projection import KeypointObservations, whitened_residuals
 from vfactor.factors.robust import RobustLoss
 from vfactor.graph import (
+    RESIZE_SHARE,
     add_observation_factor,
     add_shape_factors,
     detector_offset_prior,
@@ -46,7 +47,8 @@ from vfactor.graph import (
     hwc_violation,
     insert_vehicle_values,
     observations_from_detections,
-    vehicle_image_sizes,
+    sigma_change,
+    sized_observations,
     wireframe_from_values,
 )
 from vfactor.init import best_candidates, cross_projection_cost
@@ -460,8 +462,8 @@ class Tracker:
 
     def _sized(self, detections: list, world_T_vehicle: gtsam.Pose3, wireframe: Wireframe) -> KeypointObservations:
         """The detections' observations (at the detector's sigmas), each keypoint's sigma sized by the vehicle at
-        ``world_T_vehicle`` (:func:`_sized_observations`)."""
-        return _sized_observations(detections, self.cameras, self.options.solve.graph, world_T_vehicle, wireframe)
+        ``world_T_vehicle`` (:func:`vfactor.graph.sized_observations`)."""
+        return sized_observations(detections, self.cameras, self.options.solve.graph, world_T_vehicle, wireframe)
 
     def _offsets(self, track: _TrackState, obs: KeypointObservations, values: gtsam.Values,
                  estimate: gtsam.Values, graph: gtsam.NonlinearFactorGraph | None = None) -> dict[str, int]:
@@ -1183,20 +1185,6 @@ def _refresh(final: dict, estimates: dict, kind: str) -> None:
         final[key] = v
 
 
-#: Batch smoothing solves a frame alone again where sizing its keypoints' sigmas by the vehicle
-#: (:func:`_sized_observations`) changed a sigma by more than this share.
-_RESIZED = 0.1
-
-
-def _sized_observations(detections: list, cameras: dict[str, Camera], config, world_T_vehicle: gtsam.Pose3,
-                        wireframe: Wireframe) -> KeypointObservations:
-    """A vehicle's observations with each keypoint's sigma sized by the vehicle at ``world_T_vehicle`` with
-    ``wireframe`` in each camera's image (:func:`vfactor.graph.vehicle_image_sizes`), not by the box of the few
-    keypoints a detector kept of a vehicle the image border cuts."""
-    sizes = vehicle_image_sizes(cameras, world_T_vehicle, wireframe, sorted({d.camera for d in detections}))
-    return observations_from_detections(detections, cameras, config, sizes)
-
-
 def _solve_alone(obs: KeypointObservations, options: SolveOptions, vid: str, prior, bounds,
                  initial: tuple[gtsam.Pose3, Wireframe] | None = None) -> VehicleResult:
     """One frame of a track solved on its own (from ``initial`` where given); a numerical failure is a ``failed``
@@ -1252,9 +1240,10 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     """Batch smoothing of one track (a :func:`_track_units` unit): its results by frame index.
 
     The track's graph is solved by Levenberg-Marquardt from the frames' own solves; then each keypoint's sigma
-    is sized by the vehicle that solution puts in each image (:func:`_sized_observations`: a frame's own solve
-    is poorest where the image border cuts the vehicle, the frames where the size matters), the frames whose
-    sigmas that changed by more than :data:`_RESIZED` are solved alone again, the track's prior and noise scale
+    is sized by the vehicle that solution puts in each image (:func:`vfactor.graph.sized_observations`: a frame's
+    own solve is poorest where the image border cuts the vehicle, the frames where the size matters), the frames
+    whose sigmas that changed by more than :data:`vfactor.graph.RESIZE_SHARE` are solved alone again (from that
+    solution), the track's prior and noise scale
     chosen again from the frames' solves, and the graph built and solved again from the first solution.
     """
     vid, index, ((cameras, options, prior, bounds), frames) = unit
@@ -1332,10 +1321,9 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
             key = keys.pose_key(index, i)
             if not len(obs) or not estimate.exists(key):
                 continue
-            sized = _sized_observations(frame.detections, cameras, config, estimate.atPose3(key), wireframe)
+            sized = sized_observations(frame.detections, cameras, config, estimate.atPose3(key), wireframe)
             items[k] = (i, t, sized)
-            change = np.abs(sized.sqrt_information[:, 0, 0] / obs.sqrt_information[:, 0, 0] - 1.0)
-            if change.max() > _RESIZED:
+            if sigma_change(obs, sized) > RESIZE_SHARE:
                 again = _solve_alone(sized, dataclasses.replace(alone, covariance=False), vid, model or prior, bounds,
                                      (estimate.atPose3(key), wireframe))  # for its noise scale and shape evidence
                 firsts[k] = again if again.ok or firsts[k] is None or not firsts[k].ok else firsts[k]

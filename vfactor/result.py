@@ -68,6 +68,8 @@ class VehicleResult:
             :func:`vfactor.graph.observations_from_detections` (near 0: rejected; 0: left out of the fit);
             ``"outliers_left_out"``: indices of the observations the one-frame solve left out as gross outliers
             (docs/factors.md); ``"fit_noise_scale"``: the noise scale over every observation before that;
+            ``"resized"``: where the one-frame solve sized its keypoints' sigmas by the vehicle it found, the
+            largest relative change of a sigma (docs/factors.md, "Keypoint noise sized by the vehicle");
             ``"disagreeing_cameras"``: on a ``failed`` vehicle, the cameras whose keypoints the joint solve
             rejected while they agree among themselves (docs/reliability.md); ``"disagreeing_cut_cameras"``: on
             a solved vehicle, such cameras whose box of the vehicle reaches beyond their image (not blamed: the

@@ -27,6 +27,7 @@ from vfactor.factors.projection import KeypointObservations, projection_factor, 
 from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_prior import shape_prior_factor
 from vfactor.graph import (
+    RESIZE_SHARE,
     GraphConfig,
     build_vehicle_graph,
     copy_graph,
@@ -34,7 +35,6 @@ from vfactor.graph import (
     hwc_factor,
     hwc_residuals,
     hwc_terms,
-    RESIZE_SHARE,
     insert_vehicle_values,
     observations_from_detections,
     sigma_change,
@@ -271,6 +271,7 @@ def solve_observations(
     if options.relabel_swaps:
         best, obs, swaps = _relabelled(best, obs, options, first_prior, keys, bounds, terms, hwc)
     refining = model is not None or options.estimate_noise
+    unsized = as_given, obs
     if resize is not None and refining:  # the keypoints' sigmas sized by the vehicle the first solution found
         sized = resize(best[0].atPose3(keys.pose_key()), wireframe_from_values(best[0], keys))
         change = sigma_change(as_given, sized)
@@ -284,6 +285,8 @@ def solve_observations(
                 best, nominal, options, model, first_prior, hints, keys, bounds, terms, hwc)
         except (RuntimeError, np.linalg.LinAlgError) as exc:
             extras = {"refinement": f"kept the first solve: {exc}"}
+            (as_given, obs), resized = unsized, None  # the first solve's own sigmas
+            nominal = obs
         else:
             if (options.relabel_swaps and extras["noise_scale"] > SWAP_SEARCH_SCALE
                     and len(np.unique(nominal.camera_index)) >= 2):

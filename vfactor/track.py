@@ -54,7 +54,7 @@ from vfactor.graph import (
 from vfactor.init import best_candidates, cross_projection_cost
 from vfactor.keys import KeyScheme
 from vfactor.label_swaps import apply_swaps, relabel_swaps
-from vfactor.observations import Frame, Scene
+from vfactor.observations import Detection, Frame, Scene
 from vfactor.parallel import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
@@ -328,9 +328,7 @@ class Tracker:
         vehicles = []
         for vid in frame.vehicle_ids():
             try:
-                detections = frame.detections_of(vid)
-                obs = observations_from_detections(detections, self.cameras, self.options.solve.graph)
-                result = self._add(vid, index, frame.t, obs, detections)
+                result = self._add(vid, index, frame.t, frame.detections_of(vid))
                 if result.pose_covariance is not None:
                     result.extras["covariance"] = "filtered"  # from the frames so far
                 vehicles.append(checked(result, _seen_by(frame, vid, self.cameras), self.options.covariance))
@@ -459,11 +457,6 @@ class Tracker:
         track.poses.append((frame_index, t, key))
         track.multiview_frames, track.reanchored = int(_camera_count(obs) >= 2), False
         return self._finish(track, key, t)
-
-    def _sized(self, detections: list, world_T_vehicle: gtsam.Pose3, wireframe: Wireframe) -> KeypointObservations:
-        """The detections' observations (at the detector's sigmas), each keypoint's sigma sized by the vehicle at
-        ``world_T_vehicle`` (:func:`vfactor.graph.sized_observations`)."""
-        return sized_observations(detections, self.cameras, self.options.solve.graph, world_T_vehicle, wireframe)
 
     def _offsets(self, track: _TrackState, obs: KeypointObservations, values: gtsam.Values,
                  estimate: gtsam.Values, graph: gtsam.NonlinearFactorGraph | None = None) -> dict[str, int]:
@@ -793,8 +786,8 @@ class Tracker:
                 covariance = marginals.marginalCovariance(key) if marginals is not None else None
                 track.retired[(index, track.id)] = self._smoothed(track, solved, key, wireframe, covariance)
 
-    def _add(self, vid: str, frame_index: int, t: float, obs: KeypointObservations,
-             detections: list | None = None) -> VehicleResult:
+    def _add(self, vid: str, frame_index: int, t: float, detections: list[Detection]) -> VehicleResult:
+        obs = observations_from_detections(detections, self.cameras, self.options.solve.graph)
         track = self._track(vid)
         track.last_seen = t
         if len(obs) == 0:
@@ -856,10 +849,11 @@ class Tracker:
                     track.notes[key] = f"a new segment of the track: {jump}; the detections' id may not follow one vehicle"
                     return self._start(track, frame_index, t, raw)
                 guess = starts[0].world_T_vehicle
-        if detections:  # the keypoints the track takes: their sigmas sized by the vehicle where it is taken to be
-            raw = self._sized(detections, guess, wireframe)
-            raw = raw if kept is None else raw.subset(kept)
-            obs = raw.scaled_above_calibrated(track.noise_scale)
+        # the keypoints the track takes (those the gate kept): their sigmas sized by the vehicle where it is taken to be
+        raw = sized_observations(detections, self.cameras, options.graph, guess, wireframe)
+        if kept is not None:
+            raw = raw.subset(kept)
+        obs = raw.scaled_above_calibrated(track.noise_scale)
         if options.relabel_swaps:  # left/right pairs that the track's shape at the prediction says are swapped
             obs, swaps = relabel_swaps(obs, guess, wireframe.vehicle_p_keypoints, loss)
             if swaps:

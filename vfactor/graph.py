@@ -253,9 +253,9 @@ def vehicle_image_sizes(cameras: dict[str, Camera], world_T_vehicle: gtsam.Pose3
 #: :func:`vehicle_image_sizes` caps a vehicle's size at this many diagonals of the camera's image.
 MAX_SIZE_IN_IMAGES = 2.0
 #: Where sizing a vehicle's keypoints' sigmas by the vehicle (:func:`sized_observations`) moves one by more than this
-#: share, the one-frame solve refines at the sized sigmas and batch smoothing solves that frame alone again. On the
-#: frames of twelve two-camera track scenes 0.3 resized 30 % of the vehicles, 0.1 56 %, for the same gain; on the
-#: one-frame evaluation's scenes (vehicles in view) none.
+#: share, the one-frame solve (:func:`vfactor.solve.solve_observations`' ``resize``) refines at the sized sigmas.
+#: On the frames of twelve two-camera track scenes 0.3 resized 30 % of the vehicles, 0.1 56 %, for the same gain; on
+#: the one-frame evaluation's scenes (vehicles in view) none.
 RESIZE_SHARE = 0.3
 
 

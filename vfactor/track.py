@@ -23,6 +23,7 @@ import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Callable
 
 import gtsam
@@ -36,7 +37,6 @@ from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomi
 from vfactor.factors.projection import KeypointObservations, whitened_residuals
 from vfactor.factors.robust import RobustLoss
 from vfactor.graph import (
-    RESIZE_SHARE,
     add_observation_factor,
     add_shape_factors,
     detector_offset_prior,
@@ -47,7 +47,6 @@ from vfactor.graph import (
     hwc_violation,
     insert_vehicle_values,
     observations_from_detections,
-    sigma_change,
     sized_observations,
     wireframe_from_values,
 )
@@ -1180,11 +1179,13 @@ def _refresh(final: dict, estimates: dict, kind: str) -> None:
 
 
 def _solve_alone(obs: KeypointObservations, options: SolveOptions, vid: str, prior, bounds,
-                 initial: tuple[gtsam.Pose3, Wireframe] | None = None) -> VehicleResult:
-    """One frame of a track solved on its own (from ``initial`` where given); a numerical failure is a ``failed``
+                 detections: list[Detection] | None = None, cameras: dict[str, Camera] | None = None) -> VehicleResult:
+    """One frame of a track solved on its own (with ``detections``, those of ``obs``, as :func:`solve_vehicle`
+    solves them (:func:`vfactor.solve.solve_vehicle`): the keypoints' sigmas sized by the vehicle it finds); a numerical failure is a ``failed``
     result, not an exception."""
+    resize = None if detections is None else partial(sized_observations, detections, cameras, options.graph)
     try:
-        return solve_observations(obs, options, vid, prior, bounds, initial)
+        return solve_observations(obs, options, vid, prior, bounds, resize=resize)
     except (RuntimeError, np.linalg.LinAlgError) as exc:
         return VehicleResult(vid, Status.FAILED, message=summarise_error(exc))
 
@@ -1233,68 +1234,61 @@ def _new_offset(keys: KeyScheme, index: int, number: int, sigma: float, shape: g
 def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     """Batch smoothing of one track (a :func:`_track_units` unit): its results by frame index.
 
-    The track's graph is solved by Levenberg-Marquardt from the frames' own solves; then each keypoint's sigma
-    is sized by the vehicle that solution puts in each image (:func:`vfactor.graph.sized_observations`: a frame's
-    own solve is poorest where the image border cuts the vehicle, the frames where the size matters), the frames
-    whose sigmas that changed by more than :data:`vfactor.graph.RESIZE_SHARE` are solved alone again (from that
-    solution), the track's prior and noise scale
-    chosen again from the frames' solves, and the graph built and solved again from the first solution.
+    The track's graph is solved by Levenberg-Marquardt from the frames' own solves, each keypoint's sigma sized by
+    the vehicle its frame's solve found (:func:`vfactor.graph.sized_observations`, as the one-frame solve sizes
+    them; a frame whose solve failed by the track's pose before it).
     """
     vid, index, ((cameras, options, prior, bounds), frames) = unit
     model, prior, bounds = resolve_shape_prior(prior, bounds)
     keys = KeyScheme()
     config = options.solve.graph
-    items = [(i, frame.t, observations_from_detections(frame.detections, cameras, config)) for i, frame in frames]
     results: dict[int, VehicleResult] = {}
     alone = dataclasses.replace(options.solve, shape_information=True)
-    firsts = [_solve_alone(obs, alone, vid, model or prior, bounds) if len(obs) else None for _, _, obs in items]
+    firsts = []
+    for _, frame in frames:
+        obs = observations_from_detections(frame.detections, cameras, config)
+        firsts.append(_solve_alone(obs, alone, vid, model or prior, bounds, frame.detections, cameras)
+                      if len(obs) else None)
     shape = track_shape(firsts, model, prior)
     track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    add_shape_factors(graph, keys, index, config, track_prior, bounds)
+    posed, best, segments = [], -1, {}
+    offsets: dict[str, int] = {}  # camera name -> the key of its detector pose offset (one per camera, no lag)
     swaps = {}  # frame index -> the left/right pairs that frame's own solve relabelled, taken over by the batch graph
-
-    def build(track_prior, scale):
-        """The track's graph, initial values, posed frames ``(index, t, key)``, segment messages and offsets'
-        keys, with the track's shape prior and noise scale."""
-        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        add_shape_factors(graph, keys, index, config, track_prior, bounds)
-        posed, best, segments = [], -1, {}
-        offsets: dict[str, int] = {}  # camera name -> the key of its detector pose offset (one per camera, no lag)
-        swaps.clear()
-        for (i, t, obs), first in zip(items, firsts):
-            key = keys.pose_key(index, i)
-            obs = obs.scaled_above_calibrated(scale)
-            if first is not None and first.ok and first.extras.get("swapped_keypoints"):
-                swaps[i] = first.extras["swapped_keypoints"]
-                obs = apply_swaps(obs, swaps[i])
-            if first is None or not first.ok:
-                if not posed:
-                    results[i] = first or VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen")
-                    continue
-                guess = values.atPose3(posed[-1][2])
-            else:
-                guess = first.world_T_vehicle
-                if len(obs) > best:
-                    best = len(obs)
-                    insert_vehicle_values(values, keys, None, first.wireframe, index)
-            if posed and t - posed[-1][1] > options.max_gap:
-                segments[i] = _segment_message(t - posed[-1][1], options.max_gap)
-            for name, sigma in detector_shape_sigmas(obs).items() if options.uses_detector_offsets else ():
-                if name not in offsets:
-                    offsets[name], offset_prior = _new_offset(keys, index, len(offsets), sigma, values, values)
-                    graph.add(offset_prior)
-            add_observation_factor(graph, keys, obs, index, i, config, offsets)
-            _add_pose_factors(graph, posed, key, t, options)
-            values.insert(key, guess)
-            posed.append((i, t, key))
-        return graph, values, posed, segments, offsets
-
-    def solve(graph, values, posed, offsets):
-        """LM, again with the HWC factor where the shape breaks HWC, and again from the convention's body frame
-        where the solution's is turned front to back: (optimizer, estimate, graph)."""
+    for (i, frame), first in zip(frames, firsts):
+        solved = first is not None and first.ok
+        if not solved and not posed:
+            results[i] = first or VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen")
+            continue
+        guess = first.world_T_vehicle if solved else values.atPose3(posed[-1][2])
+        shape_at = first.wireframe if solved else wireframe_from_values(values, keys, index)
+        obs = sized_observations(frame.detections, cameras, config, guess, shape_at).scaled_above_calibrated(scale)
+        if solved and first.extras.get("swapped_keypoints"):
+            swaps[i] = first.extras["swapped_keypoints"]
+            obs = apply_swaps(obs, swaps[i])
+        if solved and len(obs) > best:
+            best = len(obs)
+            insert_vehicle_values(values, keys, None, first.wireframe, index)
+        key = keys.pose_key(index, i)
+        if posed and frame.t - posed[-1][1] > options.max_gap:
+            segments[i] = _segment_message(frame.t - posed[-1][1], options.max_gap)
+        for name, sigma in detector_shape_sigmas(obs).items() if options.uses_detector_offsets else ():
+            if name not in offsets:
+                offsets[name], offset_prior = _new_offset(keys, index, len(offsets), sigma, values, values)
+                graph.add(offset_prior)
+        add_observation_factor(graph, keys, obs, index, i, config, offsets)
+        _add_pose_factors(graph, posed, key, frame.t, options)
+        values.insert(key, guess)
+        posed.append((i, frame.t, key))
+    if not posed:
+        return results
+    try:
         optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, options.solve.lm_params())
         estimate = optimizer.optimize()
-        if config.hwc == "lazy" and hwc_violation(wireframe_from_values(estimate, keys, index), terms) > \
-                config.hwc_tolerance:
+        terms = hwc_terms(config, bounds)
+        shape = wireframe_from_values(estimate, keys, index)
+        if config.hwc == "lazy" and hwc_violation(shape, terms) > config.hwc_tolerance:
             graph.add(hwc_factor(keys, index, terms=terms))
             optimizer = gtsam.LevenbergMarquardtOptimizer(graph, estimate, options.solve.lm_params())
             estimate = optimizer.optimize()
@@ -1302,29 +1296,6 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         if turned is not None:  # the body frame turned front to back (vfactor.factors.body_frame): on from the convention's
             optimizer = gtsam.LevenbergMarquardtOptimizer(graph, turned, options.solve.lm_params())
             estimate = optimizer.optimize()
-        return optimizer, estimate, graph
-
-    terms = hwc_terms(config, bounds)
-    graph, values, posed, segments, offsets = build(track_prior, scale)
-    if not posed:
-        return results
-    try:
-        optimizer, estimate, graph = solve(graph, values, posed, offsets)
-        wireframe = wireframe_from_values(estimate, keys, index)
-        for k, ((i, t, obs), (_, frame)) in enumerate(zip(items, frames)):
-            key = keys.pose_key(index, i)
-            if not len(obs) or not estimate.exists(key):
-                continue
-            sized = sized_observations(frame.detections, cameras, config, estimate.atPose3(key), wireframe)
-            items[k] = (i, t, sized)
-            if sigma_change(obs, sized) > RESIZE_SHARE:
-                again = _solve_alone(sized, dataclasses.replace(alone, covariance=False), vid, model or prior, bounds,
-                                     (estimate.atPose3(key), wireframe))  # for its noise scale and shape evidence
-                firsts[k] = again if again.ok or firsts[k] is None or not firsts[k].ok else firsts[k]
-        shape = track_shape(firsts, model, prior)
-        track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability
-        graph, _, posed, segments, offsets = build(track_prior, scale)
-        optimizer, estimate, graph = solve(graph, estimate, posed, offsets)
         marginals = gtsam.Marginals(graph, estimate) if options.covariance else None
     except RuntimeError as exc:
         for i, _, _ in posed:

@@ -12,6 +12,7 @@ import dataclasses
 import logging
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Callable
 
 import gtsam
@@ -893,8 +894,7 @@ def solve_vehicle(
     obs = observations_from_detections(detections, cameras, options.graph)
     hints = tuple(d.vehicle_class for d in detections if d.vehicle_class)
     return solve_observations(obs, options, vehicle_id, prior, bounds, hints=hints,
-                              resize=lambda world_T_vehicle, wireframe: sized_observations(
-                                  detections, cameras, options.graph, world_T_vehicle, wireframe))
+                              resize=partial(sized_observations, detections, cameras, options.graph))
 
 
 def solve_frame(frame: Frame, cameras: dict[str, Camera], options: SolveOptions = SolveOptions(), **kwargs) -> FrameResult:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections import defaultdict
 
 import numpy as np
 
@@ -160,7 +161,6 @@ def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int =
 def _tracks_pooled(name: str, seed: int, seeds: int, classes: list[dict], shapes: list[list]) -> str:
     """The seeds of ``vfactor eval tracks`` pooled per body type and camera count, and each body type's final
     shapes (isam2) against issue 10's 5 cm."""
-    from collections import defaultdict
 
     from vfactor.evaluation import class_tables, final_shape_table
 

@@ -175,6 +175,15 @@ _REANCHOR_FRAMES = 5  # frames seen by two cameras over which a young track is r
 #: explains them at under this share of the cost at the motion model's prediction, and lies beyond
 #: :func:`_jump`'s gate from it: then they are another vehicle's, and the track starts a new segment.
 _JUMP_COST_RATIO = 0.25
+#: A pose found from a frame's keypoints alone that lies beyond :func:`_jump`'s gate but is no new segment starts the
+#: track's new pose (in place of the motion model's prediction) only where it explains them at under this share of
+#: the cost at the prediction: beyond the gate the vehicle cannot be there, unless its keypoints say so clearly (another
+#: vehicle under the id, ``intersection_multi``: 0.25-0.43). Such starts at 0.5-1.0 came from a few keypoints' or an
+#: outlier's ambiguity (136 of the 162 beyond the gate on 40 simulated scenes tracked with and without a lag); a
+#: fixed lag's smoother started there stayed there
+#: (``tracks_3veh`` seed 133, 0.56: a start 9.3 m off, the window 2.2 m then 4.5 m off; ``library_tracks_2cam``
+#: seed 158, 1.00: 12.7 m off, the window turned by up to 58 deg, then a false new segment 2.9 m off).
+_START_COST_RATIO = 0.5
 #: A young track's frame beyond the jump gate joins the track (:meth:`Tracker._rejoined`) where the track re-solved
 #: with it explains its keypoints at no more than this multiple of the cost of the frame's own best start.
 _REJOIN_COST_RATIO = 2.0
@@ -810,12 +819,12 @@ class Tracker:
         estimate = track.smoother.calculateEstimate()
         wireframe = self._wireframe(estimate, track)
         guess = self._predict(track.poses, estimate, t)
-        # a poor prediction (a long gap, a sharp manoeuvre) is replaced by the best PnP/triangulation start
+        # a poor prediction (a long gap, a sharp manoeuvre) is replaced by the best PnP/triangulation start, one beyond
+        # the jump gate only where it explains the keypoints clearly better (_START_COST_RATIO)
         loss = options.graph.loss
         key = self.keys.pose_key(track.index, frame_index)
         kept = None
-        few = fixed_by_motion and len(obs) < options.min_observations  # fewer keypoints than a frame needs alone
-        if few:
+        if fixed_by_motion and len(obs) < options.min_observations:
             kept = self._gated(track, key, obs, guess, wireframe)
             if kept is not None:
                 raw, obs = raw.subset(kept), obs.subset(kept)
@@ -848,12 +857,7 @@ class Tracker:
                     track.jumps.append((frame_index, t, jump))
                     track.notes[key] = f"a new segment of the track: {jump}; the detections' id may not follow one vehicle"
                     return self._start(track, frame_index, t, raw)
-                # but of a frame with too few keypoints to be solved alone, a start beyond the jump gate that does not
-                # explain them well enough for a new segment is their ambiguity, not where this vehicle can be (a
-                # fixed lag's smoother started there stayed there: tracks_3veh seed 133's v2, four keypoints of a view
-                # it was leaving, started 9.3 m off, ended 2.2 m off, then 4.5 m); with more keypoints such a start
-                # may be another vehicle's under the id (intersection_multi), and the pose follows them as before
-                if not (jump and few):
+                if not jump or starts[0].cost < _START_COST_RATIO * predicted_cost:
                     guess = starts[0].world_T_vehicle
         # the keypoints the track takes (those the gate kept): their sigmas sized by the vehicle where it is taken to be
         raw = sized_observations(detections, self.cameras, options.graph, guess, wireframe)

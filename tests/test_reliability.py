@@ -193,6 +193,11 @@ def test_sanity_check_of_estimates(cameras, prius, world_T_vehicle):
     assert status == Status.FAILED and "behind camera 'cam0'" in message
     nan = dataclasses.replace(good, world_T_vehicle=gtsam.Pose3(gtsam.Rot3(), np.array([np.nan, 0.0, 0.0])))
     assert check_estimate(nan, cams)[0] == Status.FAILED
+    for roll, expected in ((np.radians(89.0), Status.CONVERGED), (np.radians(91.0), Status.FAILED), (np.pi, Status.FAILED)):
+        turned = dataclasses.replace(good, world_T_vehicle=world_T_vehicle.compose(gtsam.Pose3(gtsam.Rot3.Roll(roll),
+                                                                                               np.zeros(3))))
+        status, message = check_estimate(turned, cams)
+        assert status == expected and (expected == Status.CONVERGED or "upside down" in message), (roll, message)
     no_cov = dataclasses.replace(good, pose_covariance=None, message="covariance unavailable: " + GTSAM_TEXT)
     status, message = check_estimate(no_cov, cams, covariance=True)
     assert status == Status.DEGENERATE
@@ -472,15 +477,17 @@ def test_a_vehicle_failed_by_the_disagreement_check_gives_exit_3(tmp_path, capsy
 
 
 # ------------------------------------------------------------------ a solution that fits its keypoints poorly
-def _poor_fit_scene():
-    """library_2cam at hard noise, seed 27, scene 49: a Honda Accord whose one-frame solution is turned by 179
-    degrees (one camera with three outliers and two swapped pairs), its keypoints fitting 2.3 times worse than their
-    sigmas."""
+def _poor_fit_scene(seed: int = 23, frame: int = 82):
+    """library_2cam at hard noise: seed 23, scene 82, a vehicle whose one-frame solution is turned by 35 degrees,
+    its keypoints fitting 3 times worse than their sigmas; seed 27, scene 49: a Honda Accord (one camera with three
+    outliers and two swapped pairs) whose best start was upside down, and its solution with it (179 degrees, a
+    poor fit) before starts were held upright."""
     from vfactor.evaluation import NOISE_LEVELS, noise_variant
     from vfactor.sim import simulate
 
-    sim = simulate(noise_variant(load_scenario("library_2cam"), **NOISE_LEVELS["hard"]), seed=27, num_frames=50)
-    return dataclasses.replace(sim.scene, frames=[sim.scene.frames[49]]), sim.truth[49]
+    sim = simulate(noise_variant(load_scenario("library_2cam"), **NOISE_LEVELS["hard"]), seed=seed,
+                   num_frames=frame + 1)
+    return dataclasses.replace(sim.scene, frames=[sim.scene.frames[frame]]), sim.truth[frame]
 
 
 def test_a_solution_fitting_its_keypoints_poorly_is_not_called_converged(tmp_path, capsys):
@@ -493,10 +500,10 @@ def test_a_solution_fitting_its_keypoints_poorly_is_not_called_converged(tmp_pat
     (vehicle,) = solve_scene(scene)[0].vehicles
     assert vehicle.status == Status.POOR_FIT and vehicle.ok and vehicle.world_T_vehicle is not None
     assert vehicle.extras["fit_noise_scale"] >= POOR_FIT_SCALE
-    assert vehicle.message.startswith("poor fit: the keypoints fit 2.3 times worse than their sigmas")
+    assert vehicle.message.startswith("poor fit: the keypoints fit 3 times worse than their sigmas")
     errors = pose_errors(vehicle.world_T_vehicle, vehicle.keypoints_world, truth[vehicle.id].world_T_vehicle,
                          truth[vehicle.id].keypoints_world)
-    assert errors["rotation_deg"] > 90.0  # the warning is deserved
+    assert errors["rotation_deg"] > 30.0  # the warning is deserved
     # the CLI writes the estimate with its status, says so in one line, and exits 0 (it is solved)
     save_scene(scene, tmp_path / "scene.json")
     out = tmp_path / "r.json"
@@ -508,6 +515,20 @@ def test_a_solution_fitting_its_keypoints_poorly_is_not_called_converged(tmp_pat
     (read,) = load_results(out)[0].vehicles
     assert read.status == Status.POOR_FIT and read.message == vehicle.message and read.world_T_vehicle is not None
     validate(json.loads(out.read_text()), "result")
+
+
+def test_a_vehicle_whose_best_start_is_upside_down_is_solved_upright():
+    """The Honda Accord of library_2cam seed 27 at hard noise: its best PnP start was upside down, and so was its
+    solution (179 degrees off, a poor fit). Starts are now held upright (world z up; vfactor.init.best_candidates)."""
+    from vfactor.metrics import pose_errors
+    from vfactor.solve import solve_scene
+
+    scene, truth = _poor_fit_scene(27, 49)
+    (vehicle,) = solve_scene(scene)[0].vehicles
+    assert vehicle.status == Status.CONVERGED, vehicle.message
+    errors = pose_errors(vehicle.world_T_vehicle, vehicle.keypoints_world, truth[vehicle.id].world_T_vehicle,
+                         truth[vehicle.id].keypoints_world)
+    assert errors["rotation_deg"] < 15.0, errors
 
 
 def test_paper_like_noise_is_not_a_poor_fit():

@@ -12,7 +12,12 @@ in one compiled pass (:func:`vfactor.factors.projection.robust_costs`):
 * multi-view: keypoints seen by two or more cameras are triangulated and the
   mean wireframe is aligned to them (Umeyama, with scale).
 
-The best few distinct candidates start the Levenberg-Marquardt solves.
+The best few distinct upright candidates start the Levenberg-Marquardt solves:
+the world's z is up (docs/conventions.md), and a candidate turned over (its
+body's z axis more than 90 degrees from the world's) is no vehicle in traffic;
+a few keypoints with outliers and swapped labels can fit one best (a Honda
+Accord of ``library_2cam`` seed 27 at hard noise, solved 179 degrees off from
+it; :mod:`vfactor.sanity` fails any solution still upside down).
 """
 
 from __future__ import annotations
@@ -226,7 +231,8 @@ def best_candidates(
     min_angle_rad: float = 0.35, min_distance_m: float = 1.0, min_keypoints_in_one_view: int = 4, ransac: bool = True,
     ransac_every_labelling: bool = False,
 ) -> list[Candidate]:
-    """The ``count`` lowest-cost candidates (None: all) that differ by at least the given angle or distance, best first.
+    """The ``count`` lowest-cost upright candidates (None: all) that differ by at least the given angle or distance,
+    best first (upright: the body's z axis within 90 degrees of the world's).
 
     ``ransac=False``: without the RANSAC PnP poses (:func:`pose_candidates`), a fraction of the cost;
     ``ransac_every_labelling``: RANSAC for both labellings of each camera (:func:`pose_candidates`).
@@ -237,7 +243,7 @@ def best_candidates(
     T = np.array([pose.matrix() for pose, _, _ in found])
     costs = robust_costs(obs, T, np.array([w.vehicle_p_keypoints for _, w, _ in found]), loss)  # every candidate in one pass
     chosen: list[Candidate] = []
-    finite = np.isfinite(costs)
+    finite = np.isfinite(costs) & (T[:, 2, 2] > 0.0)  # upright: the body's z within 90 deg of the world's (z up)
     keep = finite.copy()  # finite and distinct from every candidate chosen so far
     for i in np.argsort(np.where(finite, costs, np.inf), kind="stable"):
         if not finite[i]:

@@ -10,13 +10,17 @@ finds its estimate
 * within :data:`MAX_DISTANCE` of the nearest camera that sees it,
 * in front of every camera that sees it (the keypoints' centroid at a positive
   depth),
+* upright: its body's z axis within 90 degrees of the world's (world z is up,
+  docs/conventions.md; no vehicle in traffic is upside down, and a solution
+  that is explains its pixels with the wheels where the roof is, from a start
+  turned over: batch smoothing of ``tracks_3veh`` seed 169 at hard noise),
 * with its front hubs ahead of its back hubs (body x forward: a shape turned
   front to back explains the same pixels, :mod:`vfactor.factors.body_frame`;
   the solvers turn such a solution back, so this catches what they could not), and
 * with a pose covariance when one was asked for (GTSAM's marginals fail only
   when the linear system is indeterminate: some direction is not observed);
 
-otherwise it is ``failed`` (non-finite, behind a camera that sees it, or turned front to back) or
+otherwise it is ``failed`` (non-finite, behind a camera that sees it, upside down or turned front to back) or
 ``degenerate`` (too far, or no covariance), with a one-line message. The
 solvers call :func:`checked` on every result they return (``solve_observations``,
 the tracker, batch smoothing).
@@ -104,6 +108,9 @@ def check_estimate(result: VehicleResult, cameras: Iterable[Camera], covariance:
     world_p = np.asarray(result.wireframe.vehicle_p_keypoints, dtype=float)
     if not (np.all(np.isfinite(T)) and np.all(np.isfinite(world_p))):
         return Status.FAILED, "the estimate is not finite (NaN or infinity in the pose or the shape)"
+    if T[2, 2] < 0.0:  # the body's z (up) axis in the world, whose z is up
+        return Status.FAILED, ("the estimate is upside down (its roof below its wheels in the world frame, whose z "
+                               "is up): the views did not tell the vehicle's top from its bottom")
     if turned_front_to_back(world_p[:4].ravel()):
         return Status.FAILED, ("the shape is turned front to back (its front hubs behind its back hubs): the views "
                                "did not tell the vehicle's front from its back")

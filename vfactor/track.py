@@ -551,7 +551,7 @@ class Tracker:
             if alone is None:
                 alone = _solve_alone(obs, options, track.id, self.model or self.prior, self.bounds)
                 frames[i] = (index, obs, motion, alone, offsets)
-            if fresh and alone.ok:
+            if fresh and alone.ok and alone.status != Status.POOR_FIT:  # a poor fit's pose may be turned over
                 estimate.update(self.keys.pose_key(track.index, index), alone.world_T_vehicle)
         self._rechoose(track, [frame[3] for frame in frames])  # all frames so far, not the first alone
         graph = self._young_graph(track, frames)
@@ -1272,6 +1272,7 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         if not solved and not posed:
             results[i] = first or VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen")
             continue
+        solved = solved and (first.status != Status.POOR_FIT or not posed)  # a poor fit starts no pose after the first
         guess = first.world_T_vehicle if solved else values.atPose3(posed[-1][2])
         shape_at = first.wireframe if solved else wireframe_from_values(values, keys, index)
         obs = sized_observations(frame.detections, cameras, config, guess, shape_at).scaled_above_calibrated(scale)

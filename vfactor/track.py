@@ -182,7 +182,10 @@ _JUMP_COST_RATIO = 0.25
 #: outlier's ambiguity (136 of the 162 beyond the gate on 40 simulated scenes tracked with and without a lag); a
 #: fixed lag's smoother started there stayed there
 #: (``tracks_3veh`` seed 133, 0.56: a start 9.3 m off, the window 2.2 m then 4.5 m off; ``library_tracks_2cam``
-#: seed 158, 1.00: 12.7 m off, the window turned by up to 58 deg, then a false new segment 2.9 m off).
+#: seed 158, 1.00: 12.7 m off, the window turned by up to 58 deg, then a false new segment 2.9 m off). Of a frame
+#: with fewer keypoints than a frame needs alone (``SolveOptions.min_observations``) no such start is taken: four
+#: keypoints fit a pose 10.8 m and 148 deg off at 0.29 of the prediction's cost (``tracks_3veh`` seed 174 at hard
+#: noise; the window turned by up to 78 deg, 4.3 m off).
 _START_COST_RATIO = 0.5
 #: A young track's frame beyond the jump gate joins the track (:meth:`Tracker._rejoined`) where the track re-solved
 #: with it explains its keypoints at no more than this multiple of the cost of the frame's own best start.
@@ -820,11 +823,13 @@ class Tracker:
         wireframe = self._wireframe(estimate, track)
         guess = self._predict(track.poses, estimate, t)
         # a poor prediction (a long gap, a sharp manoeuvre) is replaced by the best PnP/triangulation start, one beyond
-        # the jump gate only where it explains the keypoints clearly better (_START_COST_RATIO)
+        # the jump gate only where it explains the keypoints clearly better (_START_COST_RATIO) and they are enough
+        # for a frame alone
         loss = options.graph.loss
         key = self.keys.pose_key(track.index, frame_index)
         kept = None
-        if fixed_by_motion and len(obs) < options.min_observations:
+        few = fixed_by_motion and len(obs) < options.min_observations  # fewer keypoints than a frame needs alone
+        if few:
             kept = self._gated(track, key, obs, guess, wireframe)
             if kept is not None:
                 raw, obs = raw.subset(kept), obs.subset(kept)
@@ -857,7 +862,7 @@ class Tracker:
                     track.jumps.append((frame_index, t, jump))
                     track.notes[key] = f"a new segment of the track: {jump}; the detections' id may not follow one vehicle"
                     return self._start(track, frame_index, t, raw)
-                if not jump or starts[0].cost < _START_COST_RATIO * predicted_cost:
+                if not jump or (not few and starts[0].cost < _START_COST_RATIO * predicted_cost):
                     guess = starts[0].world_T_vehicle
         # the keypoints the track takes (those the gate kept): their sigmas sized by the vehicle where it is taken to be
         raw = sized_observations(detections, self.cameras, options.graph, guess, wireframe)

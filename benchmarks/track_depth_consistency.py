@@ -55,7 +55,7 @@ def scene_rows(spec: str, noise: dict | None = None, options: TrackOptions = Tra
                 cameras = sorted({d.camera for d in sim.scene.frames[f].detections if d.vehicle == v.id})
                 nees = pose_nees(v.world_T_vehicle, v.pose_covariance, truth)
                 if len(cameras) == 1:
-                    camera = np.asarray(sim.scene.cameras[cameras[0]].world_T_camera)[:3, 3]
+                    camera = sim.scene.cameras[cameras[0]].center
                     rows.append((1, *ray_nees(v.world_T_vehicle, v.pose_covariance, truth, camera), nees))
                 else:
                     rows.append((len(cameras), np.nan, np.nan, np.nan, nees))

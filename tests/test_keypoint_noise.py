@@ -80,7 +80,7 @@ def test_tracks_keep_one_camera_depths_within_their_covariance(method):
             for v in frame.vehicles:
                 cameras = {d.camera for d in sim.scene.frames[f].detections if d.vehicle == v.id}
                 if v.ok and len(cameras) == 1:
-                    centre = np.asarray(sim.scene.cameras[cameras.pop()].world_T_camera)[:3, 3]
+                    centre = sim.scene.cameras[cameras.pop()].center
                     along.append(ray_nees(v.world_T_vehicle, v.pose_covariance, sim.truth[f][v.id].world_T_vehicle,
                                           centre)[1])
         assert len(along) >= 5 and np.mean(along) < 2.0, (seed, np.mean(along), len(along))

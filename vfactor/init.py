@@ -28,6 +28,7 @@ import cv2
 import gtsam
 import numpy as np
 
+from vfactor.factors.body_frame import upright
 from vfactor.factors.projection import KeypointObservations, robust_costs
 from vfactor.factors.robust import RobustLoss
 from vfactor.keypoints import MIRROR_PERMUTATION
@@ -243,7 +244,7 @@ def best_candidates(
     T = np.array([pose.matrix() for pose, _, _ in found])
     costs = robust_costs(obs, T, np.array([w.vehicle_p_keypoints for _, w, _ in found]), loss)  # every candidate in one pass
     chosen: list[Candidate] = []
-    finite = np.isfinite(costs) & (T[:, 2, 2] > 0.0)  # upright: the body's z within 90 deg of the world's (z up)
+    finite = np.isfinite(costs) & upright(T)
     keep = finite.copy()  # finite and distinct from every candidate chosen so far
     for i in np.argsort(np.where(finite, costs, np.inf), kind="stable"):
         if not finite[i]:

@@ -39,7 +39,7 @@ from typing import Iterable
 import numpy as np
 
 from vfactor.camera import Camera
-from vfactor.factors.body_frame import turned_front_to_back
+from vfactor.factors.body_frame import turned_front_to_back, upright
 from vfactor.result import Status, VehicleResult
 
 __all__ = ["MAX_DISTANCE", "check_estimate", "checked", "summarise_error", "one_line"]
@@ -108,7 +108,7 @@ def check_estimate(result: VehicleResult, cameras: Iterable[Camera], covariance:
     world_p = np.asarray(result.wireframe.vehicle_p_keypoints, dtype=float)
     if not (np.all(np.isfinite(T)) and np.all(np.isfinite(world_p))):
         return Status.FAILED, "the estimate is not finite (NaN or infinity in the pose or the shape)"
-    if T[2, 2] < 0.0:  # the body's z (up) axis in the world, whose z is up
+    if not upright(T[:3, :3]):
         return Status.FAILED, ("the estimate is upside down (its roof below its wheels in the world frame, whose z "
                                "is up): the views did not tell the vehicle's top from its bottom")
     if turned_front_to_back(world_p[:4].ravel()):

@@ -1277,14 +1277,14 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         if not solved and not posed:
             results[i] = first or VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen")
             continue
-        solved = solved and (first.status != Status.POOR_FIT or not posed)  # a poor fit starts no pose after the first
-        guess = first.world_T_vehicle if solved else values.atPose3(posed[-1][2])
-        shape_at = first.wireframe if solved else wireframe_from_values(values, keys, index)
+        trusted = solved and (first.status != Status.POOR_FIT or not posed)  # a poor fit starts no pose but the first
+        guess = first.world_T_vehicle if trusted else values.atPose3(posed[-1][2])
+        shape_at = first.wireframe if trusted else wireframe_from_values(values, keys, index)
         obs = sized_observations(frame.detections, cameras, config, guess, shape_at).scaled_above_calibrated(scale)
-        if solved and first.extras.get("swapped_keypoints"):
+        if trusted and first.extras.get("swapped_keypoints"):
             swaps[i] = first.extras["swapped_keypoints"]
             obs = apply_swaps(obs, swaps[i])
-        if solved and len(obs) > best:
+        if trusted and len(obs) > best:
             best = len(obs)
             insert_vehicle_values(values, keys, None, first.wireframe, index)
         key = keys.pose_key(index, i)

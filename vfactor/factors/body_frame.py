@@ -27,7 +27,7 @@ import numpy as np
 
 from vfactor.factors.linear import linear_vector_factor
 
-__all__ = ["body_frame_factor", "BODY_FRAME_MATRIX", "turned_front_to_back", "canonical_gauge"]
+__all__ = ["body_frame_factor", "BODY_FRAME_MATRIX", "turned_front_to_back", "upright", "canonical_gauge"]
 
 #: (4, 12) residual matrix on the wheel layer.
 BODY_FRAME_MATRIX = np.zeros((4, 12))
@@ -57,6 +57,14 @@ def turned_front_to_back(wheel_layer: np.ndarray) -> bool:
     turned by half a turn about z against the convention (x forward)."""
     p = np.asarray(wheel_layer, dtype=float).reshape(4, 3)
     return bool(p[0, 0] + p[1, 0] < p[2, 0] + p[3, 0])
+
+
+def upright(world_R_vehicle) -> np.ndarray | bool:
+    """Whether a vehicle's body z axis (up) lies within 90 degrees of the world's, which is up (docs/conventions.md):
+    no vehicle in traffic is upside down. ``world_R_vehicle``: a (3, 3) rotation or (n, 3, 3) / (n, 4, 4) stacked
+    poses (then one answer each)."""
+    R = np.asarray(world_R_vehicle, dtype=float)
+    return bool(R[2, 2] > 0.0) if R.ndim == 2 else R[:, 2, 2] > 0.0
 
 
 def canonical_gauge(values: gtsam.Values, pose_keys, layer_keys, offset_keys=()) -> gtsam.Values | None:

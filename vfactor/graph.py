@@ -20,7 +20,7 @@ from vfactor.camera import Camera
 from vfactor.errors import InputError, check_numbers
 from vfactor.factors.body_frame import body_frame_factor
 from vfactor.factors.distance_bounds import distance_bounds_term
-from vfactor.factors.ground_plane import GroundPlane, ground_plane_factor
+from vfactor.factors.ground_plane import GroundPlane, ground_plane_factor, hub_height_prior
 from vfactor.factors.layer_offset import layer_offset_term
 from vfactor.factors.planarity import layer_plane_term
 from vfactor.factors.projection import KeypointObservations, projection_factor
@@ -50,6 +50,7 @@ __all__ = [
     "detector_offset_prior",
     "add_ground_factor",
     "ground_factor",
+    "hub_prior",
     "insert_vehicle_values",
     "build_vehicle_graph",
     "copy_graph",
@@ -100,6 +101,11 @@ class GraphConfig:
         hub_height: height of the wheel hubs above the road (the ground-plane
             factor, when a road plane is given), metres.
         ground_sigma_height: that height's sigma (it also covers the unknown wheel radius), metres.
+        ground_sigma_road: the part of ``ground_sigma_height`` that is each pose's own (the road's unevenness, the
+            body's bounce), metres; the rest, ``sqrt(ground_sigma_height^2 - ground_sigma_road^2)``, is the
+            vehicle's wheel radius, which a track's poses share: a track gives its hub height one variable with
+            that prior (:func:`hub_prior`) and each pose's factor ``ground_sigma_road`` (:func:`ground_factor`).
+            One pose alone gets ``ground_sigma_height`` as before.
         ground_sigma_tilt: roll and pitch against the road plane's, radians.
         truncation: the detector loses keypoints whose pixel falls outside the
             image, so those it keeps near the border are biased inwards: compare
@@ -133,6 +139,7 @@ class GraphConfig:
     hinge_sigma: float = 0.01
     hub_height: float = 0.34
     ground_sigma_height: float = 0.06
+    ground_sigma_road: float = 0.02
     ground_sigma_tilt: float = 0.03
     truncation: bool = True
     shape_prior_loss: RobustLoss = field(default_factory=lambda: RobustLoss("none"))
@@ -141,8 +148,11 @@ class GraphConfig:
         check_numbers("GraphConfig", self, (
             "relative_pixel_sigma", "min_pixel_sigma", "covariance_min_pixel_sigma", "symmetry_sigma", "body_frame_sigma", "shape_prior_weight",
             "plane_sigma_m", "plane_sigma_rad", "rectangle_sigma", "trapezoid_sigma_rad", "width_ratio_sigma",
-            "hinge_sigma", "hwc_tolerance", "hub_height", "ground_sigma_height", "ground_sigma_tilt",
+            "hinge_sigma", "hwc_tolerance", "hub_height", "ground_sigma_height", "ground_sigma_road", "ground_sigma_tilt",
         ))
+        if self.ground_sigma_road >= self.ground_sigma_height:
+            raise ValueError(f"GraphConfig.ground_sigma_road: expected less than ground_sigma_height "
+                             f"({self.ground_sigma_height:g} m), got {self.ground_sigma_road!r}")
         check_numbers("GraphConfig", self, ("covariance_sandwich_weight",), strict=False)
         if self.hwc not in ("always", "lazy", "off"):
             raise ValueError(f"GraphConfig.hwc: expected 'always', 'lazy' or 'off', got {self.hwc!r}")
@@ -451,9 +461,24 @@ def add_ground_factor(
         graph.add(ground_factor(keys.pose_key(vehicle, frame), plane, config))
 
 
-def ground_factor(pose_key: int, plane: GroundPlane, config: GraphConfig = GraphConfig()) -> gtsam.NonlinearFactor:
-    """The ground-plane factor of the pose ``pose_key`` with ``config``'s hub height and sigmas."""
-    return ground_plane_factor(pose_key, plane, config.hub_height, config.ground_sigma_height, config.ground_sigma_tilt)
+def ground_factor(pose_key: int, plane: GroundPlane, config: GraphConfig = GraphConfig(),
+                  hub_key: int | None = None) -> gtsam.NonlinearFactor:
+    """The ground-plane factor of the pose ``pose_key`` with ``config``'s hub height and sigmas; with ``hub_key``
+    (a track's hub height, :func:`hub_prior`) the hub height is that variable and the height's sigma
+    ``config.ground_sigma_road``, each pose's own part of it."""
+    if hub_key is None:
+        return ground_plane_factor(pose_key, plane, config.hub_height, config.ground_sigma_height,
+                                   config.ground_sigma_tilt)
+    return ground_plane_factor(pose_key, plane, config.hub_height, config.ground_sigma_road, config.ground_sigma_tilt,
+                               hub_key=hub_key)
+
+
+def hub_prior(hub_key: int, config: GraphConfig = GraphConfig()) -> gtsam.NonlinearFactor:
+    """The prior of a track's hub height (``hub_key``): ``config.hub_height`` with the part of
+    ``config.ground_sigma_height`` that is not each pose's own (``ground_sigma_road``): the wheel radius, the same
+    in every frame of the track, so that its uncertainty does not average away over the track's poses."""
+    sigma = float(np.sqrt(config.ground_sigma_height**2 - config.ground_sigma_road**2))
+    return hub_height_prior(hub_key, config.hub_height, sigma)
 
 
 def insert_vehicle_values(

@@ -3,14 +3,16 @@
 Every variable is a ``gtsam.Symbol``: a character and an index. The default
 scheme uses ``x`` for vehicle poses (``world_T_vehicle``, one per vehicle per
 frame) and ``w``, ``l``, ``r`` for the wheel, light and roof shape layers (one
-12-vector each per vehicle, shared by all frames of its track), and ``o`` for
+12-vector each per vehicle, shared by all frames of its track), ``o`` for
 a track's detector pose offsets (a ``gtsam.Pose3`` per camera that sees it,
-where the detections carry a ``shape_sigma``). Choose other characters when those
-collide with a graph of your own.
+where the detections carry a ``shape_sigma``), and ``h`` for a track's hub
+height above a given road plane (a 1-vector, metres: its wheel radius, shared
+by its poses). Choose other characters when those collide with a graph of your
+own.
 
 Index layout: a pose of vehicle ``v`` in frame ``f`` has index
 ``v * frame_stride + f``; a layer of vehicle ``v`` has index ``v``; offset
-``j`` of vehicle ``v`` has index ``v * frame_stride + j``.
+``j`` of vehicle ``v`` has index ``v * frame_stride + j``; the hub height of vehicle ``v`` has index ``v``.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ class KeyScheme:
         roof: character of the roof layer.
         offset: character of a track's detector pose offsets (``vehicle_T_seen``, ``gtsam.Pose3``; one per
             camera that sees the track, where its detections carry a ``shape_sigma``).
+        hub: character of a track's hub height above the road plane (a 1-vector, metres; where a plane is given).
         frame_stride: pose index = vehicle * frame_stride + frame (and offset index = vehicle *
             frame_stride + offset number).
     """
@@ -44,16 +47,17 @@ class KeyScheme:
     light: str = "l"
     roof: str = "r"
     offset: str = "o"
+    hub: str = "h"
     frame_stride: int = 1_000_000
 
     def __post_init__(self):
-        names = ("pose", "wheel", "light", "roof", "offset")
+        names = ("pose", "wheel", "light", "roof", "offset", "hub")
         chars = tuple(getattr(self, name) for name in names)
         for name, c in zip(names, chars):
             if not isinstance(c, str) or len(c) != 1:
                 raise ValueError(f"KeyScheme.{name}: expected a single character, got {c!r}")
         if len(set(chars)) != len(chars):
-            raise ValueError(f"KeyScheme: the five characters must differ, got {chars}")
+            raise ValueError(f"KeyScheme: the six characters must differ, got {chars}")
         if not isinstance(self.frame_stride, int) or self.frame_stride < 1:
             raise ValueError(f"KeyScheme.frame_stride: expected a positive integer, got {self.frame_stride!r}")
 
@@ -69,6 +73,11 @@ class KeyScheme:
         if not 0 <= number < self.frame_stride:
             raise ValueError(f"number: expected 0 <= number < {self.frame_stride}, got {number}")
         return gtsam.symbol(self.offset, vehicle * self.frame_stride + number)
+
+    def hub_key(self, vehicle: int = 0) -> int:
+        """Key of a vehicle's hub height above the road plane (a 1-vector, metres), shared by the poses of its
+        track (:func:`vfactor.factors.ground_plane.hub_height_prior`)."""
+        return gtsam.symbol(self.hub, vehicle)
 
     def layer_key(self, layer: str, vehicle: int = 0) -> int:
         """Key of one shape layer ("wheel", "light" or "roof") of a vehicle."""

@@ -85,7 +85,9 @@ class VehicleResult:
             ``"covariance"``: which covariance ``pose_covariance`` is,
             ``"filtered"`` (from the frames up to its own: the tracker's online
             result), ``"smoothed"`` (from every frame of the track) or
-            ``"fixed_lag"`` (from the frames of the window, as the pose left it).
+            ``"fixed_lag"`` (from the frames of the window, as the pose left it); ``"hub_height"``: for tracks
+            with a road plane, the height of the wheel hubs above it (the wheel radius, metres) that the track's
+            poses share (docs/factors.md, "The hub height of a track").
     """
 
     id: str

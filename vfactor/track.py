@@ -37,11 +37,13 @@ from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomi
 from vfactor.factors.projection import KeypointObservations, whitened_residuals
 from vfactor.factors.robust import RobustLoss
 from vfactor.graph import (
+    GraphConfig,
     add_observation_factor,
     add_shape_factors,
     detector_offset_prior,
     detector_shape_sigmas,
     ground_factor,
+    hub_prior,
     hwc_factor,
     hwc_terms,
     hwc_violation,
@@ -59,7 +61,7 @@ from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
 from vfactor.shape_evidence import track_shape
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
-from vfactor.solve import GROSS_OUTLIER_SIGMAS, SolveOptions, solve_observations
+from vfactor.solve import GROSS_OUTLIER_SIGMAS, INLIER_BOUND, SolveOptions, solve_observations
 from vfactor.wireframe import Wireframe
 
 log = logging.getLogger(__name__)
@@ -201,10 +203,10 @@ _RESUME_COST_RATIO = 0.5
 _TAKE_BACK_POSES = _REJOIN_POSES
 #: What a track's segment is (Tracker._resume keeps them for one frame after a jump ends a segment).
 _SEGMENT_STATE = ("smoother", "poses", "hwc_added", "young", "young_frames", "multiview_frames", "reanchored", "prior",
-                  "body_type", "body_type_probability", "noise_scale", "offsets", "offset_priors")
+                  "body_type", "body_type_probability", "noise_scale", "offsets", "offset_priors", "observed")
 #: What a re-solve with a frame that does not join changes and Tracker._rejoined puts back: the shape choice and
 #: the detector offsets made for that frame.
-_REJOIN_STATE = ("prior", "noise_scale", "body_type", "body_type_probability", "offsets", "offset_priors")
+_REJOIN_STATE = ("prior", "noise_scale", "body_type", "body_type_probability", "offsets", "offset_priors", "observed")
 #: With a fixed lag, a young track's poses stay in its smoother (re-stamped with each new frame) while it has fewer
 #: than this many young frames, so that re-anchoring and re-joining can still re-solve them all.
 _YOUNG_HOLD_FRAMES = 30
@@ -249,6 +251,9 @@ class _TrackState:
     # each offset key the smoother was given -> its prior (their count numbers the next key)
     offsets: dict = field(default_factory=dict)
     offset_priors: dict = field(default_factory=dict)
+    # pose key -> (frame index, its keypoints as the smoother's projection factors hold them, camera name -> detector
+    # offset key): the smoothed covariances' graph takes them as least squares on their inliers (_covariance_graph)
+    observed: dict = field(default_factory=dict)
     # the segment a jump ended, kept for one frame (Tracker._resume): its smoother and state, or None
     previous: dict | None = None
     # the young segments of a few poses that jumps ended, kept until the segment after them can take them back
@@ -262,7 +267,7 @@ class _TrackState:
         """Drops the smoother and the young-track state: the track starts again from its next solvable frame."""
         self.smoother, self.poses, self.hwc_added, self.young, self.young_frames = None, [], False, False, []
         self.offsets, self.offset_priors, self.previous, self.ended_young = {}, {}, None, None
-        self.taken_back = []
+        self.taken_back, self.observed = [], {}
 
 
 def frame_order(scene: Scene) -> list[int]:
@@ -380,11 +385,36 @@ class Tracker:
             return out
         estimate = track.smoother.calculateEstimate()
         wireframe = self._wireframe(estimate, track)
+        marginals = self._marginals(track, estimate) if covariance else None
         for frame_index, _, key in track.poses:
             if estimate.exists(key):
-                cov = track.smoother.marginalCovariance(key) if covariance else None
+                cov = None if not covariance else (marginals.marginalCovariance(key) if marginals is not None
+                                                   else track.smoother.marginalCovariance(key))
                 out[(frame_index, track.id)] = self._smoothed(track, estimate, key, wireframe, cov)
         return out
+
+    def _marginals(self, track: _TrackState, estimate: gtsam.Values) -> gtsam.Marginals | None:
+        """The marginals of the track's smoothed poses: those of the smoother's graph with each frame's keypoints as
+        least squares on their inliers (:func:`_covariance_graph`, as batch smoothing's); None where that graph
+        cannot be solved (the smoother's own marginals are then used)."""
+        layer_keys = set(self.keys.layer_keys(track.index))
+        observed = {key: entry for key, entry in track.observed.items() if estimate.exists(key)}
+        factors = track.smoother.getFactors()
+        kept = []
+        for j in range(factors.size()):
+            factor = factors.at(j)
+            if factor is None:
+                continue
+            factor_keys = set(factor.keys())
+            if isinstance(factor, gtsam.CustomFactor) and layer_keys <= factor_keys and factor_keys & observed.keys():
+                continue  # a frame's projection factor: replaced below
+            kept.append(factor)
+        graph = _covariance_graph(kept, [(frame, obs, offsets) for frame, obs, offsets in observed.values()],
+                                  estimate, self.keys, track.index, self.options.solve.graph)
+        try:
+            return gtsam.Marginals(graph, estimate)
+        except RuntimeError:
+            return None
 
     def _smoothed(self, track: _TrackState, estimate: gtsam.Values, key: int, wireframe: Wireframe,
                   covariance: np.ndarray | None) -> VehicleResult:
@@ -431,6 +461,9 @@ class Tracker:
                                body_type=track.body_type, body_type_probability=track.body_type_probability,
                                box=_box(pose, wireframe, track.body_type))
         result.extras["noise_scale"] = track.noise_scale
+        hub = self._hub_key(track)
+        if hub is not None and estimate.exists(hub):  # the wheel radius the track's poses share (a road plane given)
+            result.extras["hub_height"] = float(estimate.atVector(hub)[0])
         if key in track.swaps:
             result.extras["swapped_keypoints"] = track.swaps[key]
         return result
@@ -458,16 +491,29 @@ class Tracker:
             obs = apply_swaps(obs, first.extras["swapped_keypoints"])
             track.swaps[key] = first.extras["swapped_keypoints"]
         motion, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        _add_pose_factors(motion, track.poses, key, t, self.options)
+        _add_pose_factors(motion, track.poses, key, t, self.options, self._hub_key(track))
         insert_vehicle_values(values, self.keys, first.world_T_vehicle, first.wireframe, track.index, frame_index)
+        if self._hub_key(track) is not None:
+            values.insert(self._hub_key(track), np.array([self.options.solve.graph.hub_height]))
         track.offsets, track.offset_priors = {}, {}
         offsets = self._offsets(track, obs, values, gtsam.Values())
         track.young, track.young_frames = True, [(frame_index, obs, motion, first, offsets)]
-        stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}, **{k: t for k in offsets.values()}}
+        stamps = {key: t, **{k: t for k in self._shape_keys(track)}, **{k: t for k in offsets.values()}}
         track.smoother.update(self._young_graph(track), values, stamps)
         track.poses.append((frame_index, t, key))
         track.multiview_frames, track.reanchored = int(_camera_count(obs) >= 2), False
         return self._finish(track, key, t)
+
+    def _hub_key(self, track: _TrackState) -> int | None:
+        """The key of the track's hub height above the road plane (its wheel radius, shared by its poses:
+        :func:`vfactor.graph.hub_prior`), or None without a road plane."""
+        return None if self.options.solve.ground_plane is None else self.keys.hub_key(track.index)
+
+    def _shape_keys(self, track: _TrackState) -> list[int]:
+        """The keys of what the track's poses share and its smoother keeps while the track lives: its shape layers
+        and, with a road plane, its hub height."""
+        hub = self._hub_key(track)
+        return [*self.keys.layer_keys(track.index), *([] if hub is None else [hub])]
 
     def _offsets(self, track: _TrackState, obs: KeypointObservations, values: gtsam.Values,
                  estimate: gtsam.Values, graph: gtsam.NonlinearFactorGraph | None = None) -> dict[str, int]:
@@ -499,10 +545,14 @@ class Tracker:
         config = self.options.solve.graph
         graph = gtsam.NonlinearFactorGraph()
         add_shape_factors(graph, self.keys, track.index, config, track.prior, self.bounds)
+        if self._hub_key(track) is not None:
+            graph.add(hub_prior(self._hub_key(track), config))
         used = set()
         for frame_index, obs, motion, _, offsets in track.young_frames if frames is None else frames:
-            add_observation_factor(graph, self.keys, obs.scaled_above_calibrated(track.noise_scale), track.index,
-                                   frame_index, config, offsets)
+            scaled = obs.scaled_above_calibrated(track.noise_scale)
+            add_observation_factor(graph, self.keys, scaled, track.index, frame_index, config, offsets)
+            if len(scaled):
+                track.observed[self.keys.pose_key(track.index, frame_index)] = (frame_index, scaled, offsets)
             graph.push_back(motion)
             used.update(offsets.values())
         for key in sorted(used):
@@ -570,7 +620,7 @@ class Tracker:
         that a fixed lag keeps it until this solution has been read."""
         track.smoother = self._new_smoother()
         stamps = {key: t if held else stamp for _, stamp, key in track.poses}
-        stamps.update({k: t for k in self.keys.layer_keys(track.index)})
+        stamps.update({k: t for k in self._shape_keys(track)})
         stamps.update({k: t for k in track.offset_priors if solved.exists(k)})
         track.smoother.update(graph, solved, stamps)
 
@@ -598,7 +648,7 @@ class Tracker:
         held = _held(track)
         key = self.keys.pose_key(track.index, frame_index)
         motion = gtsam.NonlinearFactorGraph()
-        _add_pose_factors(motion, track.poses, key, t, self.options)
+        _add_pose_factors(motion, track.poses, key, t, self.options, self._hub_key(track))
         values = gtsam.Values()
         before = {name: copy.copy(getattr(track, name)) for name in _REJOIN_STATE}
         offsets = self._offsets(track, obs, values, estimate)
@@ -659,7 +709,7 @@ class Tracker:
             track.jumps.pop()
         # the bad frame's pose goes back into the track without its keypoints: where its motion puts it
         motion, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        _add_pose_factors(motion, track.poses, key, t_bad, self.options)
+        _add_pose_factors(motion, track.poses, key, t_bad, self.options, self._hub_key(track))
         values.insert(key, self._predict(track.poses, before, t_bad))
         stamps = {key: t_bad, **({k: t_bad for *_, k in track.poses} if _held(track) else {})}
         track.smoother.update(motion, values, stamps)
@@ -710,7 +760,8 @@ class Tracker:
         for start in ended["starts"][1:] + [len(old_poses)]:  # each segment's first two poses get the motion
             for i in range(start, min(start + 2, len(merged))):  # factors to the poses before it
                 motion = gtsam.NonlinearFactorGraph()
-                _add_pose_factors(motion, merged[:i], merged[i][2], merged[i][1], self.options)
+                _add_pose_factors(motion, merged[:i], merged[i][2], merged[i][1], self.options,
+                                  self._hub_key(track))
                 frames[i] = (*frames[i][:2], motion, *frames[i][3:])
         scale, wireframe = track.noise_scale, self._wireframe(estimate, track)  # costs at the segment's noise scale
         cost_before = sum(cross_projection_cost(obs.scaled_above_calibrated(scale), estimate.atPose3(key), wireframe,
@@ -766,7 +817,7 @@ class Tracker:
             return
         estimate, smoother = track.smoother.calculateEstimate(), track.smoother
         config = self.options.solve.graph
-        layer_keys = self.keys.layer_keys(track.index)
+        layer_keys = self._shape_keys(track)
         for old_poses, frames, links, link_keys in track.taken_back:
             if not all(estimate.exists(k) for k in [*link_keys, *layer_keys]):
                 continue
@@ -877,10 +928,11 @@ class Tracker:
         graph, motion, values = gtsam.NonlinearFactorGraph(), gtsam.NonlinearFactorGraph(), gtsam.Values()
         offsets = self._offsets(track, obs, values, estimate, graph)
         add_observation_factor(graph, self.keys, obs, track.index, frame_index, options.graph, offsets)
-        _add_pose_factors(motion, track.poses, key, t, self.options)
+        track.observed[key] = (frame_index, obs, offsets)
+        _add_pose_factors(motion, track.poses, key, t, self.options, self._hub_key(track))
         graph.push_back(motion)
         values.insert(key, guess)
-        stamps = {key: t, **{k: t for k in self.keys.layer_keys(track.index)}, **{k: t for k in offsets.values()}}
+        stamps = {key: t, **{k: t for k in self._shape_keys(track)}, **{k: t for k in offsets.values()}}
         if _held(track):  # a young track's poses stay for its re-solves
             stamps.update({k: t for *_, k in track.poses})
         track.smoother.update(graph, values, stamps)
@@ -935,6 +987,7 @@ class Tracker:
         smoother = track.smoother
         held = smoother.timestamps()  # forget poses the smoother has marginalised (with or without a lag)
         track.poses = [p for p in track.poses if p[2] in held]
+        track.observed = {key: entry for key, entry in track.observed.items() if key in held}
         if track.swaps:
             track.swaps = {key: found for key, found in track.swaps.items() if key in held}
         keys = [key for _, _, key in track.poses[-recent if recent else 0:]]
@@ -979,7 +1032,7 @@ class Tracker:
         if config.hwc == "lazy" and not track.hwc_added and hwc_violation(wireframe, self._terms) > config.hwc_tolerance:
             graph = gtsam.NonlinearFactorGraph()
             graph.add(hwc_factor(self.keys, track.index, terms=self._terms))
-            smoother.update(graph, gtsam.Values(), {k: t for k in self.keys.layer_keys(track.index)})
+            smoother.update(graph, gtsam.Values(), {k: t for k in self._shape_keys(track)})
             track.hwc_added = True
             estimate = smoother.calculateEstimate()
             wireframe = self._wireframe(estimate, track)
@@ -988,14 +1041,17 @@ class Tracker:
         return self._result(track, estimate, key, wireframe, covariance, message)
 
 
-def _add_pose_factors(graph: gtsam.NonlinearFactorGraph, poses, key: int, t: float, options: TrackOptions) -> None:
+def _add_pose_factors(graph: gtsam.NonlinearFactorGraph, poses, key: int, t: float, options: TrackOptions,
+                      hub_key: int | None = None) -> None:
     """The factors of a track's new pose ``key`` at time ``t`` (seconds): motion and ground.
 
     A non-holonomic factor to the previous pose, an acceleration factor over the
     last two (when both are within ``options.lag``), and the ground-plane factor
     when ``options.solve.ground_plane`` is set. ``poses``: the track's earlier
-    ``(frame index, t, key)`` in time order. The tracker and batch smoothing
-    both build their graphs with it.
+    ``(frame index, t, key)`` in time order; ``hub_key``: the track's hub height
+    (:func:`vfactor.graph.hub_prior`), which the ground-plane factors of its poses
+    share (None: each pose's factor has the config's hub height). The tracker and
+    batch smoothing both build their graphs with it.
     """
     if poses and t - poses[-1][1] <= options.max_gap:
         _, t1, k1 = poses[-1]
@@ -1004,7 +1060,7 @@ def _add_pose_factors(graph: gtsam.NonlinearFactorGraph, poses, key: int, t: flo
             _, t0, k0 = poses[-2]
             graph.add(acceleration_factor(k0, k1, key, t1 - t0, t - t1, options.motion))
     if options.solve.ground_plane is not None:
-        graph.add(ground_factor(key, options.solve.ground_plane, options.solve.graph))
+        graph.add(ground_factor(key, options.solve.ground_plane, options.solve.graph, hub_key))
 
 
 def _acceleration_applies(poses, t: float, options: TrackOptions) -> bool:
@@ -1269,9 +1325,14 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     add_shape_factors(graph, keys, index, config, track_prior, bounds)
+    hub = None if options.solve.ground_plane is None else keys.hub_key(index)  # the track's wheel radius
+    if hub is not None:
+        graph.add(hub_prior(hub, config))
+        values.insert(hub, np.array([config.hub_height]))
     posed, best, segments = [], -1, {}
     offsets: dict[str, int] = {}  # camera name -> the key of its detector pose offset (one per camera, no lag)
     swaps = {}  # frame index -> the left/right pairs that frame's own solve relabelled, taken over by the batch graph
+    projections = []  # (the indices of its projection factors in graph, frame index, observations, offsets) per frame
     for (i, frame), first in zip(frames, firsts):
         solved = first is not None and first.ok
         if not solved and not posed:
@@ -1294,8 +1355,10 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
             if name not in offsets:
                 offsets[name], offset_prior = _new_offset(keys, index, len(offsets), sigma, values, values)
                 graph.add(offset_prior)
+        first_factor = graph.size()
         add_observation_factor(graph, keys, obs, index, i, config, offsets)
-        _add_pose_factors(graph, posed, key, frame.t, options)
+        projections.append((range(first_factor, graph.size()), i, obs, dict(offsets)))
+        _add_pose_factors(graph, posed, key, frame.t, options, hub)
         values.insert(key, guess)
         posed.append((i, frame.t, key))
     if not posed:
@@ -1313,7 +1376,13 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         if turned is not None:  # the body frame turned front to back (vfactor.factors.body_frame): on from the convention's
             optimizer = gtsam.LevenbergMarquardtOptimizer(graph, turned, options.solve.lm_params())
             estimate = optimizer.optimize()
-        marginals = gtsam.Marginals(graph, estimate) if options.covariance else None
+        if options.covariance:
+            replaced = {j for rows, *_ in projections for j in rows}
+            kept = [graph.at(j) for j in range(graph.size()) if j not in replaced]
+            marginals = gtsam.Marginals(_covariance_graph(kept, [p[1:] for p in projections], estimate, keys, index,
+                                                          config), estimate)
+        else:
+            marginals = None
     except RuntimeError as exc:
         for i, _, _ in posed:
             results[i] = VehicleResult(vid, Status.FAILED, message=f"batch smoothing failed: {summarise_error(exc)}")
@@ -1328,11 +1397,45 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
             iterations=optimizer.iterations(), final_error=graph.error(estimate), message=segments.get(i, ""),
             body_type=body_type, body_type_probability=probability, box=_box(pose, wireframe, body_type))
         results[i].extras["noise_scale"] = scale
+        if hub is not None:  # the wheel radius the track's poses share
+            results[i].extras["hub_height"] = float(estimate.atVector(hub)[0])
         if i in swaps:
             results[i].extras["swapped_keypoints"] = swaps[i]
         if marginals:
             results[i].extras["covariance"] = "smoothed"
     return results
+
+
+def _covariance_graph(factors: list, projections: list, estimate: gtsam.Values, keys: KeyScheme, index: int,
+                      config: GraphConfig) -> gtsam.NonlinearFactorGraph:
+    """The graph whose marginals are a track's covariances: its factors but the keypoints', and each frame's keypoints
+    as least squares on its inliers (docs/factors.md, "Covariances of tracks"), as the one-frame solve's covariances
+    take them.
+
+    The robust loss's Gauss-Newton information down-weights every keypoint by its residual, inliers too (the Cauchy
+    loss gives one 1.5 sigmas off 63 % of its information), so the marginals of the solved graph are too wide where
+    the keypoints are good. Here each frame's projection factors are replaced by factors without the loss on its
+    observations whose whitened residual's square at ``estimate`` is within :data:`~vfactor.solve.INLIER_BOUND`
+    (at the track's noise scale, which the observations carry); the motion, shape, HWC and offset factors stay.
+
+    Args:
+        factors: the solved track graph's factors without its projection factors.
+        projections: per frame, ``(frame index, its observations (as in the solved graph), camera name ->
+            detector offset key)``.
+        estimate: the solution.
+        index: the track's vehicle index in ``keys``.
+    """
+    out = gtsam.NonlinearFactorGraph()
+    for factor in factors:
+        out.add(factor)
+    least_squares = dataclasses.replace(config, loss=RobustLoss("none"))
+    points = wireframe_from_values(estimate, keys, index).vehicle_p_keypoints
+    for frame, obs, offsets in projections:
+        residuals = whitened_residuals(obs, estimate.atPose3(keys.pose_key(index, frame)), points)
+        inlier = np.sum(residuals ** 2, axis=1) < INLIER_BOUND
+        if inlier.any():
+            add_observation_factor(out, keys, obs.subset(inlier), index, frame, least_squares, offsets)
+    return out
 
 
 def _box(world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, body_type: str | None):

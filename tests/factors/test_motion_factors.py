@@ -6,7 +6,7 @@ import gtsam
 import numpy as np
 import pytest
 
-from vfactor.factors.ground_plane import GroundPlane, ground_plane_factor
+from vfactor.factors.ground_plane import GroundPlane, ground_plane_factor, hub_height_prior
 from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomic_factor
 
 from .contract import FactorContract
@@ -70,6 +70,40 @@ class TestGroundPlane(FactorContract):
         for key in X:
             values.insert(key, gtsam.Pose3(gtsam.Rot3(R), t))
         return values
+
+
+
+HUB = gtsam.symbol("h", 0)
+
+
+class TestGroundPlaneWithHubHeight(TestGroundPlane):
+    """The same factor with the hub height a variable (a track's wheel radius, shared by its poses)."""
+
+    def make_factor(self):
+        return ground_plane_factor(X[0], self.plane, sigma_height=0.02, hub_key=HUB)
+
+    def make_values(self, rng):
+        values = super().make_values(rng)
+        values.insert(HUB, np.array([0.34 + rng.normal(0, 0.05)]))
+        return values
+
+    def make_truth_values(self):
+        values = super().make_truth_values()
+        values.insert(HUB, np.array([0.34]))
+        return values
+
+
+def test_the_hub_height_variable_moves_the_height_residual_as_the_given_hub_height_does():
+    plane = GroundPlane((0.02, -0.01, 1.0), 0.1)
+    values = gtsam.Values()
+    values.insert(X[0], arc_pose(0.3))
+    values.insert(HUB, np.array([0.41]))
+    given = ground_plane_factor(X[0], plane, hub_height=0.41, sigma_height=0.02)
+    variable = ground_plane_factor(X[0], plane, hub_height=0.34, sigma_height=0.02, hub_key=HUB)
+    assert list(variable.keys()) == [X[0], HUB]
+    assert np.isclose(variable.error(values), given.error(values), rtol=1e-12)
+    prior = hub_height_prior(HUB, 0.34, 0.05)
+    assert np.isclose(prior.error(values), 0.5 * ((0.41 - 0.34) / 0.05) ** 2)
 
 
 def test_sideways_motion_is_penalised_but_forward_is_not():

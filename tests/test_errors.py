@@ -28,6 +28,11 @@ def test_check_numbers_bounds_and_types():
 def test_settings_name_the_field():
     with pytest.raises(ValueError, match=r"GraphConfig\.hinge_sigma: expected a number > 0, got -1"):
         GraphConfig(hinge_sigma=-1)
+    # the part of the hub height's sigma that is each pose's own cannot exceed the whole
+    with pytest.raises(ValueError, match=r"GraphConfig\.ground_sigma_road: expected less than ground_sigma_height"):
+        GraphConfig(ground_sigma_road=0.06)
+    with pytest.raises(ValueError, match=r"GraphConfig\.ground_sigma_road: expected a number > 0"):
+        GraphConfig(ground_sigma_road=0.0)
 
 
 def test_input_error_field_and_prefix():

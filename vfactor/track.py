@@ -551,7 +551,7 @@ class Tracker:
         for frame_index, obs, motion, _, offsets in track.young_frames if frames is None else frames:
             scaled = obs.scaled_above_calibrated(track.noise_scale)
             add_observation_factor(graph, self.keys, scaled, track.index, frame_index, config, offsets)
-            if len(scaled):
+            if len(scaled):  # the keypoints as this graph holds them, for the smoothed covariances (_marginals)
                 track.observed[self.keys.pose_key(track.index, frame_index)] = (frame_index, scaled, offsets)
             graph.push_back(motion)
             used.update(offsets.values())
@@ -1416,7 +1416,8 @@ def _covariance_graph(factors: list, projections: list, estimate: gtsam.Values, 
     loss gives one 1.5 sigmas off 63 % of its information), so the marginals of the solved graph are too wide where
     the keypoints are good. Here each frame's projection factors are replaced by factors without the loss on its
     observations whose whitened residual's square at ``estimate`` is within :data:`~vfactor.solve.INLIER_BOUND`
-    (at the track's noise scale, which the observations carry); the motion, shape, HWC and offset factors stay.
+    (at the track's noise scale, which the observations carry); the motion, ground-plane, hub-height, shape, HWC and
+    offset factors stay.
 
     Args:
         factors: the solved track graph's factors without its projection factors.

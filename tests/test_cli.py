@@ -134,6 +134,7 @@ def test_eval_tracks_over_noise_draws(capsys):
     out = capsys.readouterr().out
     assert "over 2 draws of the keypoint noise" in out and "| v1 | 2 |" in out
     assert "--draws 2" in out
+    assert "Pose NEES per body-frame axis" in out and "| isam2 | 6 |" in out  # roll ... z, each 1 when consistent
     assert main(["eval", "tracks", "--draws", "-1"]) == 2
     assert "--draws" in capsys.readouterr().err
     assert main(["eval", "tracks", "--lag", "0"]) == 2

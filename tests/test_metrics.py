@@ -137,3 +137,20 @@ def test_ray_nees_splits_the_error_along_and_across_the_camera_ray():
         assert CHI2_95[dof] == pytest.approx(chi2_quantile(dof, 0.95), rel=1e-6)
     with pytest.raises(ValueError, match="pose_covariance"):
         ray_nees(world_T_est, np.eye(3), world_T_true, np.zeros(3))
+
+
+def test_pose_nees_components_are_each_axis_squared_error_over_its_variance():
+    from vfactor.metrics import pose_nees, pose_nees_components
+
+    world_T_est = gtsam.Pose3(gtsam.Rot3.Yaw(0.3), np.array([4.0, 2.0, 0.34]))
+    xi = np.array([0.01, -0.02, 0.03, 0.1, -0.2, 0.05])  # roll, pitch, yaw (rad), x, y, z (m), body frame
+    world_T_true = world_T_est.compose(gtsam.Pose3.Expmap(xi))
+    sigmas = np.array([0.01, 0.01, 0.02, 0.1, 0.1, 0.05])
+    P = np.diag(sigmas**2)
+    parts = pose_nees_components(world_T_est, P, world_T_true)
+    np.testing.assert_allclose(parts, (xi / sigmas) ** 2, rtol=1e-9)
+    assert parts.sum() == pytest.approx(pose_nees(world_T_est, P, world_T_true))  # diagonal: they add up
+    P[3, 4] = P[4, 3] = 0.005  # a correlation changes the NEES, not the components (the diagonal's)
+    np.testing.assert_allclose(pose_nees_components(world_T_est, P, world_T_true), parts)
+    with pytest.raises(ValueError, match="pose_covariance"):
+        pose_nees_components(world_T_est, np.eye(3), world_T_true)

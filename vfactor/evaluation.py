@@ -23,7 +23,7 @@ import numpy as np
 from vfactor.baselines import known_shape, pnp, triangulation
 from vfactor.box import BoxModel, default_box_model, published_box
 from vfactor.graph import observations_from_detections, sized_observations
-from vfactor.metrics import keypoint_nees, nees_summary, pose_errors, pose_nees
+from vfactor.metrics import keypoint_nees, nees_summary, pose_errors, pose_nees, pose_nees_components
 from vfactor.shape_model import ShapeModel, car_hwc_bounds, default_shape_model, default_shape_prior, pascal3d_wireframes
 from vfactor.sim import Scenario, Simulation, load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations
@@ -34,7 +34,7 @@ __all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held
            "body_type_table", "consistency_table", "poor_fit_summary",
            "noise_variant", "run_accuracy", "compare_tracking", "tracking_table", "final_shape_errors",
            "shape_over_noise_draws", "shape_draws_table", "class_rows", "class_cell", "class_tables",
-           "track_body_types", "final_shape_table"]
+           "track_body_types", "final_shape_table", "nees_component_table"]
 
 #: Method name -> description, in table order.
 METHODS = {
@@ -160,7 +160,8 @@ def true_box(truth) -> tuple[np.ndarray, gtsam.Pose3] | None:
 def covariance_errors(result, truth) -> dict:
     """NEES of an estimate with covariances against its truth; {} without them.
 
-    ``pose_nees``, ``keypoint_nees`` (12,) and, for a library vehicle with a
+    ``pose_nees``, ``pose_nees_components`` (6,: roll, pitch, yaw, x, y, z; :func:`~vfactor.metrics.pose_nees_components`),
+    ``keypoint_nees`` (12,) and, for a library vehicle with a
     box, ``box_size_cm`` (3,) errors of its length, width and height against
     the published dimensions, ``box_size_z`` (3,) the same over their sigmas,
     ``box_heading_z``.
@@ -177,6 +178,8 @@ def covariance_errors(result, truth) -> dict:
             out["box_heading_z"] = error / box.heading_sigma
     if result.pose_covariance is not None:
         out["pose_nees"] = pose_nees(result.world_T_vehicle, result.pose_covariance, truth.world_T_vehicle)
+        out["pose_nees_components"] = pose_nees_components(result.world_T_vehicle, result.pose_covariance,
+                                                           truth.world_T_vehicle)
     if result.keypoint_covariances_world is not None:
         out["keypoint_nees"] = keypoint_nees(result.keypoints_world, result.keypoint_covariances_world,
                                              truth.keypoints_world)
@@ -438,6 +441,23 @@ def pose_rows(sim: Simulation, frames) -> list[dict]:
                 row.update(covariance_errors(v, truth))
             rows.append(row)
     return rows
+
+
+def nees_component_table(components: dict[str, list[np.ndarray]]) -> str:
+    """Markdown table of each method's pose NEES per body-frame axis: the mean over its poses of each tangent
+    coordinate's squared error over its variance (:func:`~vfactor.metrics.pose_nees_components`; 1 is
+    consistent), roll, pitch, yaw, x (forward), y (left), z (up).
+
+    Args:
+        components: method -> the ``pose_nees_components`` of its poses (:func:`pose_rows`' rows).
+    """
+    lines = ["| method | poses | roll | pitch | yaw | x | y | z |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for method, parts in components.items():
+        if not parts:
+            continue
+        mean = np.mean(np.asarray(parts, dtype=float), axis=0)
+        lines.append(f"| {method} | {len(parts)} | " + " | ".join(f"{v:.2f}" for v in mean) + " |")
+    return "\n".join(lines)
 
 
 def class_rows(sim: Simulation, rows: list[dict], scene=None) -> list[tuple]:

@@ -35,6 +35,7 @@ __all__ = [
     "evaluate",
     "CHI2_95",
     "pose_nees",
+    "pose_nees_components",
     "keypoint_nees",
     "ray_nees",
     "nees_summary",
@@ -190,6 +191,19 @@ def pose_nees(world_T_vehicle_est: gtsam.Pose3, pose_covariance, world_T_vehicle
         raise ValueError(f"pose_covariance: expected shape (6, 6), got {P.shape}")
     xi = gtsam.Pose3.Logmap(world_T_vehicle_est.between(world_T_vehicle_true))
     return float(xi @ np.linalg.solve(P, xi))
+
+
+def pose_nees_components(world_T_vehicle_est: gtsam.Pose3, pose_covariance, world_T_vehicle_true: gtsam.Pose3
+                         ) -> np.ndarray:
+    """(6,) each tangent coordinate's squared error over its own variance: roll, pitch, yaw (rad) and x, y, z (m) of
+    the error ``xi = Logmap(est^-1 true)`` in the estimate's body frame (as :func:`pose_nees`), each over the
+    covariance's diagonal entry. Averaged over many cases each is 1 for a consistent covariance: where the pose NEES
+    is off, they say along which axes (a width in one direction can hide a narrowness in another)."""
+    P = np.asarray(pose_covariance, dtype=float)
+    if P.shape != (6, 6):
+        raise ValueError(f"pose_covariance: expected shape (6, 6), got {P.shape}")
+    xi = gtsam.Pose3.Logmap(world_T_vehicle_est.between(world_T_vehicle_true))
+    return xi**2 / np.diag(P)
 
 
 def keypoint_nees(kp_world_est, keypoint_covariances_world, kp_world_true) -> np.ndarray:

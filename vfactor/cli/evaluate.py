@@ -143,6 +143,7 @@ def _eval_association(scenario_name, frames, seed: int, seeds: int, engine=None,
 
 def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int = 0, lag: float = 0.5,
                  engine=None) -> list[str]:
+    from vfactor.evaluation import nees_component_table
     from vfactor.parallel import InProcess
     from vfactor.sim import load_scenario
 
@@ -152,9 +153,15 @@ def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int =
                          "is nothing to track; use a scenario with tracks, e.g. tracks_3veh or tracks_3cam")
     units = [(scenario, s, frames, draws, lag) for s in range(seed, seed + seeds)]
     done = list((engine or InProcess()).map(_tracks_unit, units))
-    sections = [section for unit_sections, _, _ in done for section in unit_sections]
+    sections = [section for unit_sections, *_ in done for section in unit_sections]
     if seeds > 1:
-        sections.append(_tracks_pooled(scenario.name, seed, seeds, [c for _, c, _ in done], [s for _, _, s in done]))
+        sections.append(_tracks_pooled(scenario.name, seed, seeds, [c for _, c, _, _ in done], [s for _, _, s, _ in done]))
+    components = defaultdict(list)  # method -> every seed's poses' NEES per axis
+    for *_, unit_components in done:
+        for method, parts in unit_components.items():
+            components[method] += parts
+    sections.append(f"Pose NEES per body-frame axis{', seeds pooled' if seeds > 1 else ''} (each coordinate's squared "
+                    f"error over its variance; consistent: 1):\n\n{nees_component_table(components)}\n")
     return sections
 
 
@@ -176,9 +183,9 @@ def _tracks_pooled(name: str, seed: int, seeds: int, classes: list[dict], shapes
             f"\n\nFinal shapes (isam2, mean body-frame keypoint error):\n\n{final_shape_table({name: by_type}, 'scene')}\n")
 
 
-def _tracks_unit(unit: tuple) -> tuple[list[str], dict, list]:
+def _tracks_unit(unit: tuple) -> tuple[list[str], dict, list, dict]:
     """One seed of ``vfactor eval tracks``: its sections, its poses' :func:`~vfactor.evaluation.class_rows` per
-    method, and (body type, final shape error cm) of each track (isam2)."""
+    method, (body type, final shape error cm) of each track (isam2), and its poses' NEES per axis per method."""
     from vfactor.evaluation import compare_tracking, shape_draws_table, shape_over_noise_draws, tracking_table
     from vfactor.sim import simulate
 
@@ -193,4 +200,6 @@ def _tracks_unit(unit: tuple) -> tuple[list[str], dict, list]:
         sections.append(f"Final shapes of batch smoothing over {draws} draws of the keypoint noise (same "
                         f"vehicles and motion):\n\n{shape_draws_table(shape_over_noise_draws(sim, draws))}\n")
     shapes = [(comparison["shape_types"][vid], cm) for vid, cm in comparison["shape_cm"]["isam2"].items()]
-    return sections, comparison["classes"], shapes
+    components = {method: [row["pose_nees_components"] for row in rows if "pose_nees_components" in row]
+                  for method, rows in comparison["errors"].items()}
+    return sections, comparison["classes"], shapes, components

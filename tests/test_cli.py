@@ -139,6 +139,13 @@ def test_eval_tracks_over_noise_draws(capsys):
     assert "--draws" in capsys.readouterr().err
     assert main(["eval", "tracks", "--lag", "0"]) == 2
     assert "--lag" in capsys.readouterr().err
+    assert main(["eval", "tracks", "--scenario", "intersection_2cam_track", "--frames", "4", "--body-motion", "5,2"]) == 0
+    assert "--body-motion 5,2" in capsys.readouterr().out
+    for bad in ("5", "5,x", "-1,2", "5,30"):
+        assert main(["eval", "tracks", f"--body-motion={bad}"]) == 2
+        assert "--body-motion" in capsys.readouterr().err
+    assert main(["eval", "--body-motion", "5,2"]) == 2  # one-frame scenes have no accelerations
+    assert "--body-motion" in capsys.readouterr().err
     assert main(["eval", "tracks", "--scenario", "accuracy_2cam"]) == 2  # independent frames: nothing to track
     assert "no motion" in capsys.readouterr().err
 
@@ -150,7 +157,7 @@ def test_eval_tracks_pools_its_seeds_per_body_type_and_camera_count(capsys):
     out = capsys.readouterr().out
     pooled = out[out.index("### intersection_2cam_track, seeds 0-1 pooled"):]
     assert "Pooled, per body type" in pooled and "Pooled, per cameras" in pooled and "| 2 cameras |" in pooled
-    table = pooled[pooled.index("| body type | scene | tracks |"):].splitlines()
+    table = pooled[pooled.index("| body type | scene | tracks |"):].split("\n\n")[0].splitlines()
     tracks = sum(int(line.split("|")[3]) for line in table[2:] if line.startswith("| "))
     assert tracks == 2  # one vehicle a seed
     row = next(line for line in pooled.splitlines() if line.startswith("| all | intersection_2cam_track"))

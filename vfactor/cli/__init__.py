@@ -307,6 +307,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "and report each final shape's mean error, bias and spread (default: 0)")
     p.add_argument("--lag", type=float, default=0.5,
                    help="tracks: the fixed lag of the isam2_lag row, seconds (default: 0.5)")
+    p.add_argument("--body-motion", metavar="ROLL,PITCH",
+                   help="tracks: the simulated bodies roll and pitch on their suspension, ROLL and PITCH degrees per g "
+                   "of lateral and longitudinal acceleration (vfactor.sim.BodyMotion; default: rigid vehicles)")
     p.add_argument("--markdown", help="also write the tables to this Markdown file")
     p.add_argument("--weights", help="images: keypoint-network weights to evaluate (default: the shipped weights)")
     p.add_argument("--detector-offsets", action=argparse.BooleanOptionalAction, default=None,

@@ -24,6 +24,9 @@ def evaluate(args) -> int:
         raise InputError("--draws", f"expected an integer >= 0, got {args.draws}")
     if not (np.isfinite(args.lag) and args.lag > 0):
         raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
+    body_motion = _body_motion(args.body_motion) if args.body_motion is not None else None
+    if body_motion is not None and args.experiment != "tracks":
+        raise InputError("--body-motion", f"eval {args.experiment} simulates no accelerations (eval tracks does)")
     if args.levels is not None and args.experiment not in ("frames", "association"):
         raise InputError("--levels", f"eval {args.experiment} has no noise levels (frames and association have)")
     if args.weights is not None and args.experiment != "images":
@@ -40,7 +43,7 @@ def evaluate(args) -> int:
                                         _levels(args.levels or "clean,paper,hard"), args.seeds, engine)
             elif args.experiment == "tracks":
                 sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws,
-                                        args.lag, engine)
+                                        args.lag, engine, body_motion)
             else:
                 sections = _eval_association(args.scenario, frames, args.seed, args.seeds, engine,
                                              _levels(args.levels) if args.levels else (None,))
@@ -60,6 +63,7 @@ def evaluate(args) -> int:
         (f" --frames {args.frames}" if args.frames else "") + (f" --seed {args.seed}" if args.seed else "") + \
         (f" --seeds {args.seeds}" if args.seeds != 1 else "") + (f" --draws {args.draws}" if args.draws else "") + \
         (f" --lag {args.lag:g}" if args.experiment == "tracks" and args.lag != 0.5 else "") + \
+        (f" --body-motion {args.body_motion}" if body_motion is not None else "") + \
         (f" --levels {args.levels}" if args.levels and not (args.experiment == "frames" and
                                                              args.levels == "clean,paper,hard") else "") + \
         (f" --figures {args.figures}" if args.figures else "") + \
@@ -141,8 +145,24 @@ def _eval_association(scenario_name, frames, seed: int, seeds: int, engine=None,
             f"{body_type_report(runs)}\n"]
 
 
+def _body_motion(text: str):
+    """``--body-motion ROLL,PITCH`` (degrees per g, each in [0, 20]) as a :class:`vfactor.sim.BodyMotion`."""
+    from vfactor.sim import BodyMotion
+
+    parts = text.split(",")
+    try:
+        roll, pitch = (float(part) for part in parts)
+    except ValueError:
+        raise InputError("--body-motion", f"expected ROLL,PITCH in degrees per g, e.g. 5,2, got {text!r}") from None
+    if not all(np.isfinite(v) and 0.0 <= v <= 20.0 for v in (roll, pitch)):
+        raise InputError("--body-motion", f"expected ROLL and PITCH within [0, 20] degrees per g, got {text!r}")
+    return BodyMotion(roll, pitch)
+
+
 def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int = 0, lag: float = 0.5,
-                 engine=None) -> list[str]:
+                 engine=None, body_motion=None) -> list[str]:
+    import dataclasses
+
     from vfactor.evaluation import nees_component_table
     from vfactor.parallel import InProcess
     from vfactor.sim import load_scenario
@@ -151,6 +171,8 @@ def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int =
     if scenario.motion is None:
         raise InputError("--scenario", f"{scenario.name!r} has no motion: each frame holds new vehicles, so there "
                          "is nothing to track; use a scenario with tracks, e.g. tracks_3veh or tracks_3cam")
+    if body_motion is not None:
+        scenario = dataclasses.replace(scenario, body_motion=body_motion)
     units = [(scenario, s, frames, draws, lag) for s in range(seed, seed + seeds)]
     done = list((engine or InProcess()).map(_tracks_unit, units))
     sections = [section for unit_sections, *_ in done for section in unit_sections]

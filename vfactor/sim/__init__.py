@@ -42,6 +42,7 @@ from vfactor.sim.scenario import (
     ROUTE_FIELDS,
     ROUTE_MOTION_FIELDS,
     SCENARIO_FIELDS,
+    BodyMotion,
     Motion,
     RouteMotion,
     RouteSpec,
@@ -122,6 +123,7 @@ __all__ = [
     "intersection_path",
     # scenarios
     "Scenario",
+    "BodyMotion",
     "Motion",
     "RouteMotion",
     "RouteSpec",

@@ -9,6 +9,7 @@ load; every problem raises :class:`vfactor.errors.ScenarioError` whose
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from importlib import resources
@@ -25,6 +26,7 @@ from vfactor.sim.routes import Path as RoutePath
 from vfactor.sim.vehicles import RANDOM, RandomShape, check_vehicle_name
 
 __all__ = [
+    "BodyMotion",
     "Motion",
     "RouteMotion",
     "RouteSpec",
@@ -69,6 +71,8 @@ SCENARIO_FIELDS: dict[str, str] = {
     "motion": 'null (default: independent frames), {"speed": [min, max] m/s, "yaw_rate_deg": [min, max] deg/s} '
     '(constant speed and turn rate) or {"kind": "route", ...} '
     "(routes through the intersection; see ROUTE_MOTION_FIELDS)",
+    "body_motion": 'null (default: rigid vehicles) or {"roll_deg_per_g": 5.0, "pitch_deg_per_g": 2.0}: with motion, '
+    "the body rolls and pitches on its suspension with the accelerations while its hubs stay on the road",
 }
 
 #: Values of ``require_visible``.
@@ -143,6 +147,35 @@ _NOISE_PRESETS = {
     "noiseless": NoiseModel.noiseless(),
     "gaussian": NoiseModel.gaussian_only(),
 }
+
+
+@dataclass(frozen=True)
+class BodyMotion:
+    """The body rolling and pitching on its suspension with the vehicle's accelerations (quasi-static).
+
+    A real vehicle's body rolls outwards in a turn and pitches nose-down when braking, about a degree or a few per
+    g of acceleration (roll gradients of passenger cars 3-7 deg/g, pitch gradients 1-3 deg/g), while its wheels
+    stay on the road. With it, the simulated vehicle's pose stays the hubs' frame and its body keypoints (lights,
+    windshield and rear-window tops) turn about the hubs' centre: roll ``roll_deg_per_g * a_lat / g`` (``a_lat =
+    speed * yaw_rate``, to the left), pitch ``-pitch_deg_per_g * a_long / g`` (nose down when ``a_long < 0``).
+
+    Attributes:
+        roll_deg_per_g: degrees of body roll per g of lateral acceleration.
+        pitch_deg_per_g: degrees of body pitch per g of longitudinal acceleration.
+    """
+
+    roll_deg_per_g: float = 0.0
+    pitch_deg_per_g: float = 0.0
+
+    def applied(self, truth):
+        """The :class:`~vfactor.sim.simulate.VehicleTruth` ``truth`` with its body's roll and pitch set from its
+        speed, yaw rate and acceleration (unchanged where they are not known: independent frames)."""
+        if truth.speed is None or truth.yaw_rate is None or truth.acceleration is None:
+            return truth
+        g = 9.81
+        roll = math.radians(self.roll_deg_per_g) * truth.speed * truth.yaw_rate / g
+        pitch = -math.radians(self.pitch_deg_per_g) * truth.acceleration / g
+        return dataclasses.replace(truth, body_roll=roll, body_pitch=pitch)
 
 
 @dataclass(frozen=True)
@@ -278,6 +311,8 @@ class Scenario:
             the motion of vehicles that keep their id and shape over the frames:
             :class:`Motion` (constant speed and turn rate) or :class:`RouteMotion`
             (routes through the intersection, or explicit paths, with stops).
+        body_motion: with :attr:`motion`, the body's roll and pitch with the accelerations
+            (:class:`BodyMotion`); None: rigid vehicles (roll and pitch 0, as on a flat road).
     """
 
     cameras: dict[str, Camera]
@@ -299,6 +334,7 @@ class Scenario:
     seed: int = 0
     motion: Motion | RouteMotion | None = None
     ground_plane: bool = False
+    body_motion: BodyMotion | None = None
 
     def __post_init__(self):
         if self.visible_in is None:
@@ -429,6 +465,12 @@ def scenario_from_dict(data: dict, default_name: str = "scenario") -> Scenario:
                     f"{len(routes)} routes for vehicles_per_frame = {kw['vehicles_per_frame']}: "
                     "give at most one route per vehicle (or leave vehicles_per_frame out)",
                 )
+    if data.get("body_motion") is not None:
+        if "motion" not in kw:
+            raise ScenarioError("body_motion", "needs motion: vehicles of independent frames have no accelerations")
+        value = chk.check_mapping(data["body_motion"], "body_motion", ("roll_deg_per_g", "pitch_deg_per_g"))
+        kw["body_motion"] = BodyMotion(**{key: chk.number(value[key], f"body_motion.{key}", lo=0.0, hi=20.0)
+                                          for key in ("roll_deg_per_g", "pitch_deg_per_g") if key in value})
     return Scenario(**kw)
 
 

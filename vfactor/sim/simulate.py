@@ -50,9 +50,14 @@ class VehicleTruth:
         speed: forward speed along body x, m/s (None for independent frames).
         yaw_rate: rad/s, counter-clockwise seen from above (None for independent frames).
         acceleration: longitudinal acceleration, m/s^2 (None for independent frames).
+        body_roll, body_pitch: where the scenario has ``body_motion``, the body's roll and pitch on its
+            suspension against the hubs' frame, radians (None: a rigid vehicle); :attr:`seen_keypoints_world`.
 
     With motion, the velocity is ``speed`` along the heading (the vehicle never
-    slides sideways): world ``(speed * cos(yaw), speed * sin(yaw), 0)``.
+    slides sideways): world ``(speed * cos(yaw), speed * sin(yaw), 0)``. The pose
+    is the hubs' frame (on the road); a body that rolls or pitches moves its
+    lights, windshield and rear-window keypoints, not its hubs, so its 12
+    keypoints are no longer its rigid :attr:`wireframe`'s.
     """
 
     world_T_vehicle: gtsam.Pose3
@@ -62,11 +67,27 @@ class VehicleTruth:
     speed: float | None = None
     yaw_rate: float | None = None
     acceleration: float | None = None
+    body_roll: float | None = None
+    body_pitch: float | None = None
 
     @property
     def keypoints_world(self) -> np.ndarray:
-        """(12, 3) keypoints in the world frame, metres."""
+        """(12, 3) keypoints of the rigid vehicle (:attr:`wireframe` at :attr:`world_T_vehicle`) in the world frame,
+        metres: what an estimate of the vehicle's pose and shape is scored against."""
         return self.wireframe.in_world(self.world_T_vehicle)
+
+    @property
+    def seen_keypoints_world(self) -> np.ndarray:
+        """(12, 3) the keypoints where the cameras see them, world frame, metres: :attr:`keypoints_world` with the
+        body's keypoints (all but the four hubs) turned by :attr:`body_roll` (about body x) and :attr:`body_pitch`
+        (about body y) around the hubs' centre, the body frame's origin; the same as :attr:`keypoints_world` for a
+        rigid vehicle."""
+        if not self.body_roll and not self.body_pitch:
+            return self.keypoints_world
+        body = np.array(self.wireframe.vehicle_p_keypoints, dtype=float)
+        turn = (gtsam.Rot3.Rx(float(self.body_roll or 0.0)) * gtsam.Rot3.Ry(float(self.body_pitch or 0.0))).matrix()
+        body[4:] = body[4:] @ turn.T
+        return self.world_T_vehicle.transformFrom(body.T).T
 
     @property
     def keypoints_vehicle(self) -> np.ndarray:
@@ -191,6 +212,8 @@ def simulate(scenario: Scenario | str | Path, seed: int | None = None, num_frame
     else:
         truth = _place_tracks(scenario, np.random.default_rng([seed, _TRACKS]), num_frames)
 
+    if scenario.body_motion is not None:
+        truth = [{vid: scenario.body_motion.applied(v) for vid, v in frame.items()} for frame in truth]
     frames, detection_truth = _observe_frames(scenario, truth, seed)
     scene = Scene(cameras=dict(scenario.cameras), frames=frames, base_dir=None,
                   ground_plane=GroundPlane() if scenario.ground_plane else None)
@@ -450,7 +473,7 @@ def _observe(
     detections, labels = [], {}
     for vid, vehicle in vehicles.items():
         others = [b for other, b in bodies.items() if other != vid]
-        world_p = vehicle.keypoints_world
+        world_p = vehicle.seen_keypoints_world
         for camera in scenario.cameras.values():
             uv, depth = camera.project(world_p)
             occluded = occluded_keypoints(camera.center, bodies[vid], others)

@@ -14,7 +14,8 @@
 
 ``speed`` (m/s along body x), ``yaw_rate`` (rad/s) and ``acceleration``
 (m/s^2, longitudinal) are written for moving vehicles only (scenarios with
-``motion``). ``keypoints_world`` is redundant (``world_T_vehicle`` applied to
+``motion``), ``body_roll`` and ``body_pitch`` (radians, the body on its suspension against the hubs' frame)
+where the scenario has ``body_motion``. ``keypoints_world`` (the rigid vehicle's) is redundant (``world_T_vehicle`` applied to
 ``keypoints_vehicle``) and is written for readers that only want the points;
 :func:`load_truth` rebuilds the truth from the pose and the body keypoints.
 """
@@ -35,7 +36,7 @@ from vfactor.wireframe import Wireframe
 __all__ = ["truth_to_dict", "truth_from_dict", "save_truth", "load_truth", "write_simulation"]
 
 # Optional per-vehicle motion state (written for moving vehicles only).
-_MOTION_KEYS = ("speed", "yaw_rate", "acceleration")
+_MOTION_KEYS = ("speed", "yaw_rate", "acceleration", "body_roll", "body_pitch")
 
 
 def truth_to_dict(sim: Simulation) -> dict:

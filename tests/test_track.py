@@ -396,6 +396,18 @@ def test_a_track_with_a_road_plane_estimates_its_own_hub_height():
         assert "nissan_titan_a61_crew" in {p for p, _ in preset.values()}  # the prior's 0.34 m is 7.4 cm below it
 
 
+
+def test_a_track_starts_from_its_first_frame_solved_as_solve_vehicle_solves_it():
+    """A track's first frame is solved with its keypoints' sigmas sized by the vehicle it finds, as
+    ``solve_vehicle`` solves a frame: the Jumper van of ``library_tracks`` seed 220 enters cam0's view with 4
+    keypoints, which sized by their own small box outweighed the other cameras, and its first frame was failed
+    (the cameras "disagree") where ``vfactor solve`` solves it."""
+    sim = simulate(load_scenario("library_tracks"), seed=220)
+    scene = dataclasses.replace(sim.scene, frames=sim.scene.frames[:3])
+    first = track_scene(scene, TrackOptions(covariance=False)).frames[0]
+    assert all(v.ok for v in first.vehicles), [(v.id, v.message) for v in first.vehicles]
+
+
 def test_a_track_does_not_narrow_calibrated_covariances(sim):
     """A detector's calibrated covariances (the keypoint network's) are a floor in tracks, as in the one-frame
     covariances: the residuals of a fit that absorbs such a detector's errors understate them, and a track at their

@@ -478,11 +478,20 @@ class Tracker:
         twist = gtsam.Pose3.Logmap(estimate.atPose3(k0).between(T1)) / (t1 - t0)
         return T1.compose(gtsam.Pose3.Expmap(twist * (t - t1)))
 
-    def _start(self, track: _TrackState, frame_index: int, t: float, obs: KeypointObservations) -> VehicleResult:
-        first = solve_observations(obs, dataclasses.replace(self.options.solve, shape_information=True), track.id,
-                                   self.model or self.prior, self.bounds)
+    def _start(self, track: _TrackState, frame_index: int, t: float, detections: list[Detection]) -> VehicleResult:
+        """A new segment from this frame's own solve of all its ``detections``, its keypoints' sigmas sized by the
+        vehicle it finds, as :func:`vfactor.solve.solve_vehicle` sizes them (a vehicle entering a view, cut by the
+        image border, is what a track often starts from: sized by their own small box its few keypoints there were
+        weighed as if several times more precise than they are; ``library_tracks`` seed 220's van was failed in its
+        first frame for it)."""
+        options = self.options.solve
+        obs = observations_from_detections(detections, self.cameras, options.graph)
+        first = _solve_alone(obs, dataclasses.replace(options, shape_information=True), track.id,
+                             self.model or self.prior, self.bounds, detections, self.cameras)
         if not first.ok:
             return first
+        # the track's graph keeps the first frame's keypoints as the detector sized them: sized by the vehicle the
+        # frame's solve found, a vehicle re-drawn under an id that jumped was merged worse (intersection_multi)
         self._rechoose(track, [first])  # the prior and noise scale the frame's own solve used
         track.smoother = self._new_smoother()
         track.poses, track.hwc_added = [], False
@@ -861,7 +870,7 @@ class Tracker:
             track.restart()
             track.notes[self.keys.pose_key(track.index, frame_index)] = _segment_message(gap, self.options.max_gap)
         if track.smoother is None:
-            return self._start(track, frame_index, t, obs)
+            return self._start(track, frame_index, t, detections)
         if track.previous is not None:
             self._resume(track, t, obs)
         raw, obs = obs, obs.scaled_above_calibrated(track.noise_scale)
@@ -912,7 +921,7 @@ class Tracker:
                                 "starts": pending["starts"] + [len(pending["poses"])]}
                     track.jumps.append((frame_index, t, jump))
                     track.notes[key] = f"a new segment of the track: {jump}; the detections' id may not follow one vehicle"
-                    return self._start(track, frame_index, t, raw)
+                    return self._start(track, frame_index, t, detections)
                 if not jump or (not few and starts[0].cost < _START_COST_RATIO * predicted_cost):
                     guess = starts[0].world_T_vehicle
         # the keypoints the track takes (those the gate kept): their sigmas sized by the vehicle where it is taken to be

@@ -77,3 +77,23 @@ def test_the_body_motion_field_is_checked():
         scenario_from_dict({**base, "body_motion": {"pitch_deg_per_g": -1}})
     with pytest.raises(ScenarioError, match="body_motion"):
         scenario_from_dict({**base, "body_motion": {"yaw_deg_per_g": 1}})
+
+
+def test_turn_lateral_accel_slows_a_turning_vehicle_to_it():
+    """``motion.turn_lateral_accel``: traffic slows for a turn; the default routes turn at cruise speed (1.2-1.4 g on
+    ``library_tracks``)."""
+    base = load_scenario("library_tracks")
+    for cap, most in ((None, 9.81), (3.5, 3.5 + 1e-9)):
+        scenario = dataclasses.replace(base, motion=dataclasses.replace(base.motion, turn_lateral_accel=cap))
+        lateral = [abs(v.speed * v.yaw_rate) for seed in (210, 211, 212)
+                   for frame in simulate(scenario, seed=seed).truth for v in frame.values()]
+        if cap is None:
+            assert max(lateral) > most  # more than 1 g somewhere
+        else:
+            assert max(lateral) <= most
+    traffic = load_scenario("library_tracks_traffic")
+    assert traffic.motion.turn_lateral_accel == 3.5 and traffic.body_motion == BodyMotion(4.5, 2.0)
+    with pytest.raises(ScenarioError, match="motion.turn_lateral_accel"):
+        scenario_from_dict({"cameras": [{"name": "cam0", "pole": [-14.0, -11.0], "height": 7.5,
+                                         "look_at": [0.0, 0.0, 0.0], "hfov_deg": 45.0, "image_size": [1280, 720]}],
+                            "vehicles": ["van"], "motion": {"kind": "route", "turn_lateral_accel": 0}})

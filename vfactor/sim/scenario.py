@@ -104,6 +104,8 @@ ROUTE_MOTION_FIELDS: dict[str, str] = {
     "stop_time": "range of the time a stopping vehicle comes to rest, s (default [0, (num_frames - 1) * dt])",
     "lane_offset": "distance of the lanes from the road axes, m (default 1.75; negative: left-hand traffic)",
     "scene_radius": "null (default) or metres: a vehicle exists only while within this distance of the origin",
+    "turn_lateral_accel": "null (default: turns at cruise speed) or m/s^2: a turning vehicle's cruise speed is at "
+    "most sqrt(turn_lateral_accel * radius), as traffic slows for a turn (about 2-4 m/s^2)",
 }
 
 #: Keys of one entry of ``motion.routes``; every one is optional.
@@ -262,6 +264,8 @@ class RouteMotion:
         stop_time: time a stopping vehicle comes to rest (None: ``[0, (num_frames - 1) * dt]``).
         lane_offset: distance of the lanes from the road axes, metres.
         scene_radius: a vehicle exists only while within this distance of the origin (None: always).
+        turn_lateral_accel: a turning vehicle's cruise speed is at most ``sqrt(turn_lateral_accel * radius)``
+            (m/s^2; None: turns are driven at the drawn cruise speed, up to 1.5 g at the defaults).
     """
 
     routes: tuple[RouteSpec, ...] = ()
@@ -278,6 +282,7 @@ class RouteMotion:
     stop_time: tuple[float, float] | None = None
     lane_offset: float = 1.75
     scene_radius: float | None = None
+    turn_lateral_accel: float | None = None
 
 
 @dataclass(frozen=True)
@@ -661,6 +666,9 @@ def _route_motion(value, field: str) -> RouteMotion:
         kw["lane_offset"] = chk.number(value["lane_offset"], where("lane_offset"), lo=-20.0, hi=20.0)
     if value.get("scene_radius") is not None:
         kw["scene_radius"] = chk.number(value["scene_radius"], where("scene_radius"), lo=0.0, lo_open=True)
+    if value.get("turn_lateral_accel") is not None:
+        kw["turn_lateral_accel"] = chk.number(value["turn_lateral_accel"], where("turn_lateral_accel"), lo=0.0,
+                                              hi=15.0, lo_open=True)
     if "routes" in value:
         routes = value["routes"]
         if not isinstance(routes, list):

@@ -410,6 +410,9 @@ def _trajectory(spec: RouteSpec, motion: RouteMotion, u: np.ndarray, wheel_radiu
     arm = spec.arm or motion.arms[min(int(u[4] * len(motion.arms)), len(motion.arms) - 1)]
     turn = spec.turn or motion.turns[min(int(u[5] * len(motion.turns)), len(motion.turns) - 1)]
     radius = _pick(spec.radius, motion.radius, u[6])
+    if turn != "straight" and motion.turn_lateral_accel is not None and spec.speed is None:
+        speed = min(speed, math.sqrt(motion.turn_lateral_accel * radius))  # traffic slows for a turn
+        common["speed"] = speed
     stop = spec.stop if spec.stop is not None else bool(u[7] < motion.stop_probability)
     stop_at = _pick(spec.stop_at, motion.stop_at, u[8])
     route = intersection_path(arm, turn, radius, motion.lane_offset, stop_at)

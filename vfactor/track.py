@@ -1441,7 +1441,13 @@ def _covariance_graph(factors: list, projections: list, estimate: gtsam.Values, 
     least_squares = dataclasses.replace(config, loss=RobustLoss("none"))
     points = wireframe_from_values(estimate, keys, index).vehicle_p_keypoints
     for frame, obs, offsets in projections:
-        residuals = whitened_residuals(obs, estimate.atPose3(keys.pose_key(index, frame)), points)
+        world_T_vehicle = estimate.atPose3(keys.pose_key(index, frame))
+        residuals = whitened_residuals(obs, world_T_vehicle, points)
+        for c, camera in enumerate(obs.cameras):  # a camera's detector offset moves the vehicle as its factor does
+            rows = obs.camera_index == c
+            if camera.name in offsets and rows.any():
+                residuals[rows] = whitened_residuals(
+                    obs.subset(rows), world_T_vehicle.compose(estimate.atPose3(offsets[camera.name])), points)
         inlier = np.sum(residuals ** 2, axis=1) < INLIER_BOUND
         if inlier.any():
             add_observation_factor(out, keys, obs.subset(inlier), index, frame, least_squares, offsets)

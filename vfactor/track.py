@@ -478,14 +478,14 @@ class Tracker:
         twist = gtsam.Pose3.Logmap(estimate.atPose3(k0).between(T1)) / (t1 - t0)
         return T1.compose(gtsam.Pose3.Expmap(twist * (t - t1)))
 
-    def _start(self, track: _TrackState, frame_index: int, t: float, detections: list[Detection]) -> VehicleResult:
-        """A new segment from this frame's own solve of all its ``detections``, its keypoints' sigmas sized by the
-        vehicle it finds, as :func:`vfactor.solve.solve_vehicle` sizes them (a vehicle entering a view, cut by the
-        image border, is what a track often starts from: sized by their own small box its few keypoints there were
-        weighed as if several times more precise than they are; ``library_tracks`` seed 220's van was failed in its
-        first frame for it)."""
+    def _start(self, track: _TrackState, frame_index: int, t: float, obs: KeypointObservations,
+               detections: list[Detection]) -> VehicleResult:
+        """A new segment from this frame's own solve of all its keypoints (``obs``, stacked from ``detections`` at
+        their nominal sigmas), their sigmas sized by the vehicle it finds, as :func:`vfactor.solve.solve_vehicle`
+        sizes them (a vehicle entering a view, cut by the image border, is what a track often starts from: sized by
+        their own small box its few keypoints there were weighed as if several times more precise than they are;
+        ``library_tracks`` seed 220's van was failed in its first frame for it)."""
         options = self.options.solve
-        obs = observations_from_detections(detections, self.cameras, options.graph)
         first = _solve_alone(obs, dataclasses.replace(options, shape_information=True), track.id,
                              self.model or self.prior, self.bounds, detections, self.cameras)
         if not first.ok:
@@ -514,9 +514,8 @@ class Tracker:
         return self._finish(track, key, t)
 
     def _hub_key(self, track: _TrackState) -> int | None:
-        """The key of the track's hub height above the road plane (its wheel radius, shared by its poses:
-        :func:`vfactor.graph.hub_prior`), or None without a road plane."""
-        return None if self.options.solve.ground_plane is None else self.keys.hub_key(track.index)
+        """The track's hub-height key (:func:`_hub_key`), or None without a road plane."""
+        return _hub_key(self.keys, track.index, self.options)
 
     def _shape_keys(self, track: _TrackState) -> list[int]:
         """The keys of what the track's poses share and its smoother keeps while the track lives: its shape layers
@@ -858,7 +857,7 @@ class Tracker:
                 track.retired[(index, track.id)] = self._smoothed(track, solved, key, wireframe, covariance)
 
     def _add(self, vid: str, frame_index: int, t: float, detections: list[Detection]) -> VehicleResult:
-        obs = observations_from_detections(detections, self.cameras, self.options.solve.graph)
+        obs = given = observations_from_detections(detections, self.cameras, self.options.solve.graph)
         track = self._track(vid)
         track.last_seen = t
         if len(obs) == 0:
@@ -870,7 +869,7 @@ class Tracker:
             track.restart()
             track.notes[self.keys.pose_key(track.index, frame_index)] = _segment_message(gap, self.options.max_gap)
         if track.smoother is None:
-            return self._start(track, frame_index, t, detections)
+            return self._start(track, frame_index, t, given, detections)
         if track.previous is not None:
             self._resume(track, t, obs)
         raw, obs = obs, obs.scaled_above_calibrated(track.noise_scale)
@@ -921,7 +920,7 @@ class Tracker:
                                 "starts": pending["starts"] + [len(pending["poses"])]}
                     track.jumps.append((frame_index, t, jump))
                     track.notes[key] = f"a new segment of the track: {jump}; the detections' id may not follow one vehicle"
-                    return self._start(track, frame_index, t, detections)
+                    return self._start(track, frame_index, t, given, detections)
                 if not jump or (not few and starts[0].cost < _START_COST_RATIO * predicted_cost):
                     guess = starts[0].world_T_vehicle
         # the keypoints the track takes (those the gate kept): their sigmas sized by the vehicle where it is taken to be
@@ -1048,6 +1047,13 @@ class Tracker:
         covariance = smoother.marginalCovariance(key) if self.options.covariance else None
         message = "" if track.frames_seen > 1 else "first frame of the track: no motion factors yet"
         return self._result(track, estimate, key, wireframe, covariance, message)
+
+
+def _hub_key(keys: KeyScheme, index: int, options: TrackOptions) -> int | None:
+    """The key of track ``index``'s hub height above the road plane (its wheel radius, one variable its poses share:
+    :func:`vfactor.graph.hub_prior`), or None where the track has no road plane (``options.solve.ground_plane``).
+    The tracker and batch smoothing both take it from here."""
+    return None if options.solve.ground_plane is None else keys.hub_key(index)
 
 
 def _add_pose_factors(graph: gtsam.NonlinearFactorGraph, poses, key: int, t: float, options: TrackOptions,
@@ -1334,7 +1340,7 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     add_shape_factors(graph, keys, index, config, track_prior, bounds)
-    hub = None if options.solve.ground_plane is None else keys.hub_key(index)  # the track's wheel radius
+    hub = _hub_key(keys, index, options)  # the track's wheel radius
     if hub is not None:
         graph.add(hub_prior(hub, config))
         values.insert(hub, np.array([config.hub_height]))

@@ -102,7 +102,7 @@ def ground_plane_factor(pose_key: int, plane: GroundPlane = GroundPlane(), hub_h
     return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(3), keys, partial(_error, pose_key, params, out, hub_key))
 
 
-def hub_height_prior(hub_key: int, hub_height: float = 0.34, sigma: float = 0.057) -> gtsam.NonlinearFactor:
+def hub_height_prior(hub_key: int, hub_height: float, sigma: float) -> gtsam.NonlinearFactor:
     """The prior of a vehicle's hub height above the road (``hub_key``: a 1-vector, metres): ``hub_height``
     with ``sigma`` for the wheel radii of real vehicles (the ground-plane factors of its poses take the value
     through ``hub_key``)."""

@@ -323,33 +323,32 @@ def robust_costs(obs: KeypointObservations, world_T_vehicle: np.ndarray, vehicle
     return costs
 
 
-def _layers_to_points(values: gtsam.Values, layer_keys) -> np.ndarray:
-    return np.concatenate([values.atVector(k) for k in layer_keys]).reshape(12, 3)
-
-
-def _error(obs: KeypointObservations, loss: RobustLoss, this: gtsam.CustomFactor, values: gtsam.Values, H):
-    keys = this.keys()
+def _error(obs: KeypointObservations, loss_id: int, threshold: float, keys: tuple, out: tuple, this: gtsam.CustomFactor,
+           values: gtsam.Values, H):
+    """The factor's whitened residuals (and Jacobians into ``H``). What does not change is taken once, when the
+    factor is made: the loss's index and threshold, the factor's keys as Python ints (``this.keys()`` builds a new
+    list at each call), and ``out``, its (r, H_pose, H_shape) buffers, reused (GTSAM copies ``H[i]`` and the
+    returned ``r``; the kernel writes the same entries of ``H_shape`` at each call, the others stay zero)."""
+    r, H_pose, H_shape = out
     T = values.atPose3(keys[0]).matrix()
-    points = _layers_to_points(values, keys[1:4])
+    points = np.concatenate((values.atVector(keys[1]), values.atVector(keys[2]), values.atVector(keys[3]))).reshape(12, 3)
     offset = len(keys) == 5
     if offset:  # the keypoints as this detector sees them: world_T_seen = world_T_vehicle * vehicle_T_seen
         vehicle_T_seen = values.atPose3(keys[4])
         T = T @ vehicle_T_seen.matrix()
-    n = len(obs)
-    r = np.empty(2 * n)
     want = H is not None
-    H_pose = np.empty((2 * n, 6)) if want else _EMPTY
-    H_shape = np.zeros((2 * n, 36)) if want else _EMPTY
     projection_kernel(T[:3, :3], T[:3, 3], points, obs.keypoint_index, obs._R_cw, obs._t_cw, obs._intrinsics_table,
                       obs._lens_table, obs._dist_table, obs.uv, obs.sqrt_information, obs._window_table, obs._sigma_table,
-                      loss.id, float(loss.threshold), _MIN_DEPTH, want, r, H_pose, H_shape)
+                      loss_id, threshold, _MIN_DEPTH, want, r, H_pose, H_shape)
     if want:
-        for j in range(3):
-            H[j + 1] = H_shape[:, 12 * j : 12 * j + 12]
+        H[1] = H_shape[:, :12]
+        H[2] = H_shape[:, 12:24]
+        H[3] = H_shape[:, 24:]
         if offset:  # H_pose is d/d world_T_seen: world_T_vehicle Exp(xi) vehicle_T_seen = world_T_seen Exp(Ad(seen_T_vehicle) xi)
             H[4] = H_pose
-            H_pose = H_pose @ vehicle_T_seen.inverse().AdjointMap()
-        H[0] = H_pose
+            H[0] = H_pose @ vehicle_T_seen.inverse().AdjointMap()
+        else:
+            H[0] = H_pose
     return r
 
 
@@ -370,5 +369,6 @@ def projection_factor(
     if len(obs) == 0:
         raise ValueError("projection_factor: no observations")
     noise = gtsam.noiseModel.Unit.Create(2 * len(obs))
+    out = (np.empty(2 * len(obs)), np.empty((2 * len(obs), 6)), np.zeros((2 * len(obs), 36)))
     keys = [pose_key, *layer_keys] + ([] if offset_key is None else [offset_key])
-    return gtsam.CustomFactor(noise, keys, partial(_error, obs, loss))
+    return gtsam.CustomFactor(noise, keys, partial(_error, obs, loss.id, float(loss.threshold), tuple(int(k) for k in keys), out))

@@ -100,6 +100,33 @@ def test_the_flag_round_trips_through_a_scene_file(tmp_path):
         load_scene(tmp_path / "bad.json")
 
 
+def test_a_detector_bias_round_trips_and_leaves_one_frame_solves_alone(tmp_path):
+    """``Detection.bias_sigma``: written and read back (valid under the schema), bad values named; a one-frame
+    solve does not use it (the bias is an error a track's frames share: tests/test_track.py)."""
+    sim, f, vid = _vehicles(frames=1)[0]
+    frame = sim.scene.frames[0]
+    bias = (0.01, 0.012, 0.004, 0.03, 0.01, 0.02)
+    dets = [dataclasses.replace(d, bias_sigma=bias) for d in frame.detections]
+    scene = dataclasses.replace(sim.scene, frames=[dataclasses.replace(frame, detections=dets)])
+    save_scene(scene, tmp_path / "scene.json")
+    text = (tmp_path / "scene.json").read_text()
+    assert validate(json.loads(text), "scene") == []
+    assert [d.bias_sigma for d in load_scene(tmp_path / "scene.json").frames[0].detections] == [bias] * len(dets)
+    written = json.dumps(list(bias))[1:-1]
+    for bad in ("[0.01, 0.02]", "[0.01, -0.012, 0.004, 0.03, 0.01, 0.02]", '"1 deg"',
+                "[0.01, 0.012, 0.004, 0.03, 0.01, \"x\"]"):
+        assert f"[{written}]" in text
+        (tmp_path / "bad.json").write_text(text.replace(f"[{written}]", bad, 1))
+        with pytest.raises(SceneError, match="bias_sigma"):
+            load_scene(tmp_path / "bad.json")
+        assert validate(json.loads((tmp_path / "bad.json").read_text()), "scene") != []
+    obs = observations_from_detections([d for d in dets if d.vehicle == vid], sim.scene.cameras, SolveOptions().graph)
+    plain = observations_from_detections(frame.detections_of(vid), sim.scene.cameras, SolveOptions().graph)
+    a, b = solve_observations(obs, SolveOptions(), vid), solve_observations(plain, SolveOptions(), vid)
+    np.testing.assert_array_equal(a.world_T_vehicle.matrix(), b.world_T_vehicle.matrix())
+    np.testing.assert_array_equal(a.pose_covariance, b.pose_covariance)
+
+
 def test_a_detector_shape_error_round_trips_and_widens_only_the_shape(tmp_path):
     """``Detection.shape_sigma``: written and read back (and valid under the schema); the solve is unchanged, the
     shape and world keypoint covariances grow by ``1 / sum_c sigma_c^-2`` per axis, the pose covariance not."""

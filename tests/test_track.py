@@ -332,6 +332,68 @@ def test_detector_offsets_model_errors_that_repeat_from_frame_to_frame(sim):
         assert rotation < rotation_plain and translation < 5.0
 
 
+def _with_detector_bias(sim, bias_sigma, seed: int, shape_sigma: float | None = None):
+    """``sim``'s scene whose detections carry ``bias_sigma`` (and ``shape_sigma``) and err as the detector's bias
+    models it: every camera sees each vehicle moved by one rigid motion of its body frame, drawn once per vehicle
+    from ``bias_sigma``, in every frame, on top of the simulator's independent pixel noise."""
+    rng = np.random.default_rng(seed)
+    vehicles = sorted({d.vehicle for frame in sim.scene.frames for d in frame.detections})
+    bias = {v: gtsam.Pose3.Expmap(rng.normal(size=6) * np.asarray(bias_sigma)) for v in vehicles}
+    frames = []
+    for f, frame in enumerate(sim.scene.frames):
+        detections = []
+        for d in frame.detections:
+            truth = sim.truth[f][d.vehicle]
+            camera = sim.scene.cameras[d.camera]
+            moved = truth.world_T_vehicle.compose(bias[d.vehicle]).transformFrom(truth.wireframe.vehicle_p_keypoints.T).T
+            shift = camera.project(moved)[0] - camera.project(truth.keypoints_world)[0]
+            detections.append(dataclasses.replace(d, keypoints=d.keypoints + shift, bias_sigma=tuple(bias_sigma),
+                                                  shape_sigma=shape_sigma))
+        frames.append(dataclasses.replace(frame, detections=detections))
+    return dataclasses.replace(sim.scene, frames=frames)
+
+
+@pytest.mark.parametrize("plane", [False, True])
+def test_a_detector_bias_keeps_track_covariances_near_errors_that_no_frame_averages(plane):
+    """Each vehicle seen moved by one rigid motion in every frame and camera (the detector's bias): a track that
+    counts every frame as new is far too sure of its poses; with the detections' ``bias_sigma`` the track's common
+    offset keeps them near their errors, in the tracker (and its fixed lag) and in batch smoothing, without a road
+    plane and with one (and each camera's own offset, from a ``shape_sigma``), and the errors are no worse. Nine
+    draws of the bias (three scenes of three vehicles): the mean NEES of so few draws spreads by about a fifth."""
+    from vfactor.factors.ground_plane import GroundPlane
+
+    clean = dataclasses.replace(load_scenario("library_tracks_2cam"),
+                                noise=NoiseModel(relative_sigma=0.003, outlier_rate=0, swap_rate=0, missing_rate=0))
+    bias_sigma = (0.01, 0.01, 0.004, 0.04, 0.02, 0.03)
+    nees = {name: [] for name in ("unaware", "tracker", "fixed lag", "batch")}
+    for seed in (1, 2, 3):
+        truth = simulate(clean, seed=seed, num_frames=12)
+        scene = _with_detector_bias(truth, bias_sigma, seed=seed, shape_sigma=0.04 if plane else None)
+        if plane:
+            scene = dataclasses.replace(scene, ground_plane=GroundPlane((0.0, 0.0, 1.0), 0.0))
+        unaware = dataclasses.replace(scene, frames=[dataclasses.replace(
+            f, detections=[dataclasses.replace(d, bias_sigma=None) for d in f.detections]) for f in scene.frames])
+        plain = track_scene(unaware)
+        (rotation_plain, translation_plain), _ = mean_errors(truth, plain.frames)
+        nees["unaware"].append(_mean_nees(truth, plain.frames))
+        runs = {"tracker": track_scene(scene).frames, "batch": smooth_scene(scene)}
+        if not plane:
+            runs["fixed lag"] = track_scene(scene, TrackOptions(lag=0.5)).frames
+        for name, frames in runs.items():
+            assert all(v.ok for fr in frames for v in fr.vehicles)
+            nees[name].append(_mean_nees(truth, frames))
+            (rotation, translation), _ = mean_errors(truth, frames)
+            assert rotation < 1.2 * rotation_plain + 0.05 and translation < 1.2 * translation_plain + 0.5
+    assert np.mean(nees["unaware"]) > 3 * 6  # the repeated error counted as new in every frame
+    for name in ("tracker", "fixed lag", "batch") if not plane else ("tracker", "batch"):
+        assert 0.35 * 6 < np.mean(nees[name]) < 1.5 * 6, (name, nees[name])
+    if plane:  # no offsets at all: the bias is not modelled, the track is as if the detections had no bias_sigma
+        off = TrackOptions(detector_offsets=False)
+        for a, b in zip(track_scene(scene, off).frames, track_scene(unaware, off).frames):
+            for u, w in zip(a.vehicles, b.vehicles):
+                np.testing.assert_array_equal(u.pose_covariance, w.pose_covariance)
+
+
 def test_detector_offsets_need_a_shape_sigma(sim):
     """Detections without a shape_sigma (the simulator's) get no offset: the same estimates to the bit."""
     scene = copy.deepcopy(sim.scene)

@@ -48,6 +48,9 @@ __all__ = [
     "add_observation_factor",
     "detector_shape_sigmas",
     "detector_offset_prior",
+    "detector_bias_sigma",
+    "detector_bias_prior",
+    "COMMON_OFFSET",
     "add_ground_factor",
     "ground_factor",
     "hub_prior",
@@ -446,6 +449,34 @@ def detector_offset_prior(offset_key: int, sigma: float, vehicle_p_keypoints: np
     J = J.reshape(-1, 6)
     information = J.T @ J / (2.0 * sigma**2)  # the doubled points count once
     return gtsam.PriorFactorPose3(offset_key, gtsam.Pose3(), gtsam.noiseModel.Gaussian.Information(information))
+
+
+#: The name, in a track's camera name -> detector offset key mappings, of the offset all its cameras share (the
+#: detector's bias, :func:`detector_bias_prior`); no camera has it (camera names are not empty).
+COMMON_OFFSET = ""
+
+
+def detector_bias_sigma(detections) -> np.ndarray | None:
+    """The largest ``bias_sigma`` of ``detections``, element by element ((6,): radians about the body x, y, z, then
+    metres along them), or None where none has one (or every one is zero)."""
+    found = [np.asarray(d.bias_sigma, dtype=float) for d in detections if d.bias_sigma is not None]
+    largest = np.max(found, axis=0) if found else None
+    return largest if largest is not None and np.any(largest > 0) else None
+
+
+def detector_bias_prior(offset_key: int, bias_sigma) -> gtsam.NonlinearFactor:
+    """The prior of a track's common detector offset (the offset every camera's keypoints of the track move by,
+    docs/factors.md, "The detector's pose offset in tracks"): the identity with the detections' ``bias_sigma``
+    ((6,): rotation about the body x, y, z in radians, then shift along them in metres) as the sigmas of its
+    ``Pose3`` coordinates. A diagonal covariance is the same in either gauge of the body frame (the half turn about
+    z changes the signs of the roll, pitch, x and y coordinates only). A zero sigma is taken as
+    :data:`MIN_BIAS_SIGMA` (no bias there, and a variable the graph can still hold)."""
+    sigmas = np.maximum(np.asarray(bias_sigma, dtype=float), MIN_BIAS_SIGMA)
+    return gtsam.PriorFactorPose3(offset_key, gtsam.Pose3(), gtsam.noiseModel.Diagonal.Sigmas(sigmas))
+
+
+#: The least sigma (radians or metres) :func:`detector_bias_prior` gives a coordinate of a track's common offset.
+MIN_BIAS_SIGMA = 1e-4
 
 
 def add_ground_factor(

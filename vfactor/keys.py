@@ -5,7 +5,8 @@ scheme uses ``x`` for vehicle poses (``world_T_vehicle``, one per vehicle per
 frame) and ``w``, ``l``, ``r`` for the wheel, light and roof shape layers (one
 12-vector each per vehicle, shared by all frames of its track), ``o`` for
 a track's detector pose offsets (a ``gtsam.Pose3`` per camera that sees it,
-where the detections carry a ``shape_sigma``), and ``h`` for a track's hub
+where the detections carry a ``shape_sigma``, and one all its cameras share,
+where they carry a ``bias_sigma``), and ``h`` for a track's hub
 height above a given road plane (a 1-vector, metres: its wheel radius, shared
 by its poses). Choose other characters when those collide with a graph of your
 own.
@@ -36,7 +37,8 @@ class KeyScheme:
         light: character of the light layer.
         roof: character of the roof layer.
         offset: character of a track's detector pose offsets (``vehicle_T_seen``, ``gtsam.Pose3``; one per
-            camera that sees the track, where its detections carry a ``shape_sigma``).
+            camera that sees the track, where its detections carry a ``shape_sigma``, and the one its cameras
+            share, where they carry a ``bias_sigma``).
         hub: character of a track's hub height above the road plane (a 1-vector, metres; where a plane is given).
         frame_stride: pose index = vehicle * frame_stride + frame (and offset index = vehicle *
             frame_stride + offset number).
@@ -69,7 +71,7 @@ class KeyScheme:
 
     def offset_key(self, vehicle: int = 0, number: int = 0) -> int:
         """Key of a vehicle's detector pose offset number ``number`` (a track numbers its offsets as it makes
-        them: one per camera, a new one where the smoother has marginalised the camera's previous one)."""
+        them: one per camera and the common one, a new one where the smoother has marginalised the previous)."""
         if not 0 <= number < self.frame_stride:
             raise ValueError(f"number: expected 0 <= number < {self.frame_stride}, got {number}")
         return gtsam.symbol(self.offset, vehicle * self.frame_stride + number)

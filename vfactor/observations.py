@@ -73,6 +73,12 @@ class Detection:
             (the keypoint network's, calibrated with ``python -m vfactor.net calibrate-shape``; the scene's
             ``"shape_sigma"``). The one-frame result's shape and keypoint covariances are widened by it
             (docs/factors.md, "Covariances", item 6); None or 0: no such error.
+        bias_sigma: optional standard deviations of the detector's error that repeats over a vehicle's frames and
+            cameras, as a rigid motion of the vehicle in its body frame: ``(roll, pitch, yaw)`` radians about its
+            x, y, z axes, ``(x, y, z)`` metres along them (the keypoint network's, calibrated with ``python -m
+            vfactor.net calibrate-bias``; the scene's ``"bias_sigma"``). A track with detector offsets takes it as
+            the prior of one pose offset that all its cameras share (docs/factors.md, "The detector's pose offset
+            in tracks"), so that its poses' covariances keep what no number of frames averages away; None: none.
     """
 
     camera: str
@@ -87,6 +93,7 @@ class Detection:
     track: str | None = None
     covariance_calibrated: bool = False
     shape_sigma: float | None = None
+    bias_sigma: tuple[float, ...] | None = None
 
     @property
     def seen(self) -> np.ndarray:

@@ -19,7 +19,7 @@ otherwise)::
 
     detection = {"camera", "vehicle"?, "keypoints"?: 12 x [u, v, confidence],
                  "keypoint_covariances"?: 12 x (null | 2x2), "covariances_calibrated"?: bool,
-                 "shape_sigma"?: metres, "heatmaps"?: "x.npy",
+                 "shape_sigma"?: metres, "bias_sigma"?: 6 x number, "heatmaps"?: "x.npy",
                  "roi"?: [x0, y0, x1, y1], "class"?: "car" | "truck" | "bus" | body type}
 
 A detection gives ``keypoints``, or ``heatmaps`` with ``roi``, or only a
@@ -32,8 +32,11 @@ positive-definite 2x2 pixel covariance (px^2), or null where unknown;
 detector's true errors (the keypoint network's, as ``vfactor.net`` writes them),
 so the result's covariances are computed at no less than them; ``shape_sigma``
 (metres, default none) is the detector's error shaped like a change of the
-vehicle's shape, which widens the result's shape and keypoint covariances
-(:class:`vfactor.observations.Detection`). Optional fields may also be given as
+vehicle's shape, which widens the result's shape and keypoint covariances;
+``bias_sigma`` (default none) the sigmas of the detector's error that repeats
+over a vehicle's frames and cameras, a rigid motion of the vehicle (``[roll,
+pitch, yaw]`` radians, ``[x, y, z]`` metres, body frame), which tracks take into
+their poses' covariances (:class:`vfactor.observations.Detection`). Optional fields may also be given as
 null, which means "absent".
 
 Paths (``heatmaps``, ``images``, ``calibration``) are relative to the scene file's
@@ -91,7 +94,7 @@ _CAMERA_KEYS = ("name", "model", "K", "dist", "image_size", "world_T_camera", "c
 _INTRINSIC_KEYS = ("model", "K", "dist")
 _FRAME_KEYS = ("t", "detections", "images")
 _DETECTION_KEYS = ("camera", "vehicle", "track", "keypoints", "keypoint_covariances", "covariances_calibrated",
-                   "shape_sigma", "heatmaps", "roi", "class")
+                   "shape_sigma", "bias_sigma", "heatmaps", "roi", "class")
 _RESULT_TOP_KEYS = ("frames",)
 _RESULT_FRAME_KEYS = ("t", "vehicles")
 _VEHICLE_KEYS = (
@@ -539,6 +542,9 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Fol
         shape_sigma = _number(shape_sigma, f"{path}.shape_sigma", "a finite number of metres >= 0")
         if shape_sigma < 0:
             raise SceneError(f"{path}.shape_sigma", f"expected a finite number of metres >= 0, got {shape_sigma}")
+    bias_sigma = det.get("bias_sigma")
+    if bias_sigma is not None:
+        bias_sigma = _bias_sigma(bias_sigma, f"{path}.bias_sigma")
 
     if det.get("keypoints") is not None:
         keypoints, confidence = _keypoints(det["keypoints"], f"{path}.keypoints")
@@ -577,8 +583,18 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Fol
         track=track,
         covariance_calibrated=calibrated,
         shape_sigma=shape_sigma,
+        bias_sigma=bias_sigma,
     )
     return detection, has_vehicle
+
+
+def _bias_sigma(data, path: str) -> tuple[float, ...]:
+    """A detection's ``bias_sigma``: 6 finite numbers >= 0 (radians about, then metres along, the body x, y, z)."""
+    expected = "6 finite numbers >= 0 ([roll, pitch, yaw] radians, [x, y, z] metres)"
+    values = _numbers(data, path, expected, (6,))
+    if np.any(values < 0):
+        raise SceneError(path, f"expected {expected}, got {values.tolist()}")
+    return tuple(float(x) for x in values)
 
 
 def _keypoints(data, path: str) -> tuple[np.ndarray, np.ndarray]:
@@ -691,6 +707,8 @@ def _detection_to_dict(det: Detection, path: str, scene_base: Path | None, out_b
                 out["covariances_calibrated"] = True
     if det.shape_sigma:
         out["shape_sigma"] = float(det.shape_sigma)
+    if det.bias_sigma is not None:
+        out["bias_sigma"] = [float(x) for x in det.bias_sigma]
     if det.heatmaps is not None:
         out["heatmaps"] = _path_out(det.heatmaps, scene_base, out_base)
     if det.roi is not None:

@@ -37,9 +37,12 @@ from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomi
 from vfactor.factors.projection import KeypointObservations, whitened_residuals
 from vfactor.factors.robust import RobustLoss
 from vfactor.graph import (
+    COMMON_OFFSET,
     GraphConfig,
     add_observation_factor,
     add_shape_factors,
+    detector_bias_prior,
+    detector_bias_sigma,
     detector_offset_prior,
     detector_shape_sigmas,
     ground_factor,
@@ -125,7 +128,10 @@ class TrackOptions:
             2.7x -> 2.0x, rotation 0.88 -> 0.78 deg; three cameras: NEES 1.1x-2.9x -> 0.86x-2.2x), translations
             -0.2 to +1.2 cm; without a plane, with two cameras of little overlap, rotations are mostly worse
             (docs/results.md, "Tracking from images", "The road plane from the traffic"). It costs 1.2-1.5x per
-            frame in iSAM2.
+            frame in iSAM2. Where the detections carry a ``bias_sigma`` (the detector's error that repeats over a
+            vehicle's frames and cameras), the track gets one more offset, which every camera's keypoints share,
+            with that prior; the cameras' own offsets are then tied to it (docs/factors.md): unless
+            ``detector_offsets`` is ``False``, with or without a plane.
         optimizer: iSAM2's step: ``"dogleg"`` (Powell's dogleg, a trust region;
             the default, as Gauss-Newton steps can diverge when a weakly
             constrained track is suddenly well seen) or ``"gn"`` (Gauss-Newton).
@@ -162,6 +168,12 @@ class TrackOptions:
         if self.solve.graph.shape_prior_loss != self.shape_prior_loss:  # the tracks' prior, wherever solve is used
             graph = dataclasses.replace(self.solve.graph, shape_prior_loss=self.shape_prior_loss)
             object.__setattr__(self, "solve", dataclasses.replace(self.solve, graph=graph))
+
+    @property
+    def uses_detector_bias(self) -> bool:
+        """Whether tracks whose detections carry a ``bias_sigma`` get a common detector offset: unless
+        :attr:`detector_offsets` is ``False``."""
+        return self.detector_offsets is not False
 
     @property
     def uses_detector_offsets(self) -> bool:
@@ -251,6 +263,10 @@ class _TrackState:
     # each offset key the smoother was given -> its prior (their count numbers the next key)
     offsets: dict = field(default_factory=dict)
     offset_priors: dict = field(default_factory=dict)
+    # the largest bias_sigma of the track's detections (None: none has one; the common offset's prior is made with
+    # the one known when the offset is made) and the cameras whose detections carry one
+    bias_sigma: np.ndarray | None = None
+    bias_cameras: set = field(default_factory=set)
     # pose key -> (frame index, its keypoints as the smoother's projection factors hold them, camera name -> detector
     # offset key): the smoothed covariances' graph takes them as least squares on their inliers (_covariance_graph)
     observed: dict = field(default_factory=dict)
@@ -525,26 +541,42 @@ class Tracker:
 
     def _offsets(self, track: _TrackState, obs: KeypointObservations, values: gtsam.Values,
                  estimate: gtsam.Values, graph: gtsam.NonlinearFactorGraph | None = None) -> dict[str, int]:
-        """Camera name -> the key of the detector pose offset of its keypoints in this frame, for the cameras
-        whose detections carry a ``shape_sigma`` (docs/factors.md, "The detector's pose offset in tracks").
+        """Camera name -> the key of the detector pose offset of its keypoints in this frame (docs/factors.md, "The
+        detector's pose offset in tracks"): with detector offsets, each camera whose detections carry a
+        ``shape_sigma`` has its own; where the track's detections carry a ``bias_sigma`` the track has a common
+        offset too (under :data:`~vfactor.graph.COMMON_OFFSET`), to which each camera's own offset is tied, and
+        which the keypoints of cameras without their own offset move by directly.
 
-        A camera keeps its offset while the smoother holds it (``estimate``); a camera new to the track, or whose
-        offset the fixed lag has marginalised, gets a new one: the identity in ``values``, and its prior (made at
+        An offset stays while the smoother holds it (``estimate``); a camera new to the track, or an offset the
+        fixed lag has marginalised, gets a new one: the identity in ``values``, and its prior (a camera's made at
         the track's shape in ``estimate``, else in ``values``) in ``graph`` (a young track's graph adds the priors
         itself, :meth:`_young_graph`).
         """
         out = {}
-        if not self.options.uses_detector_offsets:
-            return out
-        for name, sigma in detector_shape_sigmas(obs).items():
+        common = None
+        if self.options.uses_detector_bias and track.bias_sigma is not None:
+            common = track.offsets.get(COMMON_OFFSET)
+            if common is None or not (estimate.exists(common) or values.exists(common)):
+                common = self.keys.offset_key(track.index, len(track.offset_priors))
+                values.insert(common, gtsam.Pose3())
+                prior = detector_bias_prior(common, track.bias_sigma)
+                track.offsets[COMMON_OFFSET], track.offset_priors[common] = common, prior
+                if graph is not None:
+                    graph.add(prior)
+            out[COMMON_OFFSET] = common
+        for name, sigma in detector_shape_sigmas(obs).items() if self.options.uses_detector_offsets else ():
             key = track.offsets.get(name)
             if key is None or not (estimate.exists(key) or values.exists(key)):
                 shape = estimate if estimate.exists(self.keys.layer_keys(track.index)[0]) else values
-                key, prior = _new_offset(self.keys, track.index, len(track.offset_priors), sigma, shape, values)
+                key, prior = _new_offset(self.keys, track.index, len(track.offset_priors), sigma, shape, values,
+                                         common)
                 track.offsets[name], track.offset_priors[key] = key, prior
                 if graph is not None:
                     graph.add(prior)
             out[name] = key
+        if common is not None:
+            out.update({camera.name: common for camera in obs.cameras
+                        if camera.name in track.bias_cameras and camera.name not in out})
         return out
 
     def _young_graph(self, track: _TrackState, frames: list | None = None) -> gtsam.NonlinearFactorGraph:
@@ -860,6 +892,10 @@ class Tracker:
         obs = given = observations_from_detections(detections, self.cameras, self.options.solve.graph)
         track = self._track(vid)
         track.last_seen = t
+        bias = detector_bias_sigma(detections)
+        if bias is not None:  # the detector's bias (the common offset's prior takes what is known when it is made)
+            track.bias_sigma = bias if track.bias_sigma is None else np.maximum(track.bias_sigma, bias)
+            track.bias_cameras.update(d.camera for d in detections if d.bias_sigma is not None)
         if len(obs) == 0:
             return VehicleResult(vid, Status.DEGENERATE, message="no keypoint seen in this frame")
         track.frames_seen += 1
@@ -1309,13 +1345,18 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
 
 
 def _new_offset(keys: KeyScheme, index: int, number: int, sigma: float, shape: gtsam.Values,
-                values: gtsam.Values) -> tuple[int, gtsam.NonlinearFactor]:
-    """A new detector pose offset of track ``index`` (docs/factors.md, "The detector's pose offset in tracks"):
-    its key (offset ``number``), the identity inserted in ``values``, and its prior made at the track's keypoints
-    in ``shape`` with the detections' ``shape_sigma`` ``sigma``."""
+                values: gtsam.Values, common: int | None = None) -> tuple[int, gtsam.NonlinearFactor]:
+    """A new detector pose offset of one camera of track ``index`` (docs/factors.md, "The detector's pose offset
+    in tracks"): its key (offset ``number``), the identity inserted in ``values``, and its prior made at the
+    track's keypoints in ``shape`` with the detections' ``shape_sigma`` ``sigma``: about the identity, or, where
+    the track has a common offset (its key ``common``), about that offset (a ``BetweenFactorPose3`` with the same
+    noise: the camera's offset is the track's common one and the camera's own part)."""
     key = keys.offset_key(index, number)
     values.insert(key, gtsam.Pose3())
-    return key, detector_offset_prior(key, sigma, wireframe_from_values(shape, keys, index).vehicle_p_keypoints)
+    prior = detector_offset_prior(key, sigma, wireframe_from_values(shape, keys, index).vehicle_p_keypoints)
+    if common is None:
+        return key, prior
+    return key, gtsam.BetweenFactorPose3(common, key, gtsam.Pose3(), prior.noiseModel())
 
 
 def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
@@ -1346,6 +1387,9 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         values.insert(hub, np.array([config.hub_height]))
     posed, best, segments = [], -1, {}
     offsets: dict[str, int] = {}  # camera name -> the key of its detector pose offset (one per camera, no lag)
+    bias = detector_bias_sigma([d for _, frame in frames for d in frame.detections]) \
+        if options.uses_detector_bias else None
+    biased = {d.camera for _, frame in frames for d in frame.detections if d.bias_sigma is not None}
     swaps = {}  # frame index -> the left/right pairs that frame's own solve relabelled, taken over by the batch graph
     projections = []  # (the indices of its projection factors in graph, frame index, observations, offsets) per frame
     for (i, frame), first in zip(frames, firsts):
@@ -1366,13 +1410,22 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         key = keys.pose_key(index, i)
         if posed and frame.t - posed[-1][1] > options.max_gap:
             segments[i] = _segment_message(frame.t - posed[-1][1], options.max_gap)
+        if bias is not None and COMMON_OFFSET not in offsets:  # the detector's bias: an offset all cameras share
+            offsets[COMMON_OFFSET] = keys.offset_key(index, len(offsets))
+            values.insert(offsets[COMMON_OFFSET], gtsam.Pose3())
+            graph.add(detector_bias_prior(offsets[COMMON_OFFSET], bias))
         for name, sigma in detector_shape_sigmas(obs).items() if options.uses_detector_offsets else ():
             if name not in offsets:
-                offsets[name], offset_prior = _new_offset(keys, index, len(offsets), sigma, values, values)
+                offsets[name], offset_prior = _new_offset(keys, index, len(offsets), sigma, values, values,
+                                                          offsets.get(COMMON_OFFSET))
                 graph.add(offset_prior)
+        frame_offsets = dict(offsets)  # and cameras without an offset of their own move by the common one
+        if bias is not None:
+            frame_offsets.update({camera.name: offsets[COMMON_OFFSET] for camera in obs.cameras
+                                  if camera.name in biased and camera.name not in offsets})
         first_factor = graph.size()
-        add_observation_factor(graph, keys, obs, index, i, config, offsets)
-        projections.append((range(first_factor, graph.size()), i, obs, dict(offsets)))
+        add_observation_factor(graph, keys, obs, index, i, config, frame_offsets)
+        projections.append((range(first_factor, graph.size()), i, obs, frame_offsets))
         _add_pose_factors(graph, posed, key, frame.t, options, hub)
         values.insert(key, guess)
         posed.append((i, frame.t, key))

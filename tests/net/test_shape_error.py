@@ -65,6 +65,8 @@ def test_calibrate_shape_command_fits_and_writes_and_the_pipeline_uses_it(tmp_pa
     rendered = render_simulation(sim, tmp_path / "render", seed=7)
     detected = detect_scene(rendered.scene, KeypointDetector(weights))
     assert {d.shape_sigma for d in detected.frames[0].detections} == {0.05}
+    bias = KeypointDetector(weights).calibration.bias_sigma  # calibrate-bias's, kept by calibrate-shape --write
+    assert bias is not None and {d.bias_sigma for d in detected.frames[0].detections} == {bias}
 
 
 def test_calibrate_shape_command_reports_bad_input(tmp_path, capsys):

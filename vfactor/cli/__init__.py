@@ -4,7 +4,7 @@ This package holds the parser and the dispatch; each group of commands has its
 own module: :mod:`vfactor.cli.estimate` (solve, track), :mod:`vfactor.cli.simulation`
 (simulate, demo), :mod:`vfactor.cli.evaluate` (eval), :mod:`vfactor.cli.tools`
 (schema, plot), :mod:`vfactor.cli.interop` (import), :mod:`vfactor.cli.common` (checks and messages they share).
-The keypoint network's commands (train, detect, calibrate, calibrate-shape, score) are forwarded
+The keypoint network's commands (train, detect, calibrate, calibrate-shape, calibrate-bias, score) are forwarded
 to :mod:`vfactor.net.commands`, so that PyTorch is imported only for them.
 
 Options every command takes, before or after its name: ``--debug`` (tracebacks
@@ -72,6 +72,7 @@ NET_COMMANDS = {
     "detect": "keypoints, confidences, covariances and heatmaps per vehicle box: IMAGE --roi X0 Y0 X1 Y1; needs torch",
     "calibrate": "fit the network's keypoint covariances to its errors on held-out crops; needs torch",
     "calibrate-shape": "fit the network's error shaped like a change of shape on solved rendered scenes; needs torch",
+    "calibrate-bias": "fit the network's error that repeats over a vehicle's frames on rendered tracks; needs torch",
     "score": "PCK@0.1 of network weights on crops with known keypoints; needs torch",
 }
 
@@ -146,7 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="give each camera's detections of a track a pose offset (a small rigid motion of the vehicle as "
                    "that camera sees it) whose prior comes from their shape_sigma (keypoint-network detections: "
                    "errors that repeat from frame to frame; docs/factors.md); default: on where the scene gives a "
-                   "road plane (vfactor fit-ground), off without one")
+                   "road plane (vfactor fit-ground), off without one. Detections with a bias_sigma (the network's "
+                   "error shared by all cameras) give the track one offset its cameras share, unless "
+                   "--no-detector-offsets")
     p.add_argument("--plot", help="also write a PNG of the trajectories with covariance ellipses")
     g = p.add_argument_group("live streams (docs/scaling.md): SCENE '-' reads JSON Lines from standard input")
     g.add_argument("--follow", action="store_true",
@@ -426,7 +429,7 @@ def _guarded(command: str, run, debug: bool) -> int:
 
 
 def _net(argv: list[str], command: str) -> int:
-    """``vfactor train|detect|calibrate|calibrate-shape|score``: the keypoint network's commands (:mod:`vfactor.net.commands`).
+    """``vfactor train|detect|calibrate|calibrate-shape|calibrate-bias|score``: the keypoint network's commands (:mod:`vfactor.net.commands`).
 
     The options of every command are taken out of ``argv`` wherever they stand; ``-q`` is passed on as the
     network's ``--quiet`` (no progress bar) where the command has one.

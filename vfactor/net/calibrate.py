@@ -101,18 +101,31 @@ class CovarianceCalibration:
             the pipeline sets from it; fitted on solved rendered scenes by
             :func:`vfactor.net.shape_error.fit_shape_sigma`). Not part of the
             pixel covariances: :meth:`apply` and :attr:`is_identity` ignore it.
+        bias_sigma: the network's error that repeats over a vehicle's frames and
+            cameras, a rigid motion of the vehicle (``Detection.bias_sigma``:
+            ``(roll, pitch, yaw)`` radians, ``(x, y, z)`` metres, body frame; fitted
+            on tracks of rendered scenes by
+            :func:`vfactor.net.bias_error.fit_bias_sigma`); None: not calibrated.
+            Not part of the pixel covariances either.
     """
 
     scale: float = 1.0
     floor: float = 0.0
     confidence_rate: float = 0.0
     shape_sigma: float = 0.0
+    bias_sigma: tuple | None = None
 
     def __post_init__(self):
         check_numbers("calibration", self, ("scale",))
         check_numbers("calibration", self, ("floor", "confidence_rate", "shape_sigma"), strict=False)
         for name in ("scale", "floor", "confidence_rate", "shape_sigma"):
             object.__setattr__(self, name, float(getattr(self, name)))
+        if self.bias_sigma is not None:
+            bias = np.asarray(self.bias_sigma, dtype=float)
+            if bias.shape != (6,) or not np.all(np.isfinite(bias)) or np.any(bias < 0):
+                raise ValueError(f"calibration.bias_sigma: expected 6 finite numbers >= 0 ([roll, pitch, yaw] "
+                                 f"radians, [x, y, z] metres), got {self.bias_sigma!r}")
+            object.__setattr__(self, "bias_sigma", tuple(float(x) for x in bias))
 
     @property
     def is_identity(self) -> bool:
@@ -121,8 +134,10 @@ class CovarianceCalibration:
 
     def detection_fields(self) -> dict:
         """What a detection found with weights of this calibration carries (:class:`vfactor.observations.Detection`'s
-        fields, and ``vfactor detect``'s output): ``covariance_calibrated`` and ``shape_sigma`` (None: none)."""
-        return {"covariance_calibrated": not self.is_identity, "shape_sigma": self.shape_sigma or None}
+        fields, and ``vfactor detect``'s output): ``covariance_calibrated``, ``shape_sigma`` and ``bias_sigma``
+        (None: none)."""
+        return {"covariance_calibrated": not self.is_identity, "shape_sigma": self.shape_sigma or None,
+                "bias_sigma": self.bias_sigma}
 
     def apply(self, covariance, confidence, box_size) -> np.ndarray:
         """Calibrated covariances.
@@ -157,8 +172,12 @@ class CovarianceCalibration:
         return gain[..., None, None] * (self.scale * cov + floor[..., :, None] * np.eye(2))
 
     def to_dict(self) -> dict:
-        """The fields as plain floats (for a weights file's metadata)."""
-        return {f.name: float(getattr(self, f.name)) for f in fields(self)}
+        """The fields as plain floats (``bias_sigma`` a list of them, where calibrated; for a weights file's
+        metadata)."""
+        out = {f.name: float(getattr(self, f.name)) for f in fields(self) if f.name != "bias_sigma"}
+        if self.bias_sigma is not None:
+            out["bias_sigma"] = list(self.bias_sigma)
+        return out
 
     @classmethod
     def from_dict(cls, data: dict) -> "CovarianceCalibration":

@@ -24,7 +24,8 @@ from vfactor.jsonio import read_json, write_text_atomic
 from vfactor.keypoints import KEYPOINT_NAMES
 from vfactor.sanity import one_line
 
-__all__ = ["main", "build_parser", "run_train", "run_detect", "run_calibrate", "run_calibrate_shape", "run_score"]
+__all__ = ["main", "build_parser", "run_train", "run_detect", "run_calibrate", "run_calibrate_shape", "run_calibrate_bias",
+           "run_score"]
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
 
@@ -65,6 +66,17 @@ def build_parser(prog: str = "python -m vfactor.net") -> argparse.ArgumentParser
         "weights file's calibration (the pixel calibration and the weights are kept); the pipeline then gives "
         "every detection that shape_sigma.",
     ))
+    add_calibrate_bias_arguments(sub.add_parser(
+        "calibrate-bias", help="fit the network's error that repeats over a vehicle's frames and cameras on rendered "
+        "tracks",
+        description="Render the track scenes of one or more scenarios (seeds --seed to --seed + --seeds - 1), find "
+        "the keypoints with the network and, per track, estimate the rigid motion of the vehicle that all its "
+        "detections share (every pose held at its truth, the shape free with the shape model learnt without the "
+        "vehicle, each camera's own offset tied to it; vfactor.net.bias_error). bias_sigma is the spread of those "
+        "motions less the data's own uncertainty of them: [roll, pitch, yaw] radians, [x, y, z] metres, body "
+        "frame. --write stores it in the weights file's calibration (the rest is kept); the pipeline then gives "
+        "every detection that bias_sigma, and tracks take it into their poses' covariances.",
+    ))
     add_score_arguments(sub.add_parser(
         "score", help="PCK@0.1 of weights on crops with known keypoints (e.g. a held-out test set)",
         description="Score weights on rendered crops: PCK@0.1 of the crop side for visible and self-occluded "
@@ -91,6 +103,22 @@ def add_calibrate_shape_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds", type=int, default=2, help="how many seeds (default 2)")
     p.add_argument("--frames", type=int, help="frames per seed (default: the scenario's)")
     p.add_argument("--write", action="store_true", help="store the fitted shape_sigma in the weights' calibration")
+    p.add_argument("--device", help="cuda, cpu, ... (default: cuda when available)")
+
+
+#: The track scenarios ``calibrate-bias`` renders by default (the shipped calibration's, seeds 231-232).
+BIAS_SCENARIOS = ("library_tracks", "tracks_3cam", "library_tracks_2cam", "tracks_3veh")
+
+
+def add_calibrate_bias_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--weights", help="weights file with a pixel calibration (default: the shipped weights)")
+    p.add_argument("--scenario", action="append", metavar="SCENARIO",
+                   help="track scenario to render (repeatable; default: library_tracks, tracks_3cam, "
+                   "library_tracks_2cam and tracks_3veh: three-camera and two-camera rigs)")
+    p.add_argument("--seed", type=int, default=231, help="first seed (default 231)")
+    p.add_argument("--seeds", type=int, default=2, help="how many seeds (default 2)")
+    p.add_argument("--frames", type=int, help="frames per seed (default: the scenario's)")
+    p.add_argument("--write", action="store_true", help="store the fitted bias_sigma in the weights' calibration")
     p.add_argument("--device", help="cuda, cpu, ... (default: cuda when available)")
 
 
@@ -150,6 +178,7 @@ def main(argv=None, prog: str = "python -m vfactor.net") -> int:
     """``python -m vfactor.net {train,detect,calibrate,calibrate-shape,score} ...`` (``vfactor`` forwards with ``prog="vfactor"``)."""
     args = build_parser(prog).parse_args(argv)
     run = {"train": run_train, "detect": run_detect, "calibrate": run_calibrate, "calibrate-shape": run_calibrate_shape,
+           "calibrate-bias": run_calibrate_bias,
            "score": run_score}[args.command]
     try:
         return run(args)
@@ -429,8 +458,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
                      "d2_median": after[g]["d2_median"], "within_95": after[g]["within_95"]}
                  for g in ("visible", "self_occluded", "all")}
         stored = CovarianceCalibration.from_metadata(detector.metadata) or CovarianceCalibration()
-        with _file_of("--weights"):  # calibrate-shape's shape_sigma, already stored, is kept
-            write_calibration(weights, replace(chosen, shape_sigma=stored.shape_sigma), {f"{METADATA_KEY}_check": {
+        with _file_of("--weights"):  # calibrate-shape's shape_sigma and calibrate-bias's bias_sigma are kept
+            write_calibration(weights, replace(chosen, shape_sigma=stored.shape_sigma, bias_sigma=stored.bias_sigma), {f"{METADATA_KEY}_check": {
                 "data": [str(v) for v in args.val], "fit": "even-numbered crops", "checked": "odd-numbered crops",
                 **check}})
         print(f"\ncalibration written to {weights} (metadata '{METADATA_KEY}'; weights unchanged)", file=sys.stderr)
@@ -480,6 +509,53 @@ def run_calibrate_shape(args: argparse.Namespace) -> int:
             write_calibration(weights, replace(detector.calibration, shape_sigma=sigma), {
                 f"{METADATA_KEY}_shape": {"scenario": args.scenario, "seeds": seeds, "vehicles": len(vehicles)}})
         print(f"\nshape_sigma written to {weights} (metadata '{METADATA_KEY}'; weights unchanged)", file=sys.stderr)
+    return EXIT_OK
+
+
+def run_calibrate_bias(args: argparse.Namespace) -> int:
+    """The ``calibrate-bias`` command on parsed arguments (see :func:`add_calibrate_bias_arguments`)."""
+    from dataclasses import replace  # noqa: PLC0415
+
+    from vfactor.errors import ScenarioError  # noqa: PLC0415
+    from vfactor.net.bias_error import MIN_FRAMES, fit_bias_sigma, measure_rendered_tracks  # noqa: PLC0415
+    from vfactor.net.calibrate import METADATA_KEY, write_calibration  # noqa: PLC0415
+    from vfactor.net.infer import KeypointDetector, default_weights_path  # noqa: PLC0415
+
+    if args.seeds < 1:
+        raise InputError("--seeds", f"expected at least 1, got {args.seeds}")
+    if args.frames is not None and args.frames < 1:
+        raise InputError("--frames", f"expected at least 1, got {args.frames}")
+    scenarios = args.scenario or list(BIAS_SCENARIOS)
+    weights = Path(args.weights) if args.weights else default_weights_path()
+    with _file_of("--weights"):
+        detector = KeypointDetector(weights, device=args.device)
+    if detector.calibration.is_identity:
+        raise InputError("--weights", "no pixel calibration in the weights: run the calibrate command first")
+    seeds = list(range(args.seed, args.seed + args.seeds))
+    tracks = []
+    for scenario in scenarios:
+        try:
+            tracks += measure_rendered_tracks(scenario, seeds, detector, frames=args.frames)
+        except ScenarioError as exc:
+            raise InputError("--scenario", str(exc)) from None
+    try:
+        sigma = fit_bias_sigma(tracks)
+    except ValueError as exc:
+        raise InputError("--scenario", f"{exc} (no track seen in {MIN_FRAMES} frames or more)") from None
+    units = np.r_[np.degrees(np.ones(3)), 100.0 * np.ones(3)]
+    bias, variance = np.stack([t.bias for t in tracks]), np.stack([t.variance for t in tracks])
+    print(f"{', '.join(scenarios)} seeds {seeds[0]}-{seeds[-1]}: {len(tracks)} tracks from the network's keypoints\n")
+    rows = [[name, *(f"{x:.2f}" for x in values * units)] for name, values in (
+        ("each track's shared motion, RMS", np.sqrt(np.mean(bias ** 2, axis=0))),
+        ("the data's uncertainty of it, RMS", np.sqrt(np.mean(variance, axis=0))),
+        ("bias_sigma", sigma))]
+    _table(["", "roll (deg)", "pitch (deg)", "yaw (deg)", "x (cm)", "y (cm)", "z (cm)"], rows)
+    print(f"\nbias_sigma = {[round(float(x), 5) for x in sigma]} ([roll, pitch, yaw] rad, [x, y, z] m, body frame)")
+    if args.write:
+        with _file_of("--weights"):
+            write_calibration(weights, replace(detector.calibration, bias_sigma=tuple(sigma)), {
+                f"{METADATA_KEY}_bias": {"scenarios": scenarios, "seeds": seeds, "tracks": len(tracks)}})
+        print(f"\nbias_sigma written to {weights} (metadata '{METADATA_KEY}'; weights unchanged)", file=sys.stderr)
     return EXIT_OK
 
 

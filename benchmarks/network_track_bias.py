@@ -1,0 +1,92 @@
+"""Tracks from the keypoint network's keypoints, with and without the detector's bias (``Detection.bias_sigma``).
+
+Renders each scene (``scenario:seed``), finds the keypoints with the shipped network (its calibration sets each
+detection's ``shape_sigma`` and ``bias_sigma``), tracks the vehicles (iSAM2 final, iSAM2 with a 1 s fixed lag,
+batch smoothing; each with the shape model learnt without the scene's vehicle models) once with the detections as
+they are and once with their ``bias_sigma`` removed, and prints per method and per rig (three cameras with the
+road plane, two without) the mean rotation and translation errors, the pose NEES (x 6) and the share of poses
+under the chi-square 95 % bound, and per body type the pose NEES.
+
+Run: ``python benchmarks/network_track_bias.py [--cache DIR] [--bias R P Y X Y Z] SCENARIO:SEED ...`` (about two
+minutes a scene to render and detect on two CPU cores; ``--cache`` keeps the detected scenes; ``--bias`` replaces
+the shipped calibration's bias_sigma, radians and metres). Needs torch and moderngl.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import pickle
+from pathlib import Path
+
+import numpy as np
+
+from vfactor.evaluation import class_rows, held_out_scene_model, pose_rows
+from vfactor.track import TrackOptions, smooth_scene, track_scene
+
+CHI2_6_95 = 12.592
+
+
+def detected_scene(spec: str, cache: Path | None):
+    """(simulation, detected scene) of ``scenario:seed``, from ``cache`` where it was kept."""
+    scenario, seed = spec.rsplit(":", 1)
+    path = cache / f"{scenario}_{seed}.pkl" if cache else None
+    if path is not None and path.exists():
+        with open(path, "rb") as f:
+            return pickle.load(f)
+    from vfactor.net.end_to_end import render_and_detect
+
+    sim, _, detected, _ = render_and_detect(scenario, int(seed), None, None)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "wb") as f:
+            pickle.dump((sim, detected), f)
+    return sim, detected
+
+
+def with_bias(scene, bias):
+    """``scene`` with every detection that carries a ``shape_sigma`` (the network's) given ``bias`` (None: none)."""
+    frames = [dataclasses.replace(f, detections=[dataclasses.replace(d, bias_sigma=bias if d.shape_sigma else None)
+                                                 for d in f.detections]) for f in scene.frames]
+    return dataclasses.replace(scene, frames=frames)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scenes", nargs="+", metavar="SCENARIO:SEED")
+    parser.add_argument("--cache", type=Path, help="folder that keeps the detected scenes")
+    parser.add_argument("--bias", type=float, nargs=6, metavar="S", help="bias_sigma to use (default: the shipped)")
+    args = parser.parse_args(argv)
+    if args.bias is None:
+        from vfactor.net.infer import KeypointDetector, default_weights_path
+
+        bias = KeypointDetector(default_weights_path()).calibration.bias_sigma
+    else:
+        bias = tuple(args.bias)
+    print(f"bias_sigma {bias}")
+    rows: dict[tuple[str, str, str], list] = {}
+    for spec in args.scenes:
+        sim, detected = detected_scene(spec, args.cache)
+        model = held_out_scene_model(sim)
+        rig = "3 cameras, plane" if detected.ground_plane is not None else "2 cameras, no plane"
+        for label, b in (("without", None), ("with", bias)):
+            scene = with_bias(detected, b)
+            runs = {"isam2": track_scene(scene, TrackOptions(), prior=model).frames,
+                    "isam2, 1 s lag": track_scene(scene, TrackOptions(lag=1.0), prior=model).frames,
+                    "batch": smooth_scene(scene, TrackOptions(), prior=model)}
+            for method, frames in runs.items():
+                truth = dataclasses.replace(sim, scene=scene)
+                rows.setdefault((method, rig, label), []).extend(class_rows(sim, pose_rows(truth, frames), scene))
+    print("\n| method | rig | bias | poses | rotation (deg) | translation (cm) | pose NEES | under the bound | "
+          "NEES per body type |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for (method, rig, label), rs in sorted(rows.items(), key=lambda kv: (kv[0][0], kv[0][1], kv[0][2] != "without")):
+        r = np.array([x[2:] for x in rs], dtype=float)
+        types = np.array([x[0] for x in rs])
+        per_type = ", ".join(f"{t} {np.nanmean(r[types == t, 2]) / 6:.2f}x" for t in sorted(set(types)))
+        print(f"| {method} | {rig} | {label} | {len(r)} | {r[:, 0].mean():.2f} | {r[:, 1].mean():.2f} | "
+              f"{np.nanmean(r[:, 2]) / 6:.2f}x | {100 * np.nanmean(r[:, 2] < CHI2_6_95):.0f} % | {per_type} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -345,7 +345,8 @@ def _with_detector_bias(sim, bias_sigma, seed: int, shape_sigma: float | None = 
         for d in frame.detections:
             truth = sim.truth[f][d.vehicle]
             camera = sim.scene.cameras[d.camera]
-            moved = truth.world_T_vehicle.compose(bias[d.vehicle]).transformFrom(truth.wireframe.vehicle_p_keypoints.T).T
+            seen_T = truth.world_T_vehicle.compose(bias[d.vehicle])
+            moved = seen_T.transformFrom(truth.wireframe.vehicle_p_keypoints.T).T
             shift = camera.project(moved)[0] - camera.project(truth.keypoints_world)[0]
             detections.append(dataclasses.replace(d, keypoints=d.keypoints + shift, bias_sigma=tuple(bias_sigma),
                                                   shape_sigma=shape_sigma))

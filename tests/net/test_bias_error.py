@@ -59,7 +59,8 @@ def test_the_measurement_finds_each_tracks_shared_motion():
     for t in tracks:
         assert t.frames == seen[t.vehicle] and np.all(t.variance > 0)
         assert np.all(np.abs(t.bias - xi[t.vehicle]) < 4 * np.sqrt(t.variance) + 1e-3), (t.bias, xi[t.vehicle])
-    assert measure_track_bias(sim, detected, min_frames=len(detected.frames) + 1) == []  # too few frames to tell a bias from noise
+    # too few frames to tell a bias from the frames' noise: not measured
+    assert measure_track_bias(sim, detected, min_frames=len(detected.frames) + 1) == []
 
 
 def test_the_calibration_carries_bias_sigma_to_the_detections_and_checks_it():

@@ -429,7 +429,8 @@ def _guarded(command: str, run, debug: bool) -> int:
 
 
 def _net(argv: list[str], command: str) -> int:
-    """``vfactor train|detect|calibrate|calibrate-shape|calibrate-bias|score``: the keypoint network's commands (:mod:`vfactor.net.commands`).
+    """``vfactor train|detect|calibrate|calibrate-shape|calibrate-bias|score``: the keypoint network's commands
+    (:mod:`vfactor.net.commands`).
 
     The options of every command are taken out of ``argv`` wherever they stand; ``-q`` is passed on as the
     network's ``--quiet`` (no progress bar) where the command has one.

@@ -331,7 +331,8 @@ def _error(obs: KeypointObservations, loss_id: int, threshold: float, keys: tupl
     returned ``r``; the kernel writes the same entries of ``H_shape`` at each call, the others stay zero)."""
     r, H_pose, H_shape = out
     T = values.atPose3(keys[0]).matrix()
-    points = np.concatenate((values.atVector(keys[1]), values.atVector(keys[2]), values.atVector(keys[3]))).reshape(12, 3)
+    points = np.concatenate((values.atVector(keys[1]), values.atVector(keys[2]),
+                             values.atVector(keys[3]))).reshape(12, 3)
     offset = len(keys) == 5
     if offset:  # the keypoints as this detector sees them: world_T_seen = world_T_vehicle * vehicle_T_seen
         vehicle_T_seen = values.atPose3(keys[4])
@@ -371,4 +372,5 @@ def projection_factor(
     noise = gtsam.noiseModel.Unit.Create(2 * len(obs))
     out = (np.empty(2 * len(obs)), np.empty((2 * len(obs), 6)), np.zeros((2 * len(obs), 36)))
     keys = [pose_key, *layer_keys] + ([] if offset_key is None else [offset_key])
-    return gtsam.CustomFactor(noise, keys, partial(_error, obs, loss.id, float(loss.threshold), tuple(int(k) for k in keys), out))
+    fixed = (obs, loss.id, float(loss.threshold), tuple(int(k) for k in keys), out)
+    return gtsam.CustomFactor(noise, keys, partial(_error, *fixed))

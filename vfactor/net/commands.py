@@ -24,8 +24,8 @@ from vfactor.jsonio import read_json, write_text_atomic
 from vfactor.keypoints import KEYPOINT_NAMES
 from vfactor.sanity import one_line
 
-__all__ = ["main", "build_parser", "run_train", "run_detect", "run_calibrate", "run_calibrate_shape", "run_calibrate_bias",
-           "run_score"]
+__all__ = ["main", "build_parser", "run_train", "run_detect", "run_calibrate", "run_calibrate_shape",
+           "run_calibrate_bias", "run_score"]
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
 
@@ -459,7 +459,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
                  for g in ("visible", "self_occluded", "all")}
         stored = CovarianceCalibration.from_metadata(detector.metadata) or CovarianceCalibration()
         with _file_of("--weights"):  # calibrate-shape's shape_sigma and calibrate-bias's bias_sigma are kept
-            write_calibration(weights, replace(chosen, shape_sigma=stored.shape_sigma, bias_sigma=stored.bias_sigma), {f"{METADATA_KEY}_check": {
+            kept = replace(chosen, shape_sigma=stored.shape_sigma, bias_sigma=stored.bias_sigma)
+            write_calibration(weights, kept, {f"{METADATA_KEY}_check": {
                 "data": [str(v) for v in args.val], "fit": "even-numbered crops", "checked": "odd-numbered crops",
                 **check}})
         print(f"\ncalibration written to {weights} (metadata '{METADATA_KEY}'; weights unchanged)", file=sys.stderr)

@@ -185,7 +185,8 @@ def test_calibrate_command_reports_and_writes(tmp_path, capsys):
     images, kp, vis, occ = blob_dataset(24, 32, seed=0)
     rois = np.tile([10.0, 20.0, 106.0, 116.0], (24, 1))
     np.savez_compressed(tmp_path / "val.npz", images=images, keypoints=kp, visible=vis, self_occluded=occ, rois=rois)
-    write_calibration(path, CovarianceCalibration(shape_sigma=0.07))  # calibrate-shape's, which --write keeps
+    bias = (0.01, 0.01, 0.01, 0.03, 0.01, 0.02)  # calibrate-shape's and calibrate-bias's, which --write keeps
+    write_calibration(path, CovarianceCalibration(shape_sigma=0.07, bias_sigma=bias))
     code = main(["calibrate", "--weights", str(path), "--val", str(tmp_path / "val.npz"), "--write"])
     assert code == 0
     out = capsys.readouterr()
@@ -194,6 +195,7 @@ def test_calibrate_command_reports_and_writes(tmp_path, capsys):
     model, meta = load_weights(path, with_config=True)
     cal = CovarianceCalibration.from_dict(meta[METADATA_KEY])
     assert KeypointDetector(path).calibration == cal and cal.shape_sigma == 0.07 and not cal.is_identity
+    assert cal.bias_sigma == bias
     assert meta[f"{METADATA_KEY}_check"]["data"] == [str(tmp_path / "val.npz")]
     for name, tensor in net.state_dict().items():
         assert torch.equal(model.state_dict()[name], tensor), name

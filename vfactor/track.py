@@ -189,6 +189,10 @@ _REANCHOR_FRAMES = 5  # frames seen by two cameras over which a young track is r
 #: explains them at under this share of the cost at the motion model's prediction, and lies beyond
 #: :func:`_jump`'s gate from it: then they are another vehicle's, and the track starts a new segment.
 _JUMP_COST_RATIO = 0.25
+#: The tracker's check of its prediction adds RANSAC PnP starts to the SQPnP and triangulation ones where the
+#: keypoints cost more than this per keypoint at the prediction (robust cost: about 10 sigma of every keypoint for
+#: the Cauchy loss's 2.5), or where one of those starts already explains them better than the prediction.
+_RANSAC_COST = 8.0
 #: A pose found from a frame's keypoints alone that lies beyond :func:`_jump`'s gate but is no new segment starts the
 #: track's new pose (in place of the motion model's prediction) only where it explains them at under this share of
 #: the cost at the prediction: beyond the gate the vehicle cannot be there, unless its keypoints say so clearly (another
@@ -930,7 +934,14 @@ class Tracker:
                 raw, obs = raw.subset(kept), obs.subset(kept)
         predicted_cost = cross_projection_cost(obs, guess, wireframe, loss)
         if predicted_cost > 2.0 * len(obs):
-            starts = best_candidates(obs, wireframe, loss, 1, min_keypoints_in_one_view=options.min_keypoints_in_one_view)
+            # SQPnP and triangulation starts first; OpenCV's RANSAC PnP (a fifth of the tracker's time where it ran
+            # at every such frame, about half of them) only where the prediction is clearly poor or a start beats it
+            # (docs/performance.md, "The tracker's prediction check: RANSAC where it can matter")
+            starts = best_candidates(obs, wireframe, loss, 1, min_keypoints_in_one_view=options.min_keypoints_in_one_view,
+                                     ransac=False)
+            if predicted_cost > _RANSAC_COST * len(obs) or (starts and starts[0].cost < predicted_cost):
+                starts = best_candidates(obs, wireframe, loss, 1,
+                                         min_keypoints_in_one_view=options.min_keypoints_in_one_view)
             if starts and starts[0].cost < predicted_cost:
                 jump = _jump(guess, starts[0].world_T_vehicle, t - track.poses[-1][1], self.options,
                              velocity_known=len(track.poses) >= 2)

@@ -291,15 +291,22 @@ def _with_detector_offsets(sim, sigma: float, seed: int):
                                   .vehicle_p_keypoints)
     R = prior.noiseModel().R()  # the prior's square-root information
     offsets = {name: gtsam.Pose3.Expmap(np.linalg.solve(R, rng.normal(size=6))) for name in sim.scene.cameras}
+    return _seen_moved(sim, lambda d: offsets[d.camera], shape_sigma=sigma)
+
+
+def _seen_moved(sim, motion, **fields):
+    """``sim``'s scene with each detection's keypoints those of its vehicle moved by ``motion(detection)`` (a
+    ``gtsam.Pose3`` of the body frame) on top of the simulator's pixel noise, and ``fields`` set on it."""
     frames = []
     for f, frame in enumerate(sim.scene.frames):
         detections = []
         for d in frame.detections:
             truth = sim.truth[f][d.vehicle]
             camera = sim.scene.cameras[d.camera]
-            moved = truth.world_T_vehicle.compose(offsets[d.camera]).transformFrom(truth.wireframe.vehicle_p_keypoints.T).T
+            seen_T = truth.world_T_vehicle.compose(motion(d))
+            moved = seen_T.transformFrom(truth.wireframe.vehicle_p_keypoints.T).T
             shift = camera.project(moved)[0] - camera.project(truth.keypoints_world)[0]
-            detections.append(dataclasses.replace(d, keypoints=d.keypoints + shift, shape_sigma=sigma))
+            detections.append(dataclasses.replace(d, keypoints=d.keypoints + shift, **fields))
         frames.append(dataclasses.replace(frame, detections=detections))
     return dataclasses.replace(sim.scene, frames=frames)
 
@@ -339,19 +346,7 @@ def _with_detector_bias(sim, bias_sigma, seed: int, shape_sigma: float | None = 
     rng = np.random.default_rng(seed)
     vehicles = sorted({d.vehicle for frame in sim.scene.frames for d in frame.detections})
     bias = {v: gtsam.Pose3.Expmap(rng.normal(size=6) * np.asarray(bias_sigma)) for v in vehicles}
-    frames = []
-    for f, frame in enumerate(sim.scene.frames):
-        detections = []
-        for d in frame.detections:
-            truth = sim.truth[f][d.vehicle]
-            camera = sim.scene.cameras[d.camera]
-            seen_T = truth.world_T_vehicle.compose(bias[d.vehicle])
-            moved = seen_T.transformFrom(truth.wireframe.vehicle_p_keypoints.T).T
-            shift = camera.project(moved)[0] - camera.project(truth.keypoints_world)[0]
-            detections.append(dataclasses.replace(d, keypoints=d.keypoints + shift, bias_sigma=tuple(bias_sigma),
-                                                  shape_sigma=shape_sigma))
-        frames.append(dataclasses.replace(frame, detections=detections))
-    return dataclasses.replace(sim.scene, frames=frames)
+    return _seen_moved(sim, lambda d: bias[d.vehicle], bias_sigma=tuple(bias_sigma), shape_sigma=shape_sigma)
 
 
 @pytest.mark.parametrize("plane", [False, True])

@@ -467,15 +467,14 @@ def run_calibrate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def run_calibrate_shape(args: argparse.Namespace) -> int:
-    """The ``calibrate-shape`` command on parsed arguments (see :func:`add_calibrate_shape_arguments`)."""
-    from dataclasses import replace  # noqa: PLC0415
+def _calibrated_detector(args: argparse.Namespace):
+    """``calibrate-shape``'s and ``calibrate-bias``'s inputs checked: ``(weights path, detector, seeds)``.
 
-    from vfactor.errors import ScenarioError  # noqa: PLC0415
-    from vfactor.net.calibrate import METADATA_KEY, write_calibration  # noqa: PLC0415
+    Raises:
+        InputError: ``--seeds`` below 1, ``--frames`` below 1, unreadable ``--weights`` or weights without a pixel
+            calibration.
+    """
     from vfactor.net.infer import KeypointDetector, default_weights_path  # noqa: PLC0415
-    from vfactor.net.shape_error import fit_shape_sigma, keypoint_nees_at, measure_vehicles  # noqa: PLC0415
-    from vfactor.vehicle_library import BODY_TYPES  # noqa: PLC0415
 
     if args.seeds < 1:
         raise InputError("--seeds", f"expected at least 1, got {args.seeds}")
@@ -486,7 +485,19 @@ def run_calibrate_shape(args: argparse.Namespace) -> int:
         detector = KeypointDetector(weights, device=args.device)
     if detector.calibration.is_identity:
         raise InputError("--weights", "no pixel calibration in the weights: run the calibrate command first")
-    seeds = list(range(args.seed, args.seed + args.seeds))
+    return weights, detector, list(range(args.seed, args.seed + args.seeds))
+
+
+def run_calibrate_shape(args: argparse.Namespace) -> int:
+    """The ``calibrate-shape`` command on parsed arguments (see :func:`add_calibrate_shape_arguments`)."""
+    from dataclasses import replace  # noqa: PLC0415
+
+    from vfactor.errors import ScenarioError  # noqa: PLC0415
+    from vfactor.net.calibrate import METADATA_KEY, write_calibration  # noqa: PLC0415
+    from vfactor.net.shape_error import fit_shape_sigma, keypoint_nees_at, measure_vehicles  # noqa: PLC0415
+    from vfactor.vehicle_library import BODY_TYPES  # noqa: PLC0415
+
+    weights, detector, seeds = _calibrated_detector(args)
     try:
         vehicles = measure_vehicles(args.scenario, seeds, detector, frames=args.frames)
     except ScenarioError as exc:
@@ -520,19 +531,9 @@ def run_calibrate_bias(args: argparse.Namespace) -> int:
     from vfactor.errors import ScenarioError  # noqa: PLC0415
     from vfactor.net.bias_error import MIN_FRAMES, fit_bias_sigma, measure_rendered_tracks  # noqa: PLC0415
     from vfactor.net.calibrate import METADATA_KEY, write_calibration  # noqa: PLC0415
-    from vfactor.net.infer import KeypointDetector, default_weights_path  # noqa: PLC0415
 
-    if args.seeds < 1:
-        raise InputError("--seeds", f"expected at least 1, got {args.seeds}")
-    if args.frames is not None and args.frames < 1:
-        raise InputError("--frames", f"expected at least 1, got {args.frames}")
     scenarios = args.scenario or list(BIAS_SCENARIOS)
-    weights = Path(args.weights) if args.weights else default_weights_path()
-    with _file_of("--weights"):
-        detector = KeypointDetector(weights, device=args.device)
-    if detector.calibration.is_identity:
-        raise InputError("--weights", "no pixel calibration in the weights: run the calibrate command first")
-    seeds = list(range(args.seed, args.seed + args.seeds))
+    weights, detector, seeds = _calibrated_detector(args)
     tracks = []
     for scenario in scenarios:
         try:

@@ -146,7 +146,8 @@ def _eval_association(scenario_name, frames, seed: int, seeds: int, engine=None,
 
 
 def _body_motion(text: str):
-    """``--body-motion ROLL,PITCH`` (degrees per g, each in [0, 20]) as a :class:`vfactor.sim.BodyMotion`."""
+    """``--body-motion ROLL,PITCH`` (degrees per g, each in [0, ``BodyMotion.MAX_DEG_PER_G``]) as a
+    :class:`vfactor.sim.BodyMotion`."""
     from vfactor.sim import BodyMotion
 
     parts = text.split(",")
@@ -154,8 +155,9 @@ def _body_motion(text: str):
         roll, pitch = (float(part) for part in parts)
     except ValueError:
         raise InputError("--body-motion", f"expected ROLL,PITCH in degrees per g, e.g. 5,2, got {text!r}") from None
-    if not all(np.isfinite(v) and 0.0 <= v <= 20.0 for v in (roll, pitch)):
-        raise InputError("--body-motion", f"expected ROLL and PITCH within [0, 20] degrees per g, got {text!r}")
+    if not all(np.isfinite(v) and 0.0 <= v <= BodyMotion.MAX_DEG_PER_G for v in (roll, pitch)):
+        raise InputError("--body-motion", f"expected ROLL and PITCH within [0, {BodyMotion.MAX_DEG_PER_G:g}] degrees "
+                                          f"per g, got {text!r}")
     return BodyMotion(roll, pitch)
 
 

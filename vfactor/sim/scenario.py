@@ -162,9 +162,12 @@ class BodyMotion:
     speed * yaw_rate``, to the left), pitch ``-pitch_deg_per_g * a_long / g`` (nose down when ``a_long < 0``).
 
     Attributes:
-        roll_deg_per_g: degrees of body roll per g of lateral acceleration.
-        pitch_deg_per_g: degrees of body pitch per g of longitudinal acceleration.
+        roll_deg_per_g: degrees of body roll per g of lateral acceleration, in [0, :attr:`MAX_DEG_PER_G`].
+        pitch_deg_per_g: degrees of body pitch per g of longitudinal acceleration, in the same range.
     """
+
+    #: The largest gradient a scenario (or ``vfactor eval tracks --body-motion``) may give, degrees per g.
+    MAX_DEG_PER_G = 20.0
 
     roll_deg_per_g: float = 0.0
     pitch_deg_per_g: float = 0.0
@@ -474,7 +477,8 @@ def scenario_from_dict(data: dict, default_name: str = "scenario") -> Scenario:
         if "motion" not in kw:
             raise ScenarioError("body_motion", "needs motion: vehicles of independent frames have no accelerations")
         value = chk.check_mapping(data["body_motion"], "body_motion", ("roll_deg_per_g", "pitch_deg_per_g"))
-        kw["body_motion"] = BodyMotion(**{key: chk.number(value[key], f"body_motion.{key}", lo=0.0, hi=20.0)
+        kw["body_motion"] = BodyMotion(**{key: chk.number(value[key], f"body_motion.{key}", lo=0.0,
+                                                          hi=BodyMotion.MAX_DEG_PER_G)
                                           for key in ("roll_deg_per_g", "pitch_deg_per_g") if key in value})
     return Scenario(**kw)
 

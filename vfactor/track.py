@@ -561,9 +561,8 @@ class Tracker:
         if self.options.uses_detector_bias and track.bias_sigma is not None:
             common = track.offsets.get(COMMON_OFFSET)
             if common is None or not (estimate.exists(common) or values.exists(common)):
-                common = self.keys.offset_key(track.index, len(track.offset_priors))
-                values.insert(common, gtsam.Pose3())
-                prior = detector_bias_prior(common, track.bias_sigma)
+                common, prior = _new_common_offset(self.keys, track.index, len(track.offset_priors), track.bias_sigma,
+                                                   values)
                 track.offsets[COMMON_OFFSET], track.offset_priors[common] = common, prior
                 if graph is not None:
                     graph.add(prior)
@@ -578,10 +577,7 @@ class Tracker:
                 if graph is not None:
                     graph.add(prior)
             out[name] = key
-        if common is not None:
-            out.update({camera.name: common for camera in obs.cameras
-                        if camera.name in track.bias_cameras and camera.name not in out})
-        return out
+        return _through_common(out, obs, track.bias_cameras)
 
     def _young_graph(self, track: _TrackState, frames: list | None = None) -> gtsam.NonlinearFactorGraph:
         """A young track's whole graph (``frames``: its young frames): shape factors (its prior), each frame's
@@ -1370,6 +1366,27 @@ def _new_offset(keys: KeyScheme, index: int, number: int, sigma: float, shape: g
     return key, gtsam.BetweenFactorPose3(common, key, gtsam.Pose3(), prior.noiseModel())
 
 
+def _new_common_offset(keys: KeyScheme, index: int, number: int, bias_sigma, values: gtsam.Values
+                       ) -> tuple[int, gtsam.NonlinearFactor]:
+    """A new common detector offset of track ``index`` (the detector's bias, docs/factors.md, "The detector's pose
+    offset in tracks"): its key (offset ``number``), the identity inserted in ``values``, and its prior with the
+    detections' ``bias_sigma`` (:func:`vfactor.graph.detector_bias_prior`)."""
+    key = keys.offset_key(index, number)
+    values.insert(key, gtsam.Pose3())
+    return key, detector_bias_prior(key, bias_sigma)
+
+
+def _through_common(offsets: dict[str, int], obs: KeypointObservations, biased: set) -> dict[str, int]:
+    """``offsets`` (camera name -> detector offset key, the track's common one under ``COMMON_OFFSET``) with every
+    camera of ``obs`` whose detections carry a ``bias_sigma`` (``biased``) and that has no offset of its own
+    moving by the common one; unchanged without a common offset."""
+    common = offsets.get(COMMON_OFFSET)
+    if common is not None:
+        offsets.update({camera.name: common for camera in obs.cameras
+                        if camera.name in biased and camera.name not in offsets})
+    return offsets
+
+
 def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     """Batch smoothing of one track (a :func:`_track_units` unit): its results by frame index.
 
@@ -1422,18 +1439,14 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         if posed and frame.t - posed[-1][1] > options.max_gap:
             segments[i] = _segment_message(frame.t - posed[-1][1], options.max_gap)
         if bias is not None and COMMON_OFFSET not in offsets:  # the detector's bias: an offset all cameras share
-            offsets[COMMON_OFFSET] = keys.offset_key(index, len(offsets))
-            values.insert(offsets[COMMON_OFFSET], gtsam.Pose3())
-            graph.add(detector_bias_prior(offsets[COMMON_OFFSET], bias))
+            offsets[COMMON_OFFSET], bias_prior = _new_common_offset(keys, index, len(offsets), bias, values)
+            graph.add(bias_prior)
         for name, sigma in detector_shape_sigmas(obs).items() if options.uses_detector_offsets else ():
             if name not in offsets:
                 offsets[name], offset_prior = _new_offset(keys, index, len(offsets), sigma, values, values,
                                                           offsets.get(COMMON_OFFSET))
                 graph.add(offset_prior)
-        frame_offsets = dict(offsets)  # and cameras without an offset of their own move by the common one
-        if bias is not None:
-            frame_offsets.update({camera.name: offsets[COMMON_OFFSET] for camera in obs.cameras
-                                  if camera.name in biased and camera.name not in offsets})
+        frame_offsets = _through_common(dict(offsets), obs, biased)
         first_factor = graph.size()
         add_observation_factor(graph, keys, obs, index, i, config, frame_offsets)
         projections.append((range(first_factor, graph.size()), i, obs, frame_offsets))

@@ -106,4 +106,5 @@ def hub_height_prior(hub_key: int, hub_height: float, sigma: float) -> gtsam.Non
     """The prior of a vehicle's hub height above the road (``hub_key``: a 1-vector, metres): ``hub_height``
     with ``sigma`` for the wheel radii of real vehicles (the ground-plane factors of its poses take the value
     through ``hub_key``)."""
-    return gtsam.PriorFactorVector(hub_key, np.array([float(hub_height)]), gtsam.noiseModel.Isotropic.Sigma(1, float(sigma)))
+    return gtsam.PriorFactorVector(hub_key, np.array([float(hub_height)]),
+                                   gtsam.noiseModel.Isotropic.Sigma(1, float(sigma)))

@@ -21,6 +21,7 @@ import numpy as np
 from vfactor.camera import Camera
 from vfactor.errors import ScenarioError
 from vfactor.factors.ground_plane import GroundPlane
+from vfactor.keypoints import LAYERS
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.sim.noise import corrupt_keypoints
 from vfactor.sim.routes import Trajectory, drive_profile, intersection_path
@@ -86,7 +87,8 @@ class VehicleTruth:
             return self.keypoints_world
         body = np.array(self.wireframe.vehicle_p_keypoints, dtype=float)
         turn = (gtsam.Rot3.Rx(float(self.body_roll or 0.0)) * gtsam.Rot3.Ry(float(self.body_pitch or 0.0))).matrix()
-        body[4:] = body[4:] @ turn.T
+        sprung = np.setdiff1d(np.arange(len(body)), LAYERS["wheel"])  # all but the hubs
+        body[sprung] = body[sprung] @ turn.T
         return self.world_T_vehicle.transformFrom(body.T).T
 
     @property

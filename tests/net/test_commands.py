@@ -52,6 +52,10 @@ def test_train_command_reports_bad_input(tmp_path, capsys):
     assert err.startswith("error: --init") and len(err.strip().splitlines()) == 1
     assert main(["train", "--render", "2", "--library-share", "1.5", "--out", str(tmp_path / "run")]) == 2
     assert "--library-share" in capsys.readouterr().err
+    for weight in ("van", "van=x", "truck=2", "van=-1"):
+        assert main(["train", "--render", "2", "--library-weight", weight, "--out", str(tmp_path / "run")]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: --library-weight") and len(err.strip().splitlines()) == 1, err
 
 
 def test_detect_command_writes_keypoints_and_heatmaps(tmp_path, capsys):

@@ -116,6 +116,24 @@ def test_a_custom_split_draws_only_its_vehicles(gl_context, tmp_path):
     assert not any(m["source"] in TRAIN.library_models for m in load_dataset(tmp_path / "rest").meta)
 
 
+def test_library_type_weights_set_how_often_each_body_type_is_drawn(gl_context, tmp_path):
+    from dataclasses import replace
+
+    vans_only = replace(TRAIN, library_probability=1.0,
+                        library_type_weights=tuple((t, 0.0) for t in BODY_TYPES if t != "van"))
+    make_dataset(4, seed=4, size=32, path=tmp_path / "vans", split=vans_only)
+    sources = [m["source"] for m in load_dataset(tmp_path / "vans").meta]
+    assert all(library_vehicle(s).body_type == "van" for s in sources), sources
+    p = replace(TRAIN, library_type_weights=(("van", 3.0),)).library_draw_probabilities()
+    vans = np.array([library_vehicle(m).body_type == "van" for m in TRAIN.library_models])
+    assert p.sum() == pytest.approx(1.0) and np.allclose(p[vans], 3 * p[~vans][0]) and np.allclose(p[~vans], p[~vans][0])
+    assert TRAIN.library_draw_probabilities() is None  # the default: every model as often, the draws as before
+    with pytest.raises(ValueError, match="unknown body type 'truck'"):
+        replace(TRAIN, library_type_weights=(("truck", 2.0),))
+    with pytest.raises(ValueError, match="weights >= 0"):
+        replace(TRAIN, library_type_weights=(("van", -1.0),))
+
+
 def test_command_line(gl_context, tmp_path, capsys):
     from vfactor.render.dataset import main
 

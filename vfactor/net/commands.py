@@ -147,6 +147,9 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--library-share", type=float, metavar="P",
                    help="the share of vehicle-library vehicles among the --render training crops (default: the "
                    "training split's, 0.5); the rest are presets and PASCAL3D+ shapes")
+    p.add_argument("--library-weight", action="append", default=[], metavar="TYPE=W",
+                   help="draw the --render crops' library models of body TYPE W times as often as the others' "
+                   "(repeatable; e.g. van=3)")
     p.add_argument("--export", metavar="PATH",
                    help="also copy the weights to PATH: those of the epoch with the best validation PCK when there "
                    "are validation crops (OUT/weights_best.pt), else the final ones")
@@ -210,7 +213,7 @@ def run_train(args: argparse.Namespace) -> int:
     train_paths, val_paths = [Path(p) for p in args.data], [Path(p) for p in args.val]
     if args.render:
         train_paths.append(_render(out / "data" / "train", args.render, config.seed, S, False, args.render_workers,
-                                   not args.quiet, _training_split(args.library_share)))
+                                   not args.quiet, _training_split(args.library_share, args.library_weight)))
     if args.render_val:
         val_paths.append(_render(out / "data" / "val", args.render_val, config.seed, S, True, args.render_workers,
                                  not args.quiet))
@@ -257,17 +260,29 @@ def _train_config(args):
         raise InputError("--config", str(exc)) from None
 
 
-def _training_split(library_share: float | None):
-    """The training split with ``library_share`` library vehicles (None: :data:`vfactor.render.dataset.TRAIN`)."""
-    if library_share is None:
+def _training_split(library_share: float | None, library_weights=()):
+    """The training split with ``library_share`` library vehicles and ``library_weights`` (``TYPE=W`` strings) per
+    body type (None and none: :data:`vfactor.render.dataset.TRAIN`)."""
+    if library_share is None and not library_weights:
         return None
-    if not 0.0 <= library_share <= 1.0:
+    if library_share is not None and not 0.0 <= library_share <= 1.0:
         raise InputError("--library-share", f"expected a share in [0, 1], got {library_share}")
     from dataclasses import replace  # noqa: PLC0415
 
     from vfactor.render.dataset import TRAIN  # noqa: PLC0415
 
-    return replace(TRAIN, library_probability=float(library_share))
+    weights = []
+    for text in library_weights:
+        body_type, _, weight = text.partition("=")
+        try:
+            weights.append((body_type, float(weight)))
+        except ValueError:
+            raise InputError("--library-weight", f"expected TYPE=W (e.g. van=3), got {text!r}") from None
+    share = TRAIN.library_probability if library_share is None else float(library_share)
+    try:
+        return replace(TRAIN, library_probability=share, library_type_weights=tuple(weights))
+    except ValueError as exc:
+        raise InputError("--library-weight", str(exc)) from None
 
 
 def _render(path: Path, n: int, seed: int, size: int, held_out: bool, workers: int, verbose: bool,

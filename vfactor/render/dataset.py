@@ -50,7 +50,7 @@ from vfactor.render.renderer import Ground, Light, Renderer, VehicleInstance, ke
 from vfactor.sim.rig import intrinsics_from_hfov, look_at
 from vfactor.sim.vehicles import (RandomShape, draw_vehicle, footprint, footprints_overlap, road_pose, symmetrised,
                                   within_hwc_bounds)
-from vfactor.vehicle_library import BODY_TYPES, library_ids
+from vfactor.vehicle_library import BODY_TYPES, library_ids, vehicle_library
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
 
 __all__ = [
@@ -90,6 +90,8 @@ class SplitSpec:
         library_models: ids of :mod:`vfactor.vehicle_library` vehicles the split uses (each with the simulator's
             3 cm keypoint jitter, :func:`vfactor.sim.vehicles.draw_vehicle`).
         library_probability: chance that a vehicle is one of ``library_models``.
+        library_type_weights: ``((body type, weight), ...)``: a library model of that body type is drawn ``weight``
+            times as often as one of a type not listed (weight 1); empty (default): every model equally often.
         parity: 0 or 1: the bins (below) the split keeps: ``floor(value / bin) % 2 == parity``.
         hue_bin_deg: paint hue bins (degrees) for coloured paints.
         grey_bin: grey-level bins for achromatic paints (white, silver, grey, black).
@@ -104,11 +106,30 @@ class SplitSpec:
     preset_probability: float = 0.35
     library_models: tuple = ()
     library_probability: float = 0.0
+    library_type_weights: tuple = ()
     parity: int = 0
     hue_bin_deg: float = 20.0
     grey_bin: float = 0.1
     azimuth_bin_deg: float = 10.0
     elevation_bin_deg: float = 4.0
+
+    def __post_init__(self):
+        weights = dict(self.library_type_weights)
+        unknown = sorted(set(weights) - set(BODY_TYPES))
+        if unknown:
+            raise ValueError(f"library_type_weights: unknown body type {unknown[0]!r} (one of {', '.join(BODY_TYPES)})")
+        if not all(isinstance(w, (int, float)) and math.isfinite(w) and w >= 0 for w in weights.values()):
+            raise ValueError(f"library_type_weights: expected weights >= 0, got {self.library_type_weights!r}")
+
+    def library_draw_probabilities(self) -> np.ndarray | None:
+        """The probability of each of ``library_models`` in a library draw (None: uniform, the default)."""
+        if not self.library_type_weights:
+            return None
+        weights = dict(self.library_type_weights)
+        w = np.array([float(weights.get(vehicle_library()[m].body_type, 1.0)) for m in self.library_models])
+        if not w.sum() > 0:
+            raise ValueError("library_type_weights: every library model of the split has weight 0")
+        return w / w.sum()
 
     def keeps(self, value: float, bin_width: float) -> bool:
         return int(math.floor(value / bin_width)) % 2 == self.parity
@@ -289,7 +310,9 @@ def random_vehicle(rng: np.random.Generator, split: SplitSpec = TRAIN, max_tries
     shapes = pascal3d_shapes()
     for _ in range(max_tries):
         if split.library_models and rng.uniform() < split.library_probability:
-            vehicle_id = split.library_models[rng.integers(len(split.library_models))]
+            p = split.library_draw_probabilities()
+            index = rng.integers(len(split.library_models)) if p is None else rng.choice(len(split.library_models), p=p)
+            vehicle_id = split.library_models[index]
             wf, radius, source = draw_vehicle(vehicle_id, rng, RandomShape(jitter=0.03))
         elif split.presets and (not split.pascal_models or rng.uniform() < split.preset_probability):
             name = split.presets[rng.integers(len(split.presets))]

@@ -552,19 +552,16 @@ def test_a_track_one_camera_sees_holds_a_bounded_window(sim):
 
 
 
-def test_one_frame_of_a_vehicle_turned_round_is_left_out_not_a_new_segment(sim):
-    """A learnt detector now and then gives one frame's keypoints of the vehicle turned round
-    (library_tracks_2cam seed 12 from rendered images: both cameras' keypoints of one frame fit the vehicle
-    165 deg off). That frame lies beyond the motion model's gate and starts a new segment; the next frame, right
-    again, follows the ended segment, which goes on, and the bad frame's pose goes back into it from the track's
-    motion alone, with a message (it used to leave three segments and two jumps, the bad frame turned round)."""
+def turned_frames(sim, turns: dict[int, float]):
+    """``sim``'s frames with every camera's keypoints of v1 in frame ``f`` those of the vehicle turned by
+    ``turns[f]`` radians in place (about its vertical), with the simulator's noise."""
     import gtsam
 
     frames = []
     for f, frame in enumerate(sim.scene.frames):
-        if f == 10:  # every camera sees the vehicle turned round in place, with the simulator's noise
+        if f in turns:
             truth = sim.truth[f]["v1"]
-            turned = truth.world_T_vehicle.compose(gtsam.Pose3(gtsam.Rot3.Rz(np.pi), np.zeros(3)))
+            turned = truth.world_T_vehicle.compose(gtsam.Pose3(gtsam.Rot3.Rz(turns[f]), np.zeros(3)))
             world = turned.transformFrom(truth.wireframe.vehicle_p_keypoints.T).T
             detections = []
             for d in frame.detections:
@@ -573,21 +570,47 @@ def test_one_frame_of_a_vehicle_turned_round_is_left_out_not_a_new_segment(sim):
                 detections.append(dataclasses.replace(d, keypoints=camera.project(world)[0] + noise))
             frame = dataclasses.replace(frame, detections=detections)
         frames.append(frame)
-    run = track_scene(dataclasses.replace(sim.scene, frames=frames))
+    return dataclasses.replace(sim.scene, frames=frames)
+
+
+def assert_bad_frames_left_out(sim, scene, bad: set, options=TrackOptions()):
+    """Tracked, the ``bad`` frames are left out of the track (their poses from its motion, said in their messages),
+    no jump is reported, and every pose is within 5 deg and 25 cm of the truth."""
+    run = track_scene(scene, options)
     assert not any("jumps" in m for m in run.messages), run.messages
-    assert "left out of the track" in run.frames[10].vehicles[0].message
+    for f in bad:
+        assert "left out of the track" in run.frames[f].vehicles[0].message, (f, run.frames[f].vehicles[0].message)
     errors = [pose_errors(fr.vehicles[0].world_T_vehicle, fr.vehicles[0].keypoints_world,
                           sim.truth[f]["v1"].world_T_vehicle, sim.truth[f]["v1"].keypoints_world)
-              for f, fr in enumerate(run.frames) if f != 10]
-    assert max(e["rotation_deg"] for e in errors) < 5 and max(e["translation_cm"] for e in errors) < 25
+              for f, fr in enumerate(run.frames)]
+    assert max(e["rotation_deg"] for e in errors) < 5 and max(e["translation_cm"] for e in errors) < 25, errors
+    return run
+
+
+def test_one_frame_of_a_vehicle_turned_round_is_left_out_not_a_new_segment(sim):
+    """A learnt detector now and then gives one frame's keypoints of the vehicle turned round
+    (library_tracks_2cam seed 12 from rendered images: both cameras' keypoints of one frame fit the vehicle
+    165 deg off). That frame lies beyond the motion model's gate and starts a new segment; the next frame, right
+    again, follows the ended segment, which goes on, and the bad frame's pose goes back into it from the track's
+    motion alone, with a message (it used to leave three segments and two jumps, the bad frame turned round)."""
+    scene = turned_frames(sim, {10: np.pi})
+    run = assert_bad_frames_left_out(sim, scene, {10})
     # the bad frame: online its own (turned) solve, finally the track's pose for its time
     assert run.online[10].vehicles[0].world_T_vehicle.rotation().matrix()[:, 0] @ \
         sim.truth[10]["v1"].world_T_vehicle.rotation().matrix()[:, 0] < 0
-    bad = run.frames[10].vehicles[0]
-    assert pose_errors(bad.world_T_vehicle, bad.keypoints_world, sim.truth[10]["v1"].world_T_vehicle,
-                       sim.truth[10]["v1"].keypoints_world)["rotation_deg"] < 5
-    lagged = track_scene(dataclasses.replace(sim.scene, frames=frames), TrackOptions(lag=0.3))
+    lagged = track_scene(scene, TrackOptions(lag=0.3))
     assert not any("jumps" in m for m in lagged.messages) and "left out" in lagged.frames[10].vehicles[0].message
+
+
+def test_a_run_of_bad_frames_is_left_out_not_new_segments(sim):
+    """A view hidden behind another vehicle for a few frames, the network putting the hidden vehicle's keypoints on
+    the one in front (``library_tracks_2cam`` seed 241 from rendered images: a pickup's keypoints 59-173 deg off in
+    three frames, which left four segments and three jumps, the poses 12 deg / 96 cm off on average): the frames
+    after the run follow the segment the first jump ended, which is held through the run and goes on, the bad
+    frames' poses from its motion."""
+    turns = {10: np.pi, 11: np.pi, 12: 0.6 * np.pi}  # the third another pose again: a jump from the second segment
+    assert_bad_frames_left_out(sim, turned_frames(sim, turns), set(turns))
+    assert_bad_frames_left_out(sim, turned_frames(sim, turns), set(turns), TrackOptions(lag=0.5))
 
 
 def test_a_frame_that_does_not_join_a_young_track_leaves_its_shape_choice_as_it_was(sim):

@@ -210,14 +210,16 @@ _START_COST_RATIO = 0.5
 _REJOIN_COST_RATIO = 2.0
 #: ... and only a track of at least this many poses (Tracker._rejoined).
 _REJOIN_POSES = 5
-#: The frame after a jump resumes the segment the jump ended (Tracker._resume) where that segment's prediction
+#: A frame after a jump resumes the segment the jump ended (Tracker._resume) where that segment's prediction
 #: explains it at under this share of the cost at the new segment's.
 _RESUME_COST_RATIO = 0.5
+#: ... while fewer frames than this came after the jump (0.5 s at 10 Hz): a view hidden for a few frames.
+_RESUME_FRAMES = 5
 #: A young segment of fewer than :data:`_REJOIN_POSES` poses that a jump ended is kept (Tracker._take_back) until the
 #: segment after it has this many poses, and is then taken back into it where that segment's motion explains its
 #: keypoints (the ended segment's depth, from one camera, may have been what was off, not the id).
 _TAKE_BACK_POSES = _REJOIN_POSES
-#: What a track's segment is (Tracker._resume keeps them for one frame after a jump ends a segment).
+#: What a track's segment is (Tracker._resume holds them for a few frames after a jump ends a segment).
 _SEGMENT_STATE = ("smoother", "poses", "hwc_added", "young", "young_frames", "multiview_frames", "reanchored", "prior",
                   "body_type", "body_type_probability", "noise_scale", "offsets", "offset_priors", "observed")
 #: What a re-solve with a frame that does not join changes and Tracker._rejoined puts back: the shape choice and
@@ -274,7 +276,8 @@ class _TrackState:
     # pose key -> (frame index, its keypoints as the smoother's projection factors hold them, camera name -> detector
     # offset key): the smoothed covariances' graph takes them as least squares on their inliers (_covariance_graph)
     observed: dict = field(default_factory=dict)
-    # the segment a jump ended, kept for one frame (Tracker._resume): its smoother and state, or None
+    # the segment a jump ended, held for a few frames (Tracker._resume): its smoother and state, and "bad": the
+    # poses of the segments jumps ended since (frame index, t, key), or None
     previous: dict | None = None
     # the young segments of a few poses that jumps ended, kept until the segment after them can take them back
     # (Tracker._take_back): their poses, young frames and where each segment starts among them, or None
@@ -715,50 +718,60 @@ class Tracker:
         return True
 
     def _resume(self, track: _TrackState, t: float, raw: KeypointObservations) -> None:
-        """Resumes the segment a jump ended where the frame after the jump follows it.
+        """Resumes the segment a jump ended where a frame after the jump follows it.
 
         A learnt detector now and then gives one frame's keypoints of a vehicle turned round or elsewhere
         (``library_tracks_2cam`` seed 12 from the network's keypoints: both cameras' keypoints of one frame
-        165 deg off): one such frame beyond the motion model's gate started a new segment, and the next frame,
-        right again, another. So the ended segment's smoother is kept for one frame: where the next frame's
-        keypoints are explained by the ended segment's prediction at under :data:`_RESUME_COST_RATIO` of the cost
-        at the new segment's, the jump was one bad frame. The ended segment goes on (its poses live again), and the
-        bad frame's pose goes back into it without the frame's keypoints: where the track's motion puts it, said
-        in its result's message (its online result, given before the next frame came, was its own solve).
+        165 deg off), or a few frames' where a view is hidden behind another vehicle and the network puts the
+        hidden one's keypoints on the one in front (``library_tracks_2cam`` seed 241: a pickup 59-173 deg off in
+        three frames of one camera). Such a frame beyond the motion model's gate started a new segment, and the
+        next frames, wrong in another way or right again, more. So the segment the first jump ended is held
+        (``track.previous``) while the frames after it number fewer than :data:`_RESUME_FRAMES` (a jump from a
+        segment begun within them keeps holding it): where a frame's keypoints are explained by the held
+        segment's prediction at under :data:`_RESUME_COST_RATIO` of the cost at the current segment's, the
+        frames since were bad. The held segment goes on (its poses live again), and the bad frames' poses go back
+        into it without their keypoints: where the track's motion puts them, said in their results' messages
+        (their online results, given before, were their own solves).
         """
-        previous, track.previous = track.previous, None
-        if len(track.poses) != 1:
+        previous = track.previous
+        if previous is None:
+            return
+        bad = previous["bad"] + track.poses  # every frame since the held segment ended
+        if len(bad) >= _RESUME_FRAMES or len(track.poses) >= _RESUME_FRAMES:
+            track.previous = None  # the segment after the jump holds: the held one is given up
             return
         loss = self.options.solve.graph.loss
         now = track.smoother.calculateEstimate()
         cost_now = cross_projection_cost(raw.scaled_above_calibrated(track.noise_scale),
                                          self._predict(track.poses, now, t), self._wireframe(now, track), loss)
-        before = previous["smoother"].calculateEstimate()  # the ended segment (same keys' characters and index)
+        before = previous["smoother"].calculateEstimate()  # the held segment (same keys' characters and index)
         cost_before = cross_projection_cost(raw.scaled_above_calibrated(previous["noise_scale"]),
                                             self._predict(previous["poses"], before, t), self._wireframe(before, track),
                                             loss)
         if not cost_before < _RESUME_COST_RATIO * cost_now:
             return
-        (frame_index, t_bad, key), = track.poses
-        for name, value in previous.items():
-            setattr(track, name, value)
-        track.ended_young = None  # the ended segment goes on: nothing to take back
-        for index, _, _ in track.poses:  # the ended segment's poses are live again
+        for name in _SEGMENT_STATE:
+            setattr(track, name, previous[name])
+        track.previous = None
+        track.ended_young = None  # the held segment goes on: nothing to take back
+        bad_frames = {index for index, _, _ in bad}
+        for index, _, _ in track.poses + bad:  # the held segment's poses are live again; the bad ones join it
             track.retired.pop((index, track.id), None)
-        if track.jumps and track.jumps[-1][0] == frame_index:
-            track.jumps.pop()
-        # the bad frame's pose goes back into the track without its keypoints: where its motion puts it
-        motion, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        _add_pose_factors(motion, track.poses, key, t_bad, self.options, self._hub_key(track))
-        values.insert(key, self._predict(track.poses, before, t_bad))
-        stamps = {key: t_bad, **({k: t_bad for *_, k in track.poses} if _held(track) else {})}
-        track.smoother.update(motion, values, stamps)
-        if track.young:  # a frame without keypoints in the young track's graph: its motion factors only
-            left_out = VehicleResult(track.id, Status.FAILED, message="keypoints left out")
-            track.young_frames.append((frame_index, raw.subset(np.zeros(len(raw), dtype=bool)), motion, left_out, {}))
-        track.poses.append((frame_index, t_bad, key))
-        track.notes[key] = ("its keypoints lay beyond the motion model's gate, and the next frame's followed the "
-                            "track again: left out of the track, the pose from the track's motion alone")
+        track.jumps = [jump for jump in track.jumps if jump[0] not in bad_frames]
+        # the bad frames' poses go back into the track without their keypoints: where its motion puts them
+        for frame_index, t_bad, key in bad:
+            motion, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+            _add_pose_factors(motion, track.poses, key, t_bad, self.options, self._hub_key(track))
+            values.insert(key, self._predict(track.poses, track.smoother.calculateEstimate(), t_bad))
+            stamps = {key: t_bad, **({k: t_bad for *_, k in track.poses} if _held(track) else {})}
+            track.smoother.update(motion, values, stamps)
+            if track.young:  # a frame without keypoints in the young track's graph: its motion factors only
+                left_out = VehicleResult(track.id, Status.FAILED, message="keypoints left out")
+                track.young_frames.append((frame_index, raw.subset(np.zeros(len(raw), dtype=bool)), motion,
+                                           left_out, {}))
+            track.poses.append((frame_index, t_bad, key))
+            track.notes[key] = ("its keypoints lay beyond the motion model's gate, and a later frame's followed the "
+                                "track again: left out of the track, the pose from the track's motion alone")
 
     def _take_back(self, track: _TrackState) -> None:
         """The poses of the young segment a jump ended, solved again with the segment after it, where its motion
@@ -948,9 +961,13 @@ class Tracker:
                     # the keypoints are those of a vehicle elsewhere: the id does not follow one vehicle here
                     self._retire(track)
                     ended = {name: getattr(track, name) for name in _SEGMENT_STATE}
+                    held = track.previous  # a segment an earlier jump ended, held through the frames after it
                     pending = track.ended_young  # an earlier young segment this one was to take back
                     track.restart()
-                    track.previous = ended
+                    if held is not None and len(held["bad"]) + len(ended["poses"]) < _RESUME_FRAMES:
+                        track.previous = dict(held, bad=held["bad"] + ended["poses"])  # still held: this one was bad
+                    else:
+                        track.previous = dict(ended, bad=[])
                     if ended["young"] and len(ended["poses"]) < _TAKE_BACK_POSES and \
                             [p[0] for p in ended["poses"]] == [f[0] for f in ended["young_frames"]]:
                         track.ended_young = {"poses": ended["poses"], "young_frames": ended["young_frames"],

@@ -247,6 +247,17 @@ def test_eval_images_tracks_a_multi_frame_scenario(rendered):
     k = evaluation["keypoints"]  # the calibration check per body type: every detection counted in one class
     assert set(k["by_body_type"]) and sum(g["d2_count"] for g in k["by_body_type"].values()) == k["d2_count"] > 0
     assert 0.2 < k["d2_mean"] < 20.0 and "mean d2 of PCK-correct keypoints" in report
+    views = k["by_view"]  # vehicles whole in the image and cut by its border: every detection in one of them
+    assert set(views) <= {"whole", "cut"} and sum(v["d2_count"] for v in views.values()) == k["d2_count"]
+    assert sum(v["visible"] for v in views.values()) == k["visible"] and "| whole in the image |" in report
+
+
+def test_a_box_beyond_the_image_border_is_cut():
+    from vfactor.net.end_to_end import cut_by_border
+
+    assert not cut_by_border((0.0, 0.0, 1280.0, 720.0), (1280, 720))
+    assert cut_by_border((-3.0, 10.0, 200.0, 100.0), (1280, 720)) and cut_by_border((10, 10, 1281, 100), (1280, 720))
+    assert cut_by_border((10.0, 650.0, 200.0, 721.0), (1280, 720))
 
 
 def test_keypoint_accuracy_d2_is_the_mahalanobis_distance_of_the_pck_correct_keypoints():

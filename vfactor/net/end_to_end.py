@@ -32,7 +32,7 @@ from vfactor.vehicle_library import BODY_TYPES
 from vfactor.solve import SolveOptions
 
 __all__ = ["evaluate_images", "render_and_detect", "keypoint_accuracy", "calibration_table", "images_report",
-           "network_saw"]
+           "network_saw", "cut_by_border"]
 
 
 def network_saw(model: str) -> bool:
@@ -68,9 +68,12 @@ def keypoint_accuracy(detected, rendered, crop_box, body_types=None) -> dict:
         (in-image keypoints the network found nothing for); ``d2_mean`` and ``d2_count``: the mean squared
         Mahalanobis distance ``e^T S^-1 e`` of the PCK-correct in-image keypoints under the detections' pixel
         covariances ``S`` (image px^2; chi-square(2), mean 2, if they are calibrated; NaN without covariances).
-        With ``body_types``, ``by_body_type``: class -> those figures for its detections.
+        With ``body_types``, ``by_body_type``: class -> those figures for its detections. ``by_view``: ``"whole"``
+        and ``"cut"`` -> those figures for the detections whose vehicle lies wholly in the image and those whose
+        true box the image border cuts (:func:`cut_by_border`; a vehicle entering or leaving a view), where there are
+        any.
     """
-    pred, truth, vis, occ, sides, cov, classes = [], [], [], [], [], [], []
+    pred, truth, vis, occ, sides, cov, classes, cut = [], [], [], [], [], [], [], []
     for f, frame in enumerate(detected.frames):
         for det in frame.detections:
             key = (det.camera, det.vehicle)
@@ -87,13 +90,23 @@ def keypoint_accuracy(detected, rendered, crop_box, body_types=None) -> dict:
             sides.append(max(x1 - x0, y1 - y0))
             cov.append(det.covariance if det.covariance is not None else np.full((len(uv), 2, 2), np.nan))
             classes.append(None if body_types is None else body_types.get((f, det.vehicle)))
+            cut.append(cut_by_border(rendered.boxes_true[f][key], detected.cameras[det.camera].image_size))
     arrays = tuple(map(np.asarray, (pred, truth, vis, occ, sides, cov)))
     out = _accuracy(*arrays)
+    cut = np.array(cut, dtype=bool)
+    out["by_view"] = {view: _accuracy(*(a[rows] for a in arrays)) for view, rows in (("whole", ~cut), ("cut", cut))
+                      if rows.any()}
     if body_types is not None:
         classes = np.array(classes, dtype=object)
         out["by_body_type"] = {c: _accuracy(*(a[classes == c] for a in arrays))
                                for c in dict.fromkeys(c for c in classes if c is not None)}
     return out
+
+
+def cut_by_border(box, image_size) -> bool:
+    """Whether a vehicle's box ``(x0, y0, x1, y1)`` (pixel edges) reaches beyond a ``(width, height)`` image."""
+    x0, y0, x1, y1 = box
+    return bool(x0 < 0 or y0 < 0 or x1 > image_size[0] or y1 > image_size[1])
 
 
 def _accuracy(pred, truth, vis, occ, sides, cov) -> dict:
@@ -124,7 +137,8 @@ def _accuracy(pred, truth, vis, occ, sides, cov) -> dict:
 
 def calibration_table(keypoints: dict) -> str:
     """Markdown, per body type, of :func:`keypoint_accuracy`'s ``by_body_type``: PCK, median error and the mean d2 of
-    the PCK-correct keypoints under their covariances (calibrated: 2)."""
+    the PCK-correct keypoints under their covariances (calibrated: 2); then all detections, and those of vehicles
+    whole in the image and cut by its border (``by_view``)."""
     lines = ["| body type | PCK@0.1 visible | PCK@0.1 self-occluded | median error of visible keypoints (% of crop) "
              "| mean d2 of PCK-correct keypoints (calibrated: 2) | keypoints |", "| --- " * 6 + "|"]
     groups = keypoints.get("by_body_type", {})
@@ -133,8 +147,12 @@ def calibration_table(keypoints: dict) -> str:
         k = groups[c]
         lines.append(f"| {c} | {k['pck_visible']:.3f} | {k['pck_self_occluded']:.3f} | "
                      f"{100 * k['median_rel_visible']:.2f} | {k['d2_mean']:.2f} | {k['d2_count']} |")
-    lines.append(f"| all | {keypoints['pck_visible']:.3f} | {keypoints['pck_self_occluded']:.3f} | "
-                 f"{100 * keypoints['median_rel_visible']:.2f} | {keypoints['d2_mean']:.2f} | {keypoints['d2_count']} |")
+    views = keypoints.get("by_view", {})
+    for label, k in [("all", keypoints)] + [(name, views[view]) for view, name in
+                                           (("whole", "whole in the image"), ("cut", "cut by the image border"))
+                                           if view in views]:
+        lines.append(f"| {label} | {k['pck_visible']:.3f} | {k['pck_self_occluded']:.3f} | "
+                     f"{100 * k['median_rel_visible']:.2f} | {k['d2_mean']:.2f} | {k['d2_count']} |")
     return "\n".join(lines)
 
 

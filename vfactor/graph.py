@@ -39,6 +39,7 @@ from vfactor.wireframe import Wireframe
 __all__ = [
     "GraphConfig",
     "observations_from_detections",
+    "roi_cut_by_border",
     "vehicle_image_sizes",
     "sized_observations",
     "sigma_change",
@@ -298,11 +299,16 @@ def _stacked(parts: list, empty_shape: tuple, dtype) -> np.ndarray:
 
 
 def _roi_cut(camera: Camera, roi) -> bool:
-    """Whether the detection box ``roi`` ``(x0, y0, x1, y1)`` reaches beyond the camera's image (False where either
-    is not known)."""
+    """Whether the detection box ``roi`` reaches beyond the camera's image (False where either is not known)."""
     if roi is None or camera.image_size is None:
         return False
-    width, height = camera.image_size
+    return roi_cut_by_border(roi, camera.image_size)
+
+
+def roi_cut_by_border(roi, image_size) -> bool:
+    """Whether a box ``(x0, y0, x1, y1)`` (pixel edges) reaches beyond a ``(width, height)`` image, whose pixel edges
+    span ``-0.5 .. width - 0.5``: a vehicle's whole (amodal) box where the image border cuts the vehicle."""
+    width, height = image_size
     return bool(roi[0] < -0.5 or roi[1] < -0.5 or roi[2] > width - 0.5 or roi[3] > height - 0.5)
 
 

@@ -11,7 +11,7 @@ from torch.nn import functional as F  # noqa: E402
 
 from tests.net.fakes import COV, H, PEAKS, S, FixedHeatmaps  # noqa: E402
 from vfactor.heatmaps import heatmap_to_image  # noqa: E402
-from vfactor.net.crop import crop_roi, expand_roi, image_to_crop  # noqa: E402
+from vfactor.net.crop import crop_roi, expand_roi, extend_clipped_roi, image_to_crop  # noqa: E402
 from vfactor.net.infer import KeypointDetector, benchmark_inference  # noqa: E402
 from vfactor.net.model import StackedHourglass, save_weights  # noqa: E402
 
@@ -90,6 +90,30 @@ def test_boxes_are_grown_and_squared_as_the_weights_say(tmp_path):
     [[d]] = det.detect_batch([np.zeros((200, 300, 3), np.uint8)], [[box]])
     assert d.roi == (80.0, 10.0, 200.0, 130.0)
     np.testing.assert_allclose(d.keypoints.uv, heatmap_to_image(PEAKS, d.roi, (H, H)), atol=1e-6)
+
+
+def test_a_box_clipped_by_the_image_border_is_grown_beyond_it():
+    """A 2D detector's box stops at the border of an image that cuts the vehicle; the network was trained on the
+    whole vehicle's box, so that edge is first moved out by CLIPPED_EXTENSION of the box's side."""
+    assert extend_clipped_roi((0, 100, 200, 180), 1280, 720) == pytest.approx((-50, 100, 200, 180))
+    assert extend_clipped_roi((1000, 100, 1280, 180), 1280, 720) == pytest.approx((1000, 100, 1350, 180))
+    assert extend_clipped_roi((10, -0.5, 200, 719.5), 1280, 720) == pytest.approx((10, -180.5, 200, 899.5))
+    for inside_or_beyond in [(10, 100, 200, 180), (-60, 100, 200, 180), (1000, 100, 1400, 180)]:
+        assert extend_clipped_roi(inside_or_beyond, 1280, 720) == pytest.approx(inside_or_beyond)
+    assert extend_clipped_roi((0, 100, 200, 180), 1280, 720, extension=0.0) == pytest.approx((0, 100, 200, 180))
+    with pytest.raises(ValueError, match="extension"):
+        extend_clipped_roi((0, 100, 200, 180), 1280, 720, extension=-1)
+    net = FixedHeatmaps(num_stacks=1, channels=8, depth=2, input_size=S)
+    image = np.zeros((100, 150, 3), np.uint8)
+    detector = KeypointDetector(net, device="cpu", roi_margin=0.0, flip_test=False)
+    [[grown]] = detector.detect_batch([image], [[(0, 20, 40, 60)]])
+    assert grown.roi == (-10.0, 20.0, 40.0, 60.0)  # the left edge 10 px (a quarter of 40) beyond the image
+    np.testing.assert_allclose(grown.keypoints.uv, heatmap_to_image(PEAKS, grown.roi, (H, H)), atol=1e-6)
+    [[kept]] = KeypointDetector(net, device="cpu", roi_margin=0.0, flip_test=False,
+                                clipped_extension=0).detect_batch([image], [[(0, 20, 40, 60)]])
+    assert kept.roi == (0.0, 20.0, 40.0, 60.0)
+    with pytest.raises(ValueError, match="clipped_extension"):
+        KeypointDetector(net, device="cpu", clipped_extension=-0.1)
 
 
 def test_batch_form_keeps_boxes_with_their_images():

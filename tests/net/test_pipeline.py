@@ -253,11 +253,12 @@ def test_eval_images_tracks_a_multi_frame_scenario(rendered):
 
 
 def test_a_box_beyond_the_image_border_is_cut():
-    from vfactor.net.end_to_end import cut_by_border
+    from vfactor.graph import roi_cut_by_border
 
-    assert not cut_by_border((0.0, 0.0, 1280.0, 720.0), (1280, 720))
-    assert cut_by_border((-3.0, 10.0, 200.0, 100.0), (1280, 720)) and cut_by_border((10, 10, 1281, 100), (1280, 720))
-    assert cut_by_border((10.0, 650.0, 200.0, 721.0), (1280, 720))
+    assert not roi_cut_by_border((-0.5, -0.5, 1279.5, 719.5), (1280, 720))  # the image's pixel edges
+    assert roi_cut_by_border((-3.0, 10.0, 200.0, 100.0), (1280, 720))
+    assert roi_cut_by_border((10, 10, 1281, 100), (1280, 720))
+    assert roi_cut_by_border((10.0, 650.0, 200.0, 721.0), (1280, 720))
 
 
 def test_keypoint_accuracy_d2_is_the_mahalanobis_distance_of_the_pck_correct_keypoints():

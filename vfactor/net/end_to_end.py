@@ -25,6 +25,7 @@ import numpy as np
 
 from vfactor.evaluation import (accuracy_table, body_type_of, body_type_table, compare_methods, compare_tracking,
                                 consistency_table, summarise_methods, tracking_table)
+from vfactor.graph import roi_cut_by_border
 from vfactor.net.evaluate import pck
 from vfactor.net.pipeline import detect_scene
 from vfactor.sim import load_scenario, simulate
@@ -32,7 +33,7 @@ from vfactor.vehicle_library import BODY_TYPES
 from vfactor.solve import SolveOptions
 
 __all__ = ["evaluate_images", "render_and_detect", "keypoint_accuracy", "calibration_table", "images_report",
-           "network_saw", "cut_by_border"]
+           "network_saw"]
 
 
 def network_saw(model: str) -> bool:
@@ -70,8 +71,8 @@ def keypoint_accuracy(detected, rendered, crop_box, body_types=None) -> dict:
         covariances ``S`` (image px^2; chi-square(2), mean 2, if they are calibrated; NaN without covariances).
         With ``body_types``, ``by_body_type``: class -> those figures for its detections. ``by_view``: ``"whole"``
         and ``"cut"`` -> those figures for the detections whose vehicle lies wholly in the image and those whose
-        true box the image border cuts (:func:`cut_by_border`; a vehicle entering or leaving a view), where there are
-        any.
+        true box the image border cuts (:func:`vfactor.graph.roi_cut_by_border`; a vehicle entering or leaving a
+        view), where there are any.
     """
     pred, truth, vis, occ, sides, cov, classes, cut = [], [], [], [], [], [], [], []
     for f, frame in enumerate(detected.frames):
@@ -90,7 +91,7 @@ def keypoint_accuracy(detected, rendered, crop_box, body_types=None) -> dict:
             sides.append(max(x1 - x0, y1 - y0))
             cov.append(det.covariance if det.covariance is not None else np.full((len(uv), 2, 2), np.nan))
             classes.append(None if body_types is None else body_types.get((f, det.vehicle)))
-            cut.append(cut_by_border(rendered.boxes_true[f][key], detected.cameras[det.camera].image_size))
+            cut.append(roi_cut_by_border(rendered.boxes_true[f][key], detected.cameras[det.camera].image_size))
     arrays = tuple(map(np.asarray, (pred, truth, vis, occ, sides, cov)))
     out = _accuracy(*arrays)
     cut = np.array(cut, dtype=bool)
@@ -101,12 +102,6 @@ def keypoint_accuracy(detected, rendered, crop_box, body_types=None) -> dict:
         out["by_body_type"] = {c: _accuracy(*(a[classes == c] for a in arrays))
                                for c in dict.fromkeys(c for c in classes if c is not None)}
     return out
-
-
-def cut_by_border(box, image_size) -> bool:
-    """Whether a vehicle's box ``(x0, y0, x1, y1)`` (pixel edges) reaches beyond a ``(width, height)`` image."""
-    x0, y0, x1, y1 = box
-    return bool(x0 < 0 or y0 < 0 or x1 > image_size[0] or y1 > image_size[1])
 
 
 def _accuracy(pred, truth, vis, occ, sides, cov) -> dict:

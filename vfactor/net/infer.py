@@ -24,7 +24,7 @@ import torch
 from vfactor.heatmaps import DecodedKeypoints, decode_heatmaps
 from vfactor.keypoints import MIRROR_PERMUTATION
 from vfactor.net.calibrate import CovarianceCalibration
-from vfactor.net.crop import check_roi_in_image, crop_roi, expand_roi
+from vfactor.net.crop import CLIPPED_EXTENSION, check_roi_in_image, crop_roi, expand_roi, extend_clipped_roi
 from vfactor.net.model import StackedHourglass, default_weights_path, load_weights
 
 #: Left/right swap of the heatmap channels, as a tensor index.
@@ -75,6 +75,9 @@ class KeypointDetector:
             twice the network time for less noisy keypoints (on rendered
             two-camera scenes the pose error falls by about 8 %, see
             docs/results.md). The shipped calibration was fitted with it on.
+        clipped_extension: a box that stops at the image border (a 2D detector's box clipped by the image) is
+            first grown beyond it by this share of its side (:func:`vfactor.net.crop.extend_clipped_roi`; 0: never),
+            as the network was trained on whole vehicles' boxes, which reach beyond the image where it cuts them.
 
     Attributes:
         calibration: the :class:`vfactor.net.calibrate.CovarianceCalibration` applied.
@@ -89,7 +92,8 @@ class KeypointDetector:
 
     def __init__(self, weights=None, device=None, roi_margin: float | None = None, roi_square: bool | None = None,
                  min_confidence: float | None = None, batch_size: int = 16,
-                 calibration: CovarianceCalibration | dict | None = None, flip_test: bool = True):
+                 calibration: CovarianceCalibration | dict | None = None, flip_test: bool = True,
+                 clipped_extension: float = CLIPPED_EXTENSION):
         device = torch.device(device if device is not None else ("cuda" if torch.cuda.is_available() else "cpu"))
         meta: dict = {}
         if isinstance(weights, StackedHourglass):
@@ -107,6 +111,10 @@ class KeypointDetector:
             raise ValueError(f"batch_size: expected a positive integer, got {batch_size!r}")
         self.batch_size = batch_size
         self.flip_test = bool(flip_test)
+        if isinstance(clipped_extension, bool) or not isinstance(clipped_extension, (int, float)) or \
+                not np.isfinite(clipped_extension) or clipped_extension < 0:
+            raise ValueError(f"clipped_extension: expected a number >= 0, got {clipped_extension!r}")
+        self.clipped_extension = float(clipped_extension)
         self.metadata = meta
         if calibration is None:
             calibration = CovarianceCalibration.from_metadata(meta) or CovarianceCalibration()
@@ -172,7 +180,7 @@ class KeypointDetector:
             for j, roi in enumerate(boxes_i):
                 try:
                     check_roi_in_image(roi, img.shape[1], img.shape[0])
-                    box = self.crop_box(roi)
+                    box = self.crop_box(extend_clipped_roi(roi, img.shape[1], img.shape[0], self.clipped_extension))
                 except ValueError as exc:
                     raise ValueError(f"rois[{i}][{j}]: {exc}") from None
                 crop, used = crop_roi(img, box, S)

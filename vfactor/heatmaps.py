@@ -35,6 +35,8 @@ __all__ = [
     "render_gaussian_heatmap",
     "heatmap_to_image",
     "image_to_heatmap",
+    "extend_clipped_roi",
+    "CLIPPED_EXTENSION",
 ]
 
 #: Pixels below this fraction of the peak are left out of the log-quadratic fit
@@ -363,3 +365,32 @@ def _moments(h, row, col):
     ex, ey = dx - mean[0], dy - mean[1]
     cov = np.array([[(wts * ex * ex).sum(), (wts * ex * ey).sum()], [(wts * ex * ey).sum(), (wts * ey * ey).sum()]])
     return mean, cov + np.eye(2) / 12.0
+
+
+#: How far :func:`extend_clipped_roi` grows a box that stops at the image border beyond it, as a share of the box's
+#: width (a left or right border) or height (top or bottom). The network was trained on boxes of the whole vehicle
+#: (amodal), which reach beyond the image where it cuts the vehicle; a 2D detector's box stops at the border, and
+#: there the network put the keypoints it cannot see inside that box (PCK@0.1 of cut vehicles' keypoints 0.23-0.56 on
+#: five rendered track scenes, 0.37-0.67 with the box grown by this share; docs/network.md, "Boxes clipped by the
+#: image border"). The keypoint network's detector (vfactor.net.infer) and its training crops (vfactor.render) use it.
+CLIPPED_EXTENSION = 0.25
+
+
+def extend_clipped_roi(roi, width: int, height: int, extension: float = CLIPPED_EXTENSION) -> tuple:
+    """A box that stops at the border of a ``width x height`` image (an edge within a pixel of it: a 2D detector's
+    box clipped by the image) grown beyond that border by ``extension`` times its width or height; other boxes, and
+    edges inside the image or already beyond it, as they are.
+
+    Args:
+        roi: ``(x0, y0, x1, y1)``, pixel edges (the image spans ``-0.5 .. width - 0.5``).
+        extension: share of the box's side (>= 0; 0 keeps every box).
+    """
+    x0, y0, x1, y1 = (float(v) for v in roi)
+    if not (x1 > x0 and y1 > y0):
+        raise ValueError(f"roi: expected (x0, y0, x1, y1) with x1 > x0 and y1 > y0, got {roi!r}")
+    if not np.isfinite(extension) or extension < 0:
+        raise ValueError(f"extension: expected a number >= 0, got {extension!r}")
+    w, h = (x1 - x0) * extension, (y1 - y0) * extension
+    at = lambda value, edge: abs(value - edge) <= 1.0  # noqa: E731 - within a pixel of the image's edge
+    return (x0 - w if at(x0, -0.5) else x0, y0 - h if at(y0, -0.5) else y0,
+            x1 + w if at(x1, width - 0.5) else x1, y1 + h if at(y1, height - 0.5) else y1)

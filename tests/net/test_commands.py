@@ -56,6 +56,8 @@ def test_train_command_reports_bad_input(tmp_path, capsys):
         assert main(["train", "--render", "2", "--library-weight", weight, "--out", str(tmp_path / "run")]) == 2
         err = capsys.readouterr().err
         assert err.startswith("error: --library-weight") and len(err.strip().splitlines()) == 1, err
+    assert main(["train", "--render", "2", "--clipped-box-share", "2", "--out", str(tmp_path / "run")]) == 2
+    assert capsys.readouterr().err.startswith("error: --clipped-box-share")
 
 
 def test_detect_command_writes_keypoints_and_heatmaps(tmp_path, capsys):

@@ -10,8 +10,8 @@ torch = pytest.importorskip("torch")
 from torch.nn import functional as F  # noqa: E402
 
 from tests.net.fakes import COV, H, PEAKS, S, FixedHeatmaps  # noqa: E402
-from vfactor.heatmaps import heatmap_to_image  # noqa: E402
-from vfactor.net.crop import crop_roi, expand_roi, extend_clipped_roi, image_to_crop  # noqa: E402
+from vfactor.heatmaps import extend_clipped_roi, heatmap_to_image  # noqa: E402
+from vfactor.net.crop import crop_roi, expand_roi, image_to_crop  # noqa: E402
 from vfactor.net.infer import KeypointDetector, benchmark_inference  # noqa: E402
 from vfactor.net.model import StackedHourglass, save_weights  # noqa: E402
 

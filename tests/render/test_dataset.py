@@ -116,6 +116,27 @@ def test_a_custom_split_draws_only_its_vehicles(gl_context, tmp_path):
     assert not any(m["source"] in TRAIN.library_models for m in load_dataset(tmp_path / "rest").meta)
 
 
+def test_vehicles_cut_by_the_image_can_be_framed_from_their_clipped_box(gl_context):
+    """clipped_box_probability: a target the image border cuts is cropped from its box clipped to the image and grown
+    as the detector grows such boxes; its keypoints beyond that crop are not in it (in_crop), those inside are."""
+    from vfactor.heatmaps import extend_clipped_roi
+    from vfactor.render.dataset import SampleOptions
+
+    options = SampleOptions(edge_probability=1.0, clipped_box_probability=1.0, jitter=0.0, margin=(0.2, 0.2))
+    samples = [random_training_sample(sample_rng(7, i), 64, options=options) for i in range(6)]
+    cut = [s for s in samples if s.meta["box_clipped"]]
+    assert cut, [s.meta["box"] for s in samples]
+    for s in cut:
+        width, height = options.image_size
+        box = np.array(s.meta["box"])
+        clipped = np.clip(box, -0.5, [width - 0.5, height - 0.5] * 2)
+        assert np.any(clipped != box)  # the image cuts it, and the box is the clipped one grown beyond the border
+        assert extend_clipped_roi(clipped, width, height) == pytest.approx(tuple(box))
+        assert np.allclose(roi_from_box(np.array(s.meta["box"]), 0.2, True), s.roi)
+    default = random_training_sample(sample_rng(7, 0), 64)
+    assert default.meta["box_clipped"] is False
+
+
 def test_library_type_weights_set_how_often_each_body_type_is_drawn(gl_context, tmp_path):
     from dataclasses import replace
 

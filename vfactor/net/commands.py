@@ -147,6 +147,9 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--library-share", type=float, metavar="P",
                    help="the share of vehicle-library vehicles among the --render training crops (default: the "
                    "training split's, 0.5); the rest are presets and PASCAL3D+ shapes")
+    p.add_argument("--clipped-box-share", type=float, metavar="P",
+                   help="frame this share of the --render crops' vehicles the image border cuts from their box "
+                   "clipped to the image, as a 2D detector gives it (default 0: from the whole vehicle's box)")
     p.add_argument("--library-weight", action="append", default=[], metavar="TYPE=W",
                    help="draw the --render crops' library models of body TYPE W times as often as the others' "
                    "(repeatable; e.g. van=3)")
@@ -213,7 +216,8 @@ def run_train(args: argparse.Namespace) -> int:
     train_paths, val_paths = [Path(p) for p in args.data], [Path(p) for p in args.val]
     if args.render:
         train_paths.append(_render(out / "data" / "train", args.render, config.seed, S, False, args.render_workers,
-                                   not args.quiet, _training_split(args.library_share, args.library_weight)))
+                                   not args.quiet, _training_split(args.library_share, args.library_weight),
+                                   _sample_options(args.clipped_box_share)))
     if args.render_val:
         val_paths.append(_render(out / "data" / "val", args.render_val, config.seed, S, True, args.render_workers,
                                  not args.quiet))
@@ -285,8 +289,19 @@ def _training_split(library_share: float | None, library_weights=()):
         raise InputError("--library-weight", str(exc)) from None
 
 
+def _sample_options(clipped_box_share: float | None):
+    """The renderer's sample options with ``clipped_box_share`` (None: the defaults)."""
+    from vfactor.render.dataset import SampleOptions  # noqa: PLC0415
+
+    if clipped_box_share is None:
+        return SampleOptions()
+    if not 0.0 <= clipped_box_share <= 1.0:
+        raise InputError("--clipped-box-share", f"expected a share in [0, 1], got {clipped_box_share}")
+    return SampleOptions(clipped_box_probability=float(clipped_box_share))
+
+
 def _render(path: Path, n: int, seed: int, size: int, held_out: bool, workers: int, verbose: bool,
-            split=None) -> Path:
+            split=None, options=None) -> Path:
     from vfactor.render import make_dataset  # noqa: PLC0415
 
     if any(path.glob("*.npz")):
@@ -295,7 +310,8 @@ def _render(path: Path, n: int, seed: int, size: int, held_out: bool, workers: i
         return path
     if verbose:
         print(f"rendering {n} {'held-out ' if held_out else ''}crops of {size} px into {path}", file=sys.stderr)
-    make_dataset(n, seed=seed, size=size, path=path, held_out=held_out, workers=workers, split=split)
+    kwargs = {"options": options} if options is not None else {}
+    make_dataset(n, seed=seed, size=size, path=path, held_out=held_out, workers=workers, split=split, **kwargs)
     return path
 
 

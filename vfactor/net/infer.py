@@ -21,10 +21,10 @@ from typing import Sequence
 import numpy as np
 import torch
 
-from vfactor.heatmaps import DecodedKeypoints, decode_heatmaps
+from vfactor.heatmaps import CLIPPED_EXTENSION, DecodedKeypoints, decode_heatmaps, extend_clipped_roi
 from vfactor.keypoints import MIRROR_PERMUTATION
 from vfactor.net.calibrate import CovarianceCalibration
-from vfactor.net.crop import CLIPPED_EXTENSION, check_roi_in_image, crop_roi, expand_roi, extend_clipped_roi
+from vfactor.net.crop import check_roi_in_image, crop_roi, expand_roi
 from vfactor.net.model import StackedHourglass, default_weights_path, load_weights
 
 #: Left/right swap of the heatmap channels, as a tensor index.
@@ -76,7 +76,7 @@ class KeypointDetector:
             two-camera scenes the pose error falls by about 8 %, see
             docs/results.md). The shipped calibration was fitted with it on.
         clipped_extension: a box that stops at the image border (a 2D detector's box clipped by the image) is
-            first grown beyond it by this share of its side (:func:`vfactor.net.crop.extend_clipped_roi`; 0: never),
+            first grown beyond it by this share of its side (:func:`vfactor.heatmaps.extend_clipped_roi`; 0: never),
             as the network was trained on whole vehicles' boxes, which reach beyond the image where it cuts them.
 
     Attributes:

@@ -35,6 +35,7 @@ import gtsam
 import numpy as np
 
 from vfactor.camera import Camera
+from vfactor.heatmaps import extend_clipped_roi
 from vfactor.keypoints import LAYERS, NUM_KEYPOINTS
 from vfactor.render.mesh import (
     Appearance,
@@ -181,6 +182,10 @@ class SampleOptions:
             image's side outside or inside one of the four edges), so that the image cuts the vehicle: the crop's part
             outside the full image is black, as a zero-padded crop of a real image (vehicles entering
             or leaving a camera's view). Otherwise the centre lands in the middle 70 % x 60 % of the image.
+        clipped_box_probability: chance that a target the image border cuts is framed from its box clipped to the
+            image (as a 2D detector gives it), grown beyond the border as the detector grows such boxes
+            (:func:`vfactor.heatmaps.extend_clipped_roi`), instead of from its whole box; 0 (default): whole boxes,
+            and the samples are those of before.
         square: square ROIs (the box's larger side); else the box's own aspect, resized anisotropically.
         other_vehicles: probabilities of 0, 1, 2, 3 other vehicles near the target.
         occluder_probability: chance of a prop between the camera and the target.
@@ -201,6 +206,7 @@ class SampleOptions:
     margin: tuple = (0.10, 0.30)
     jitter: float = 0.05
     edge_probability: float = 0.2
+    clipped_box_probability: float = 0.0
     square: bool = True
     other_vehicles: tuple = (0.35, 0.3, 0.2, 0.15)
     occluder_probability: float = 0.35
@@ -568,6 +574,12 @@ def random_training_sample(
     body = target.body_mesh().transformed(pose)
     vuv, _ = camera.project(body.vertices)
     box = np.array([vuv[:, 0].min() + 0.5, vuv[:, 1].min() + 0.5, vuv[:, 0].max() + 0.5, vuv[:, 1].max() + 0.5])
+    width, height = o.image_size
+    clipped = np.clip(box, -0.5, [width - 0.5, height - 0.5, width - 0.5, height - 0.5])
+    box_clipped = bool(o.clipped_box_probability > 0 and np.any(clipped != box)
+                       and rng.uniform() < o.clipped_box_probability)
+    if box_clipped:  # what the detector crops from a 2D detector's box that stops at the border
+        box = np.array(extend_clipped_roi(clipped, width, height))
     margin = float(rng.uniform(*o.margin))
     roi0 = roi_from_box(box, margin, o.square)
     slack = np.array([
@@ -645,6 +657,7 @@ def random_training_sample(
         "jitter": jitter.tolist(),
         "at_edge": bool(at_edge),
         "box": box.tolist(),
+        "box_clipped": box_clipped,
         "other_vehicles": len(others),
         "props": len(props),
         "low_res": low_res,

@@ -576,7 +576,8 @@ def random_training_sample(
     box = np.array([vuv[:, 0].min() + 0.5, vuv[:, 1].min() + 0.5, vuv[:, 0].max() + 0.5, vuv[:, 1].max() + 0.5])
     width, height = o.image_size
     clipped = np.clip(box, -0.5, [width - 0.5, height - 0.5, width - 0.5, height - 0.5])
-    box_clipped = bool(o.clipped_box_probability > 0 and np.any(clipped != box)
+    seen = clipped[2] - clipped[0] >= 1 and clipped[3] - clipped[1] >= 1  # a detector would see some of it
+    box_clipped = bool(o.clipped_box_probability > 0 and np.any(clipped != box) and seen
                        and rng.uniform() < o.clipped_box_probability)
     if box_clipped:  # what the detector crops from a 2D detector's box that stops at the border
         box = np.array(extend_clipped_roi(clipped, width, height))

@@ -147,7 +147,8 @@ def test_library_type_weights_set_how_often_each_body_type_is_drawn(gl_context, 
     assert all(library_vehicle(s).body_type == "van" for s in sources), sources
     p = replace(TRAIN, library_type_weights=(("van", 3.0),)).library_draw_probabilities()
     vans = np.array([library_vehicle(m).body_type == "van" for m in TRAIN.library_models])
-    assert p.sum() == pytest.approx(1.0) and np.allclose(p[vans], 3 * p[~vans][0]) and np.allclose(p[~vans], p[~vans][0])
+    assert p.sum() == pytest.approx(1.0)
+    assert np.allclose(p[vans], 3 * p[~vans][0]) and np.allclose(p[~vans], p[~vans][0])
     assert TRAIN.library_draw_probabilities() is None  # the default: every model as often, the draws as before
     with pytest.raises(ValueError, match="unknown body type 'truck'"):
         replace(TRAIN, library_type_weights=(("truck", 2.0),))

@@ -6,6 +6,7 @@ Uses the shipped weights on images rendered from a simulated two-camera scene
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 
@@ -175,6 +176,8 @@ def test_cli_eval_images(rendered, tmp_path, capsys):
     for method in ("factor_graph", "triangulation", "pnp", "known_shape", "factor_graph_simulated_noise"):
         assert f"| {method} | 2 |" in text
     assert "Tracking" not in text  # accuracy_2cam's frames hold new vehicles each: nothing to track
+    assert main(["eval", "images", "--frames", "1", "--seed", "4", "--clipped-boxes", "--markdown", str(md)]) == 0
+    assert "1 frames, seed 4, boxes clipped to the image" in md.read_text()
 
 
 def test_cli_eval_images_evaluates_the_given_weights(rendered, tmp_path, capsys):
@@ -303,3 +306,33 @@ def test_detection_on_a_dask_cluster_equals_in_process(rendered, detector, tmp_p
             np.testing.assert_allclose(db.keypoints, da.keypoints, atol=1e-5)
             np.testing.assert_allclose(db.confidence, da.confidence, atol=1e-6)
             assert not db.from_image and db.heatmaps and (tmp_path / "hm").joinpath(db.heatmaps).exists()
+
+
+def test_rendered_scenes_can_give_boxes_clipped_by_the_image(tmp_path):
+    """render_simulation(clip_boxes=True): every box within the image, as a 2D detector gives it (tracks_3veh seed
+    231's van is cut by cam1's border in every frame); the images and the true (whole) boxes are the same."""
+    try:
+        get_context()
+    except RenderingUnavailable as exc:
+        pytest.skip(f"no OpenGL rendering here: {exc}")
+    from vfactor.graph import roi_cut_by_border
+    from vfactor.render.scenes import render_simulation
+
+    sim = simulate("tracks_3veh", seed=231)
+    sim = dataclasses.replace(sim, scene=dataclasses.replace(sim.scene, frames=sim.scene.frames[:1]),
+                              truth=sim.truth[:1])
+    whole = render_simulation(sim, tmp_path / "whole", seed=231)
+    clipped = render_simulation(sim, tmp_path / "clipped", seed=231, clip_boxes=True)
+    assert whole.boxes_true == clipped.boxes_true
+    cut = 0
+    for a, b in zip(whole.scene.frames[0].detections, clipped.scene.frames[0].detections):
+        width, height = whole.scene.cameras[a.camera].image_size
+        assert b.roi[0] >= -0.5 and b.roi[1] >= -0.5 and b.roi[2] <= width - 0.5 and b.roi[3] <= height - 0.5
+        if roi_cut_by_border(a.roi, (width, height)):
+            cut += 1
+            assert b.roi != a.roi
+        else:
+            assert b.roi == a.roi
+    assert cut >= 1
+    image = cv2.imread(str(whole.scene.frames[0].images["cam1"]))
+    assert np.array_equal(image, cv2.imread(str(clipped.scene.frames[0].images["cam1"])))

@@ -315,6 +315,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "of lateral and longitudinal acceleration (vfactor.sim.BodyMotion; default: rigid vehicles)")
     p.add_argument("--markdown", help="also write the tables to this Markdown file")
     p.add_argument("--weights", help="images: keypoint-network weights to evaluate (default: the shipped weights)")
+    p.add_argument("--clipped-boxes", action="store_true",
+                   help="images: give the network each vehicle's box clipped to the image, as a 2D detector gives it "
+                   "(default: the whole vehicle's box, beyond the image where the image cuts the vehicle)")
     p.add_argument("--detector-offsets", action=argparse.BooleanOptionalAction, default=None,
                    help="images: track with each camera's detector pose offset (TrackOptions.detector_offsets; "
                    "default: on where the scene gives a road plane)")

@@ -49,7 +49,7 @@ def evaluate(args) -> int:
                                              _levels(args.levels) if args.levels else (None,))
     elif args.experiment == "images":
         sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed, args.weights,
-                                args.detector_offsets)
+                                args.detector_offsets, args.clipped_boxes)
     else:
         if args.scenario:
             raise InputError("--scenario", "the paper comparison uses its own scenario (paper_webots)")
@@ -109,7 +109,7 @@ def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper"
 
 
 def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = None,
-                 detector_offsets: bool | None = None) -> list[str]:
+                 detector_offsets: bool | None = None, clipped_boxes: bool = False) -> list[str]:
     try:
         from vfactor.net.end_to_end import evaluate_images, images_report
         from vfactor.net.infer import KeypointDetector
@@ -123,7 +123,7 @@ def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = No
 
     track_options = TrackOptions(detector_offsets=detector_offsets)
     return [images_report(evaluate_images(scenario_name, frames, seed, detector, progress=progress("rendering"),
-                                          track_options=track_options))]
+                                          track_options=track_options, clip_boxes=clipped_boxes))]
 
 
 def _eval_association(scenario_name, frames, seed: int, seeds: int, engine=None, levels=(None,)) -> list[str]:

@@ -152,7 +152,7 @@ def calibration_table(keypoints: dict) -> str:
 
 
 def render_and_detect(scenario: str, seed: int, frames: int | None = None, detector=None,
-                      work_dir: str | Path | None = None, progress=None):
+                      work_dir: str | Path | None = None, progress=None, clip_boxes: bool = False):
     """Simulates a scenario, renders its camera images and finds the keypoints in the vehicles' boxes.
 
     Args:
@@ -163,6 +163,8 @@ def render_and_detect(scenario: str, seed: int, frames: int | None = None, detec
         work_dir: folder for the images, the scene file and the heatmaps; None: a temporary folder, removed
             afterwards.
         progress: called with ``(images rendered, images total)``.
+        clip_boxes: give the network the boxes clipped to the image, as a 2D detector gives them (default: the
+            whole vehicles' boxes; :func:`vfactor.render.scenes.render_simulation`).
 
     Returns:
         ``(simulation, rendered scene, detected scene, detector)``: the detected scene holds the network's
@@ -175,14 +177,14 @@ def render_and_detect(scenario: str, seed: int, frames: int | None = None, detec
     sim = simulate(load_scenario(scenario), seed=seed, num_frames=frames)
     with tempfile.TemporaryDirectory(prefix="vfactor_eval_images_") as tmp:
         folder = Path(work_dir) if work_dir is not None else Path(tmp)
-        rendered = render_simulation(sim, folder, seed=seed, progress=progress)
+        rendered = render_simulation(sim, folder, seed=seed, progress=progress, clip_boxes=clip_boxes)
         detected = detect_scene(rendered.scene, detector, heatmaps_dir=folder / "heatmaps" if work_dir else None)
     return sim, rendered, detected, detector
 
 
 def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, seed: int = 0, detector=None,
                     work_dir: str | Path | None = None, options: SolveOptions = SolveOptions(),
-                    progress=None, track_options=None) -> dict:
+                    progress=None, track_options=None, clip_boxes: bool = False) -> dict:
     """Runs the image-to-pose pipeline on rendered scenes of a scenario and scores it.
 
     Args:
@@ -195,6 +197,7 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
         options: solver options of the factor graph.
         progress: called with ``(images rendered, images total)``.
         track_options: the tracking comparison's :class:`~vfactor.track.TrackOptions` (default: the defaults).
+        clip_boxes: the network gets the boxes clipped to the image (:func:`render_and_detect`).
 
     Returns:
         ``{"scenario", "seed", "frames", "keypoints": keypoint_accuracy(...),
@@ -206,7 +209,8 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
         its frames); without motion every frame holds new vehicles and there is
         nothing to track.
     """
-    sim, rendered, detected, detector = render_and_detect(scenario, seed, frames, detector, work_dir, progress)
+    sim, rendered, detected, detector = render_and_detect(scenario, seed, frames, detector, work_dir, progress,
+                                                          clip_boxes)
     body_types = {(f, vid): body_type_of(sim.truth[f][vid].preset) for f in range(len(sim.scene.frames))
                   for vid in sim.truth[f]}
     keypoints = keypoint_accuracy(detected, rendered, detector.crop_box, body_types)
@@ -214,7 +218,8 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
     rows["factor_graph_simulated_noise"] = compare_methods(sim, options, methods=("factor_graph",))["factor_graph"]
     tracked = sim.scenario.motion is not None
     tracking = compare_tracking(dataclasses.replace(sim, scene=detected), track_options) if tracked else None
-    return {"scenario": sim.scenario.name, "seed": seed, "frames": len(sim.scene.frames), "keypoints": keypoints,
+    return {"scenario": sim.scenario.name, "seed": seed, "frames": len(sim.scene.frames), "clip_boxes": clip_boxes,
+            "keypoints": keypoints,
             "summary": summarise_methods(rows), "rows": rows, "tracking": tracking}
 
 
@@ -223,7 +228,8 @@ def images_report(evaluation: dict) -> str:
     k = evaluation["keypoints"]
     return (
         f"### {evaluation['scenario']}: rendered images -> keypoint network -> factor graph, "
-        f"{evaluation['frames']} frames, seed {evaluation['seed']}\n\n"
+        f"{evaluation['frames']} frames, seed {evaluation['seed']}"
+        + (", boxes clipped to the image" if evaluation.get("clip_boxes") else "") + "\n\n"
         f"Network keypoints on the full images: PCK@0.1 {k['pck_visible']:.3f} visible ({k['visible']}), "
         f"{k['pck_self_occluded']:.3f} self-occluded or hidden ({k['self_occluded']}); median error of visible "
         f"keypoints {k['median_px_visible']:.1f} px ({100 * k['median_rel_visible']:.1f} % of the crop side); "

@@ -79,6 +79,7 @@ def render_simulation(
     supersample: float = 2.0,
     progress: Callable[[int, int], None] | None = None,
     min_inside: float = 0.25,
+    clip_boxes: bool = False,
 ) -> RenderedScene:
     """Renders every camera image of a simulation and writes a scene file of images and boxes.
 
@@ -96,6 +97,9 @@ def render_simulation(
             lies in the image (a 2D detector does not report a vehicle almost
             wholly out of view, and the keypoint network refuses such a box:
             ``vfactor.net.crop.MIN_ROI_INSIDE``, the same 25 %).
+        clip_boxes: report each box clipped to the image, as a 2D detector gives the box of a vehicle the image
+            border cuts (default: the whole vehicle's box, which reaches beyond the image there; docs/network.md,
+            "Boxes clipped by the image border"). The images and the true boxes are the same either way.
 
     Returns:
         :class:`RenderedScene`.
@@ -149,6 +153,8 @@ def render_simulation(
                         noisy = box
                     if _share_inside(noisy, size) < min_inside:
                         continue
+                    if clip_boxes:  # the image's pixel edges: -0.5 .. size - 0.5
+                        noisy = np.clip(noisy, -0.5, [size[0] - 0.5, size[1] - 0.5, size[0] - 0.5, size[1] - 0.5])
                     detections.append(Detection(camera=name, vehicle=vid, keypoints=np.full((12, 2), np.nan),
                                                 confidence=np.zeros(12), roi=tuple(float(b) for b in noisy),
                                                 from_image=True))

@@ -611,6 +611,12 @@ def test_a_run_of_bad_frames_is_left_out_not_new_segments(sim):
     turns = {10: np.pi, 11: np.pi, 12: 0.6 * np.pi}  # the third another pose again: a jump from the second segment
     assert_bad_frames_left_out(sim, turned_frames(sim, turns), set(turns))
     assert_bad_frames_left_out(sim, turned_frames(sim, turns), set(turns), TrackOptions(lag=0.5))
+    # longer than the hold (track._RESUME_FRAMES): the keypoints say so for good, and the track splits as before
+    from vfactor.track import _RESUME_FRAMES
+
+    run = track_scene(turned_frames(sim, {f: np.pi for f in range(10, 10 + 2 * _RESUME_FRAMES)}))
+    assert any("jumps" in m for m in run.messages), run.messages
+    assert not any("left out of the track" in v.message for fr in run.frames for v in fr.vehicles)
 
 
 def test_a_frame_that_does_not_join_a_young_track_leaves_its_shape_choice_as_it_was(sim):

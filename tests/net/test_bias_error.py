@@ -13,7 +13,6 @@ torch = pytest.importorskip("torch")
 
 from vfactor.net.bias_error import TrackBias, fit_bias_sigma, measure_track_bias  # noqa: E402
 from vfactor.net.calibrate import CovarianceCalibration  # noqa: E402
-from vfactor.net.commands import main  # noqa: E402
 from vfactor.net.infer import KeypointDetector, default_weights_path  # noqa: E402
 from vfactor.sim import load_scenario, simulate  # noqa: E402
 from vfactor.sim.noise import NoiseModel  # noqa: E402
@@ -74,13 +73,3 @@ def test_the_calibration_carries_bias_sigma_to_the_detections_and_checks_it():
     for bad in ((0.01, 0.02), (0.01, -0.01, 0, 0, 0, 0), (0.01, float("nan"), 0, 0, 0, 0)):
         with pytest.raises(ValueError, match="bias_sigma"):
             CovarianceCalibration(bias_sigma=bad)
-
-
-def test_calibrate_bias_command_reports_bad_input(tmp_path, capsys):
-    assert main(["calibrate-bias", "--weights", str(tmp_path / "none.pt")]) == 2
-    assert "--weights" in capsys.readouterr().err
-    assert main(["calibrate-bias", "--seeds", "0"]) == 2
-    assert "--seeds" in capsys.readouterr().err
-    assert main(["calibrate-bias", "--scenario", "no_such_scenario", "--seeds", "1"]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("error: --scenario") and len(err.strip().splitlines()) == 1

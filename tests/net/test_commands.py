@@ -91,3 +91,15 @@ def test_detect_command_reports_bad_input(tmp_path, capsys):
                  "--weights", str(tmp_path / "w.pt")]) == 2
     assert main(["detect", str(tmp_path / "a.png")]) == 2
     assert "--roi" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["calibrate-shape", "calibrate-bias"])
+def test_calibrate_shape_and_bias_commands_report_bad_input(command, tmp_path, capsys):
+    """The inputs the two commands share (their weights, seeds and scenario) named when bad, in one line."""
+    assert main([command, "--weights", str(tmp_path / "none.pt")]) == 2
+    assert "--weights" in capsys.readouterr().err
+    assert main([command, "--seeds", "0"]) == 2
+    assert "--seeds" in capsys.readouterr().err
+    assert main([command, "--scenario", "no_such_scenario", "--seeds", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --scenario") and len(err.strip().splitlines()) == 1

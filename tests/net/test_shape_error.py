@@ -67,13 +67,3 @@ def test_calibrate_shape_command_fits_and_writes_and_the_pipeline_uses_it(tmp_pa
     assert {d.shape_sigma for d in detected.frames[0].detections} == {0.05}
     bias = KeypointDetector(weights).calibration.bias_sigma  # calibrate-bias's, kept by calibrate-shape --write
     assert bias is not None and {d.bias_sigma for d in detected.frames[0].detections} == {bias}
-
-
-def test_calibrate_shape_command_reports_bad_input(tmp_path, capsys):
-    assert main(["calibrate-shape", "--weights", str(tmp_path / "none.pt")]) == 2
-    assert "--weights" in capsys.readouterr().err
-    assert main(["calibrate-shape", "--seeds", "0"]) == 2
-    assert "--seeds" in capsys.readouterr().err
-    assert main(["calibrate-shape", "--scenario", "no_such_scenario", "--seeds", "1"]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("error: --scenario") and len(err.strip().splitlines()) == 1

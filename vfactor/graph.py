@@ -431,7 +431,8 @@ def detector_shape_sigmas(observations: KeypointObservations) -> dict[str, float
     return out
 
 
-def detector_offset_prior(offset_key: int, sigma: float, vehicle_p_keypoints: np.ndarray) -> gtsam.NonlinearFactor:
+def detector_offset_prior(offset_key: int, sigma: float, vehicle_p_keypoints: np.ndarray,
+                          common_key: int | None = None) -> gtsam.NonlinearFactor:
     """The prior of a detector pose offset ``vehicle_T_seen`` (:func:`add_observation_factor`'s ``offsets``).
 
     The identity, with the information of ``sigma`` metres (the detection's ``shape_sigma``) on each coordinate of
@@ -445,6 +446,9 @@ def detector_offset_prior(offset_key: int, sigma: float, vehicle_p_keypoints: np
         offset_key: key of the ``gtsam.Pose3`` offset.
         sigma: metres on each keypoint coordinate.
         vehicle_p_keypoints: (12, 3) the track's keypoints (body frame, metres) when the offset is made.
+        common_key: where the track has a common offset (the detector's bias, :func:`detector_bias_prior`), its
+            key: the prior is then about that offset (a ``BetweenFactorPose3`` with the same noise: the camera's
+            offset is the common one and the camera's own part).
     """
     p = np.asarray(vehicle_p_keypoints, dtype=float).reshape(12, 3)
     p = np.concatenate([p, p * [-1.0, -1.0, 1.0]])
@@ -454,7 +458,10 @@ def detector_offset_prior(offset_key: int, sigma: float, vehicle_p_keypoints: np
     J[:, :, 3:] = np.eye(3)
     J = J.reshape(-1, 6)
     information = J.T @ J / (2.0 * sigma**2)  # the doubled points count once
-    return gtsam.PriorFactorPose3(offset_key, gtsam.Pose3(), gtsam.noiseModel.Gaussian.Information(information))
+    noise = gtsam.noiseModel.Gaussian.Information(information)
+    if common_key is not None:
+        return gtsam.BetweenFactorPose3(common_key, offset_key, gtsam.Pose3(), noise)
+    return gtsam.PriorFactorPose3(offset_key, gtsam.Pose3(), noise)
 
 
 #: The name, in a track's camera name -> detector offset key mappings, of the offset all its cameras share (the

@@ -737,7 +737,7 @@ class Tracker:
         if previous is None:
             return
         bad = previous["bad"] + track.poses  # every frame since the held segment ended
-        if len(bad) >= _RESUME_FRAMES or len(track.poses) >= _RESUME_FRAMES:
+        if len(bad) >= _RESUME_FRAMES:
             track.previous = None  # the segment after the jump holds: the held one is given up
             return
         loss = self.options.solve.graph.loss
@@ -1373,14 +1373,12 @@ def _new_offset(keys: KeyScheme, index: int, number: int, sigma: float, shape: g
     """A new detector pose offset of one camera of track ``index`` (docs/factors.md, "The detector's pose offset
     in tracks"): its key (offset ``number``), the identity inserted in ``values``, and its prior made at the
     track's keypoints in ``shape`` with the detections' ``shape_sigma`` ``sigma``: about the identity, or, where
-    the track has a common offset (its key ``common``), about that offset (a ``BetweenFactorPose3`` with the same
-    noise: the camera's offset is the track's common one and the camera's own part)."""
+    the track has a common offset (its key ``common``), about that offset
+    (:func:`vfactor.graph.detector_offset_prior`)."""
     key = keys.offset_key(index, number)
     values.insert(key, gtsam.Pose3())
-    prior = detector_offset_prior(key, sigma, wireframe_from_values(shape, keys, index).vehicle_p_keypoints)
-    if common is None:
-        return key, prior
-    return key, gtsam.BetweenFactorPose3(common, key, gtsam.Pose3(), prior.noiseModel())
+    return key, detector_offset_prior(key, sigma, wireframe_from_values(shape, keys, index).vehicle_p_keypoints,
+                                      common)
 
 
 def _new_common_offset(keys: KeyScheme, index: int, number: int, bias_sigma, values: gtsam.Values

@@ -114,8 +114,8 @@ def measure_track_bias(sim, detected, config: GraphConfig = GraphConfig(),
                     offsets[d.camera] = key = keys.offset_key(0, len(offsets) + 1)
                     values.insert(key, gtsam.Pose3())
                     if d.shape_sigma:  # the camera's own part, as a track's offsets have it
-                        own = detector_offset_prior(key, float(d.shape_sigma), truth.wireframe.vehicle_p_keypoints)
-                        graph.add(gtsam.BetweenFactorPose3(common, key, gtsam.Pose3(), own.noiseModel()))
+                        graph.add(detector_offset_prior(key, float(d.shape_sigma),
+                                                        truth.wireframe.vehicle_p_keypoints, common))
                     else:
                         graph.add(gtsam.BetweenFactorPose3(common, key, gtsam.Pose3(), _HELD))
             obs = observations_from_detections(detections, detected.cameras, config)

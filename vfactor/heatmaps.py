@@ -36,6 +36,7 @@ __all__ = [
     "heatmap_to_image",
     "image_to_heatmap",
     "extend_clipped_roi",
+    "clip_roi_to_image",
     "CLIPPED_EXTENSION",
 ]
 
@@ -394,3 +395,9 @@ def extend_clipped_roi(roi, width: int, height: int, extension: float = CLIPPED_
     at = lambda value, edge: abs(value - edge) <= 1.0  # noqa: E731 - within a pixel of the image's edge
     return (x0 - w if at(x0, -0.5) else x0, y0 - h if at(y0, -0.5) else y0,
             x1 + w if at(x1, width - 0.5) else x1, y1 + h if at(y1, height - 0.5) else y1)
+
+
+def clip_roi_to_image(roi, width: int, height: int) -> np.ndarray:
+    """(4,) the box ``(x0, y0, x1, y1)`` (pixel edges) clipped to a ``width x height`` image, whose pixel edges span
+    ``-0.5 .. width - 0.5``: what a 2D detector gives of a vehicle the image border cuts."""
+    return np.clip(np.asarray(roi, dtype=float), -0.5, [width - 0.5, height - 0.5, width - 0.5, height - 0.5])

@@ -10,7 +10,7 @@ torch = pytest.importorskip("torch")
 from torch.nn import functional as F  # noqa: E402
 
 from tests.net.fakes import COV, H, PEAKS, S, FixedHeatmaps  # noqa: E402
-from vfactor.heatmaps import extend_clipped_roi, heatmap_to_image  # noqa: E402
+from vfactor.heatmaps import clip_roi_to_image, extend_clipped_roi, heatmap_to_image  # noqa: E402
 from vfactor.net.crop import crop_roi, expand_roi, image_to_crop  # noqa: E402
 from vfactor.net.infer import KeypointDetector, benchmark_inference  # noqa: E402
 from vfactor.net.model import StackedHourglass, save_weights  # noqa: E402
@@ -96,6 +96,7 @@ def test_a_box_clipped_by_the_image_border_is_grown_beyond_it():
     """A 2D detector's box stops at the border of an image that cuts the vehicle; the network was trained on the
     whole vehicle's box, so that edge is first moved out by CLIPPED_EXTENSION of the box's side."""
     assert extend_clipped_roi((0, 100, 200, 180), 1280, 720) == pytest.approx((-50, 100, 200, 180))
+    assert clip_roi_to_image((-50, 10, 1300, 730), 1280, 720) == pytest.approx((-0.5, 10, 1279.5, 719.5))
     assert extend_clipped_roi((1000, 100, 1280, 180), 1280, 720) == pytest.approx((1000, 100, 1350, 180))
     assert extend_clipped_roi((10, -0.5, 200, 719.5), 1280, 720) == pytest.approx((10, -180.5, 200, 899.5))
     for inside_or_beyond in [(10, 100, 200, 180), (-60, 100, 200, 180), (1000, 100, 1400, 180)]:

@@ -35,7 +35,7 @@ import gtsam
 import numpy as np
 
 from vfactor.camera import Camera
-from vfactor.heatmaps import extend_clipped_roi
+from vfactor.heatmaps import clip_roi_to_image, extend_clipped_roi
 from vfactor.keypoints import LAYERS, NUM_KEYPOINTS
 from vfactor.render.mesh import (
     Appearance,
@@ -575,7 +575,7 @@ def random_training_sample(
     vuv, _ = camera.project(body.vertices)
     box = np.array([vuv[:, 0].min() + 0.5, vuv[:, 1].min() + 0.5, vuv[:, 0].max() + 0.5, vuv[:, 1].max() + 0.5])
     width, height = o.image_size
-    clipped = np.clip(box, -0.5, [width - 0.5, height - 0.5, width - 0.5, height - 0.5])
+    clipped = clip_roi_to_image(box, width, height)
     seen = clipped[2] - clipped[0] >= 1 and clipped[3] - clipped[1] >= 1  # a detector would see some of it
     box_clipped = bool(o.clipped_box_probability > 0 and np.any(clipped != box) and seen
                        and rng.uniform() < o.clipped_box_probability)

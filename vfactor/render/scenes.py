@@ -31,6 +31,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from vfactor.heatmaps import clip_roi_to_image
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.render.dataset import HELD_OUT, SplitSpec, random_appearance, random_ground, random_light
 from vfactor.render.renderer import Renderer
@@ -153,8 +154,8 @@ def render_simulation(
                         noisy = box
                     if _share_inside(noisy, size) < min_inside:
                         continue
-                    if clip_boxes:  # the image's pixel edges: -0.5 .. size - 0.5
-                        noisy = np.clip(noisy, -0.5, [size[0] - 0.5, size[1] - 0.5, size[0] - 0.5, size[1] - 0.5])
+                    if clip_boxes:
+                        noisy = clip_roi_to_image(noisy, *size)
                     detections.append(Detection(camera=name, vehicle=vid, keypoints=np.full((12, 2), np.nan),
                                                 confidence=np.zeros(12), roi=tuple(float(b) for b in noisy),
                                                 from_image=True))

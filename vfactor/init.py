@@ -34,8 +34,8 @@ from vfactor.factors.robust import RobustLoss
 from vfactor.keypoints import MIRROR_PERMUTATION
 from vfactor.wireframe import Wireframe
 
-__all__ = ["Candidate", "umeyama", "triangulate_keypoints", "pose_candidates", "best_candidates", "cross_projection_cost",
-           "distinct_poses"]
+__all__ = ["Candidate", "StartSearch", "umeyama", "triangulate_keypoints", "pose_candidates", "best_candidates",
+           "cross_projection_cost", "distinct_poses"]
 
 
 @dataclass(frozen=True)
@@ -132,22 +132,15 @@ def _world_pose(world_T_camera: gtsam.Pose3, rvec, tvec) -> gtsam.Pose3 | None:
     return world_T_camera.compose(gtsam.Pose3(camera_T_vehicle))
 
 
-def _camera_pnp(camera, world_T_camera: gtsam.Pose3, labellings, image_uv, threshold_px,
-                ransac: bool = True, every_labelling: bool = False) -> list[list[gtsam.Pose3]]:
-    """PnP poses (world_T_vehicle) of one camera's keypoints under each labelling of them.
+def _sqpnp(camera, world_T_camera: gtsam.Pose3, labellings, image_uv, threshold_px) -> dict:
+    """SQPnP poses (world_T_vehicle) of one camera's keypoints under each labelling of them, each fitted on every
+    point, and what RANSAC (:func:`_ransac_pnp`) needs of them.
 
-    Each labelling is the (n, 3) body-frame points its labels name, seen at
-    ``image_uv`` (n, 2 pixels). SQPnP fits each on every point. RANSAC (EPnP,
-    ``threshold_px``; 6 points or more) runs only where that fit leaves some
-    point beyond ``threshold_px`` (with every point within it RANSAC would keep
-    them all: the same fit), and only for the labellings whose SQPnP fit keeps
-    the most points within it: RANSAC looks for the outliers of the labelling
-    the keypoints favour, the others keep their SQPnP pose (``every_labelling``:
-    RANSAC for each labelling whose fit leaves a point out). ``ransac=False``:
-    SQPnP alone.
+    Each labelling is the (n, 3) body-frame points its labels name, seen at ``image_uv`` (n, 2 pixels).
 
     Returns:
-        Per labelling, its poses (SQPnP's, then RANSAC's).
+        ``{"poses": per labelling its SQPnP pose (none where it failed), "within": per labelling the points its fit
+        keeps within ``threshold_px`` (-1 without a fit), and the PnP inputs}``.
     """
     img, K, dist, px_per_unit = camera.pnp_inputs(image_uv)  # a fisheye lens: normalised points, identity K
     threshold = threshold_px / px_per_unit
@@ -166,52 +159,117 @@ def _camera_pnp(camera, world_T_camera: gtsam.Pose3, labellings, image_uv, thres
             pass
         poses.append(found)
         within.append(kept)
-    for object_p, found, kept in zip(labellings, poses, within):
-        if ransac and len(object_p) >= 6 and kept < len(object_p) and (every_labelling or kept == max(within)):
+    return {"poses": poses, "within": within, "labellings": labellings, "inputs": (img, K, dist, threshold),
+            "world_T_camera": world_T_camera}
+
+
+def _ransac_pnp(fits: dict, every_labelling: bool = False) -> list[list[gtsam.Pose3]]:
+    """RANSAC PnP poses (EPnP, the threshold of :func:`_sqpnp`'s ``fits``; 6 points or more) per labelling.
+
+    RANSAC runs only where the SQPnP fit leaves some point beyond the threshold (with every point within it RANSAC
+    would keep them all: the same fit), and only for the labellings whose SQPnP fit keeps the most points within
+    it: RANSAC looks for the outliers of the labelling the keypoints favour, the others keep their SQPnP pose
+    (``every_labelling``: RANSAC for each labelling whose fit leaves a point out).
+    """
+    img, K, dist, threshold = fits["inputs"]
+    out = []
+    for object_p, kept in zip(fits["labellings"], fits["within"]):
+        found = []
+        if len(object_p) >= 6 and kept < len(object_p) and (every_labelling or kept == max(fits["within"])):
             ok, rvec, tvec, _ = cv2.solvePnPRansac(
                 object_p.astype(np.float64), img, K, dist, iterationsCount=200, reprojectionError=threshold,
                 confidence=0.999, flags=cv2.SOLVEPNP_EPNP,
             )
-            pose = _world_pose(world_T_camera, rvec, tvec) if ok else None
+            pose = _world_pose(fits["world_T_camera"], rvec, tvec) if ok else None
             if pose is not None:
                 found.append(pose)
-    return poses
+        out.append(found)
+    return out
+
+
+class StartSearch:
+    """The pose starts of one vehicle's keypoints (:func:`best_candidates`), each kind made once.
+
+    PnP runs on every camera that sees at least ``min_keypoints_in_one_view`` keypoints (4 at the least), with the
+    labels as given and mirrored, each pose also turned by half a turn; triangulation needs 4 keypoints seen twice.
+    SQPnP and triangulation are made with the search; RANSAC PnP (:func:`_ransac_pnp`) when a call first asks for
+    it, so that a caller that tries the cheap starts first and RANSAC's only where they do not do pays for the
+    cheap ones once (the one-frame solve's further starts, the tracker's prediction check).
+    """
+
+    def __init__(self, obs: KeypointObservations, wireframe: Wireframe, loss: RobustLoss,
+                 min_keypoints_in_one_view: int = 4, ransac_every_labelling: bool = False):
+        self.obs, self.wireframe, self.loss, self.every_labelling = obs, wireframe, loss, ransac_every_labelling
+        points = wireframe.vehicle_p_keypoints
+        sigma = 1.0 / np.abs(obs.sqrt_information[:, 0, 0])
+        self._cameras = []  # (camera name, its SQPnP fits)
+        for c, camera in enumerate(obs.cameras):
+            rows = np.flatnonzero(obs.camera_index == c)
+            if len(rows) < max(4, min_keypoints_in_one_view):
+                continue
+            labels = obs.keypoint_index[rows]
+            labellings = (points[labels], points[MIRROR_PERMUTATION[labels]])
+            self._cameras.append((camera.name, _sqpnp(camera, camera.pose, labellings, obs.uv[rows],
+                                                      float(3.0 * np.median(sigma[rows])))))
+        self._ransac: list | None = None  # per camera, per labelling: RANSAC's poses, once made
+        self._triangulated = None
+        idx, world = triangulate_keypoints(obs)
+        if len(idx) >= 4:
+            R, t, s = umeyama(points[idx], world, with_scale=True)
+            if 0.6 < s < 1.6:
+                self._triangulated = (gtsam.Pose3(gtsam.Rot3(R), t), wireframe.scaled(s), "triangulation")
+
+    def candidates(self, ransac: bool = True) -> list[tuple[gtsam.Pose3, Wireframe, str]]:
+        """Every (pose, wireframe, source) start, unscored: per camera and labelling SQPnP's pose, then RANSAC's
+        (``ransac``), each also turned; then the triangulation's."""
+        if ransac and self._ransac is None:
+            self._ransac = [_ransac_pnp(fits, self.every_labelling) for _, fits in self._cameras]
+        out = []
+        flip = gtsam.Pose3(gtsam.Rot3.Yaw(np.pi), np.zeros(3))
+        for c, (name, fits) in enumerate(self._cameras):
+            for j, tag in enumerate(("pnp", "pnp-mirrored")):
+                for pose in fits["poses"][j] + (self._ransac[c][j] if ransac else []):
+                    out.append((pose, self.wireframe, f"{tag}:{name}"))
+                    out.append((pose.compose(flip), self.wireframe, f"{tag}-turned:{name}"))
+        if self._triangulated is not None:
+            out.append(self._triangulated)
+        return out
+
+    def best(self, count: int | None = 2, ransac: bool = True, min_angle_rad: float = 0.35,
+             min_distance_m: float = 1.0) -> list[Candidate]:
+        """The ``count`` lowest-cost upright candidates (None: all) that differ by at least the given angle or
+        distance, best first (upright: the body's z axis within 90 degrees of the world's); ``ransac=False``:
+        without the RANSAC PnP poses, a fraction of the cost."""
+        found = self.candidates(ransac)
+        if not found:
+            return []
+        T = np.array([pose.matrix() for pose, _, _ in found])
+        costs = robust_costs(self.obs, T, np.array([w.vehicle_p_keypoints for _, w, _ in found]), self.loss)
+        chosen: list[Candidate] = []
+        finite = np.isfinite(costs) & upright(T)
+        keep = finite.copy()  # finite and distinct from every candidate chosen so far
+        for i in np.argsort(np.where(finite, costs, np.inf), kind="stable"):
+            if not finite[i]:
+                break
+            if not keep[i]:
+                continue
+            pose, w, source = found[i]
+            chosen.append(Candidate(pose, w, float(costs[i]), source))
+            if len(chosen) == count:
+                break
+            keep &= _distinct(T[:, :3, :3], T[:, :3, 3], T[i, :3, :3], T[i, :3, 3], min_angle_rad, min_distance_m)
+        return chosen
 
 
 def pose_candidates(
     obs: KeypointObservations, wireframe: Wireframe, min_keypoints_in_one_view: int = 4, ransac: bool = True,
     ransac_every_labelling: bool = False,
 ) -> list[tuple[gtsam.Pose3, Wireframe, str]]:
-    """All candidate (pose, wireframe, source) starts for one vehicle (unscored).
-
-    PnP (:func:`_camera_pnp`) runs on every camera that sees at least
-    ``min_keypoints_in_one_view`` keypoints (4 at the least), with the labels
-    as given and mirrored (``ransac=False``: SQPnP alone; ``ransac_every_labelling``:
-    RANSAC for both labellings, not only the one the keypoints favour); triangulation needs 4
-    keypoints seen twice.
-    """
-    out = []
-    points = wireframe.vehicle_p_keypoints
-    sigma = 1.0 / np.abs(obs.sqrt_information[:, 0, 0])
-    flip = gtsam.Pose3(gtsam.Rot3.Yaw(np.pi), np.zeros(3))
-    for c, camera in enumerate(obs.cameras):
-        rows = np.flatnonzero(obs.camera_index == c)
-        if len(rows) < max(4, min_keypoints_in_one_view):
-            continue
-        threshold = float(3.0 * np.median(sigma[rows]))
-        labels = obs.keypoint_index[rows]
-        fits = _camera_pnp(camera, camera.pose, (points[labels], points[MIRROR_PERMUTATION[labels]]), obs.uv[rows],
-                           threshold, ransac, ransac_every_labelling)
-        for tag, poses in zip(("pnp", "pnp-mirrored"), fits):
-            for pose in poses:
-                out.append((pose, wireframe, f"{tag}:{camera.name}"))
-                out.append((pose.compose(flip), wireframe, f"{tag}-turned:{camera.name}"))
-    idx, world = triangulate_keypoints(obs)
-    if len(idx) >= 4:
-        R, t, s = umeyama(points[idx], world, with_scale=True)
-        if 0.6 < s < 1.6:
-            out.append((gtsam.Pose3(gtsam.Rot3(R), t), wireframe.scaled(s), "triangulation"))
-    return out
+    """All candidate (pose, wireframe, source) starts for one vehicle, unscored (:meth:`StartSearch.candidates`).
+    ``ransac=False``: SQPnP alone; ``ransac_every_labelling``: RANSAC for both labellings, not only the one the
+    keypoints favour."""
+    search = StartSearch(obs, wireframe, RobustLoss(), min_keypoints_in_one_view, ransac_every_labelling)
+    return search.candidates(ransac)
 
 
 def distinct_poses(a: gtsam.Pose3, b: gtsam.Pose3, min_angle_rad: float = 0.35, min_distance_m: float = 1.0) -> bool:
@@ -232,28 +290,12 @@ def best_candidates(
     min_angle_rad: float = 0.35, min_distance_m: float = 1.0, min_keypoints_in_one_view: int = 4, ransac: bool = True,
     ransac_every_labelling: bool = False,
 ) -> list[Candidate]:
-    """The ``count`` lowest-cost upright candidates (None: all) that differ by at least the given angle or distance,
-    best first (upright: the body's z axis within 90 degrees of the world's).
+    """The ``count`` lowest-cost upright starts (None: all) that differ by at least the given angle or distance, best
+    first (:meth:`StartSearch.best`; a caller that may ask twice, without RANSAC and then with it, keeps one
+    :class:`StartSearch`).
 
-    ``ransac=False``: without the RANSAC PnP poses (:func:`pose_candidates`), a fraction of the cost;
-    ``ransac_every_labelling``: RANSAC for both labellings of each camera (:func:`pose_candidates`).
+    ``ransac=False``: without the RANSAC PnP poses, a fraction of the cost;
+    ``ransac_every_labelling``: RANSAC for both labellings of each camera.
     """
-    found = pose_candidates(obs, wireframe, min_keypoints_in_one_view, ransac, ransac_every_labelling)
-    if not found:
-        return []
-    T = np.array([pose.matrix() for pose, _, _ in found])
-    costs = robust_costs(obs, T, np.array([w.vehicle_p_keypoints for _, w, _ in found]), loss)  # every candidate in one pass
-    chosen: list[Candidate] = []
-    finite = np.isfinite(costs) & upright(T)
-    keep = finite.copy()  # finite and distinct from every candidate chosen so far
-    for i in np.argsort(np.where(finite, costs, np.inf), kind="stable"):
-        if not finite[i]:
-            break
-        if not keep[i]:
-            continue
-        pose, w, source = found[i]
-        chosen.append(Candidate(pose, w, float(costs[i]), source))
-        if len(chosen) == count:
-            break
-        keep &= _distinct(T[:, :3, :3], T[:, :3, 3], T[i, :3, :3], T[i, :3, 3], min_angle_rad, min_distance_m)
-    return chosen
+    return StartSearch(obs, wireframe, loss, min_keypoints_in_one_view, ransac_every_labelling).best(
+        count, ransac, min_angle_rad, min_distance_m)

@@ -42,7 +42,7 @@ from vfactor.graph import (
     sized_observations,
     wireframe_from_values,
 )
-from vfactor.init import best_candidates, distinct_poses
+from vfactor.init import StartSearch, best_candidates, distinct_poses
 from vfactor.keys import KeyScheme
 from vfactor.label_swaps import SWAP_MARGIN, apply_swaps, merge_findings, relabel_swaps, suspect_pairs, swapped_rows
 from vfactor.observations import Detection, Frame, Scene
@@ -228,10 +228,13 @@ def solve_observations(
     def settled() -> bool:  # no further start: as many as allowed, or the best solution explains the keypoints
         return tried == options.num_starts or best_inliers >= FURTHER_START_INLIERS
 
+    search = None  # the starts' search, made when a start is first needed (SQPnP and triangulation once)
+
     def candidate_starts(ransac: bool):
-        return [(c.world_T_vehicle, c.wireframe) for c in best_candidates(
-            obs, mean, options.graph.loss, None, min_keypoints_in_one_view=options.min_keypoints_in_one_view,
-            ransac=ransac)]
+        nonlocal search
+        if search is None:
+            search = StartSearch(obs, mean, options.graph.loss, options.min_keypoints_in_one_view)
+        return [(c.world_T_vehicle, c.wireframe) for c in search.best(None, ransac)]
 
     if initial is not None:
         rounds = [lambda: [initial]]

@@ -55,7 +55,7 @@ from vfactor.graph import (
     sized_observations,
     wireframe_from_values,
 )
-from vfactor.init import best_candidates, cross_projection_cost
+from vfactor.init import StartSearch, best_candidates, cross_projection_cost
 from vfactor.keys import KeyScheme
 from vfactor.label_swaps import apply_swaps, relabel_swaps
 from vfactor.observations import Detection, Frame, Scene
@@ -946,11 +946,10 @@ class Tracker:
             # SQPnP and triangulation starts first; OpenCV's RANSAC PnP (a fifth of the tracker's time where it ran
             # at every such frame, about half of them) only where the prediction is clearly poor or a start beats it
             # (docs/performance.md, "The tracker's prediction check: RANSAC where it can matter")
-            starts = best_candidates(obs, wireframe, loss, 1, min_keypoints_in_one_view=options.min_keypoints_in_one_view,
-                                     ransac=False)
+            search = StartSearch(obs, wireframe, loss, options.min_keypoints_in_one_view)
+            starts = search.best(1, ransac=False)
             if predicted_cost > _RANSAC_COST * len(obs) or (starts and starts[0].cost < predicted_cost):
-                starts = best_candidates(obs, wireframe, loss, 1,
-                                         min_keypoints_in_one_view=options.min_keypoints_in_one_view)
+                starts = search.best(1)  # RANSAC's poses join the SQPnP and triangulation ones already made
             if starts and starts[0].cost < predicted_cost:
                 jump = _jump(guess, starts[0].world_T_vehicle, t - track.poses[-1][1], self.options,
                              velocity_known=len(track.poses) >= 2)

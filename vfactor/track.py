@@ -237,6 +237,11 @@ _JUMP_DISTANCE, _JUMP_HEADING = 1.5, math.radians(30.0)
 _JUMP_SPEED = 20.0
 
 
+def _still_held(frames_after: int) -> bool:
+    """Whether the segment a jump ended is still held (Tracker._resume) with ``frames_after`` frames after the jump."""
+    return frames_after < _RESUME_FRAMES
+
+
 @dataclass
 class _TrackState:
     """One track's smoother and bookkeeping."""
@@ -737,7 +742,7 @@ class Tracker:
         if previous is None:
             return
         bad = previous["bad"] + track.poses  # every frame since the held segment ended
-        if len(bad) >= _RESUME_FRAMES:
+        if not _still_held(len(bad)):
             track.previous = None  # the segment after the jump holds: the held one is given up
             return
         loss = self.options.solve.graph.loss
@@ -963,7 +968,7 @@ class Tracker:
                     held = track.previous  # a segment an earlier jump ended, held through the frames after it
                     pending = track.ended_young  # an earlier young segment this one was to take back
                     track.restart()
-                    if held is not None and len(held["bad"]) + len(ended["poses"]) < _RESUME_FRAMES:
+                    if held is not None and _still_held(len(held["bad"]) + len(ended["poses"])):
                         track.previous = dict(held, bad=held["bad"] + ended["poses"])  # still held: this one was bad
                     else:
                         track.previous = dict(ended, bad=[])

@@ -36,6 +36,7 @@ __all__ = [
     "heatmap_to_image",
     "image_to_heatmap",
     "extend_clipped_roi",
+    "edges_at_border",
     "clip_roi_to_image",
     "CLIPPED_EXTENSION",
 ]
@@ -392,9 +393,17 @@ def extend_clipped_roi(roi, width: int, height: int, extension: float = CLIPPED_
     if not np.isfinite(extension) or extension < 0:
         raise ValueError(f"extension: expected a number >= 0, got {extension!r}")
     w, h = (x1 - x0) * extension, (y1 - y0) * extension
-    at = lambda value, edge: abs(value - edge) <= 1.0  # noqa: E731 - within a pixel of the image's edge
-    return (x0 - w if at(x0, -0.5) else x0, y0 - h if at(y0, -0.5) else y0,
-            x1 + w if at(x1, width - 0.5) else x1, y1 + h if at(y1, height - 0.5) else y1)
+    left, top, right, bottom = edges_at_border(roi, width, height)
+    return (x0 - w if left else x0, y0 - h if top else y0, x1 + w if right else x1, y1 + h if bottom else y1)
+
+
+def edges_at_border(roi, width: int, height: int) -> tuple[bool, bool, bool, bool]:
+    """Which edges of a box ``(x0, y0, x1, y1)`` (pixel edges) lie within a pixel of the border of a ``width x
+    height`` image (whose pixel edges span ``-0.5 .. width - 0.5``): left, top, right, bottom. A 2D detector's box
+    of a vehicle the image border cuts stops there."""
+    x0, y0, x1, y1 = (float(v) for v in roi)
+    return (abs(x0 + 0.5) <= 1.0, abs(y0 + 0.5) <= 1.0, abs(x1 - (width - 0.5)) <= 1.0,
+            abs(y1 - (height - 0.5)) <= 1.0)
 
 
 def clip_roi_to_image(roi, width: int, height: int) -> np.ndarray:

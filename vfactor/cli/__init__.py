@@ -318,6 +318,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--clipped-boxes", action="store_true",
                    help="images: give the network each vehicle's box clipped to the image, as a 2D detector gives it "
                    "(default: the whole vehicle's box, beyond the image where the image cuts the vehicle)")
+    p.add_argument("--amodal-pass", action="store_true",
+                   help="images, with --clipped-boxes: find the clipped vehicles' keypoints again in the boxes of the "
+                   "vehicles a first solve found (tracked where the scenario moves), then evaluate (vfactor.net.amodal)")
     p.add_argument("--detector-offsets", action=argparse.BooleanOptionalAction, default=None,
                    help="images: track with each camera's detector pose offset (TrackOptions.detector_offsets; "
                    "default: on where the scene gives a road plane)")
@@ -363,6 +366,10 @@ def _estimate_options(p: argparse.ArgumentParser) -> None:
                    "(default: the shipped weights; needs torch)")
     p.add_argument("--save-detections", metavar="SCENE_OUT",
                    help="also write the scene with the network's keypoints (and its heatmaps in SCENE_OUT's folder)")
+    p.add_argument("--amodal-pass", action="store_true",
+                   help="detections given as image boxes: where a box stops at the image border (a 2D detector's box "
+                   "of a vehicle the border cuts), find that vehicle's keypoints again in the box of the vehicle the "
+                   "first solve found, beyond the border, and solve again (vfactor.net.amodal; docs/network.md)")
 
 
 def main(argv=None) -> int:

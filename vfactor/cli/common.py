@@ -20,7 +20,7 @@ from vfactor.sanity import one_line
 
 __all__ = ["EXIT_OK", "EXIT_INTERNAL", "EXIT_INPUT", "EXIT_UNSOLVED", "EXIT_INTERRUPTED", "configure_logging", "say",
            "note", "output", "progress", "missing_extra", "check_positive", "check_out_file", "check_out_dir", "report_unsolved",
-           "detect", "check_outputs"]
+           "detect", "amodal_pass", "check_amodal_pass", "check_outputs"]
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_UNSOLVED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
@@ -193,6 +193,31 @@ def detect(scene, args, engine=None):
         print(f"keypoint network: {len(pending)} boxes ({time.perf_counter() - t0:.2f} s)"
               + (f"; wrote {args.save_detections} and {heatmaps_dir}/" if args.save_detections else ""))
     return scene
+
+
+def amodal_pass(scene, results, args, engine=None):
+    """``--amodal-pass``: the scene with the keypoints of each vehicle whose box stops at the image border found
+    again in the box of the vehicle ``results`` (the first solve's) holds (:func:`vfactor.net.amodal.redetect_clipped`)."""
+    from vfactor.net.amodal import redetect_clipped
+    from vfactor.net.infer import KeypointDetector
+
+    t0 = time.perf_counter()
+    scene, replaced = redetect_clipped(scene, results, KeypointDetector(args.weights), engine=engine)
+    if not args.quiet:
+        print(f"amodal pass: {replaced} boxes clipped by the image border found again from the first solve's "
+              f"vehicles ({time.perf_counter() - t0:.2f} s)")
+    return scene, replaced
+
+
+def check_amodal_pass(raw, args) -> None:
+    """``--amodal-pass`` needs detections given as image boxes (found by the network), and writes no first-pass
+    detections."""
+    if not getattr(args, "amodal_pass", False):
+        return
+    if not raw.undetected():
+        raise InputError("--amodal-pass", "no detection of the scene is given as an image box for the keypoint network")
+    if args.save_detections:
+        raise InputError("--amodal-pass", "not with --save-detections (which writes the first pass's keypoints)")
 
 
 def check_outputs(args) -> None:

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
 import numpy as np
 
-from vfactor.cli.common import (EXIT_INPUT, EXIT_OK, EXIT_UNSOLVED, check_out_file, check_outputs, detect, note,
-                                output, progress, report_unsolved, say)
+from vfactor.cli.common import (EXIT_INPUT, EXIT_OK, EXIT_UNSOLVED, amodal_pass, check_amodal_pass, check_out_file,
+                                check_outputs, detect, note, output, progress, report_unsolved, say)
 from vfactor.cli.scenes import scene_jobs
 from vfactor.cli.stream import is_stream, track_stream_command
 from vfactor.cli.interop import name_file_pairs
@@ -124,11 +125,17 @@ def _solve_one(args, engine: _Engine) -> int:
     from vfactor.solve import SolveOptions, iter_solve_scene
 
     check_outputs(args)
-    given = detect(load_input(args), args, engine.get())
+    raw = load_input(args)
+    check_amodal_pass(raw, args)
+    given = detect(raw, args, engine.get())
     scene, association = associate(given, args)
     options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
     t0 = time.perf_counter()
     results = []
+    if args.amodal_pass:  # a first solve gives the clipped vehicles' whole boxes
+        first = list(iter_solve_scene(scene, dataclasses.replace(options, covariance=False),
+                                      progress=progress("first solve", not args.quiet), engine=engine.get()))
+        scene, _ = amodal_pass(scene, first, args, engine.get())
 
     def frames():  # written to --out as they come (vfactor.formats.write_results)
         for frame in iter_solve_scene(scene, options, progress=progress("solving", not args.quiet), engine=engine.get()):
@@ -153,6 +160,8 @@ def track(args) -> int:
     if args.batch and (args.lag is not None or args.online):
         raise InputError("--batch", "batch smoothing uses every frame: it takes neither --lag nor --online")
     if is_stream(args):
+        if args.amodal_pass:
+            raise InputError("--amodal-pass", "not with a stream (--follow or standard input): it solves the scene twice")
         return track_stream_command(args)
     if args.idle_timeout is not None:
         raise InputError("--idle-timeout", "only with --follow")
@@ -166,17 +175,26 @@ def _track_one(args, engine: _Engine) -> int:
     check_outputs(args)
     if args.plot:
         check_out_file(args.plot, "--plot", [("scene file", args.scene), ("result file --out", args.out)])
-    given = detect(load_input(args), args, engine.get())
+    raw = load_input(args)
+    check_amodal_pass(raw, args)
+    given = detect(raw, args, engine.get())
     scene, association = associate(given, args)
     options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance,
                            detector_offsets=args.detector_offsets)
     where = engine.get()
     t0 = time.perf_counter()
-    if args.batch:
-        results, messages = smooth_scene(scene, options, progress=progress("smoothing", not args.quiet), engine=where), []
-    else:
+
+    def estimate(scene):
+        if args.batch:
+            return smooth_scene(scene, options, progress=progress("smoothing", not args.quiet), engine=where), []
         run = track_scene(scene, options, progress=progress("tracking", not args.quiet), engine=where)
-        results, messages = (run.online if args.online else run.frames), run.messages
+        return (run.online if args.online else run.frames), run.messages
+
+    results, messages = estimate(scene)
+    if args.amodal_pass:  # the tracks give the clipped vehicles' whole boxes; the scene is tracked again
+        scene, replaced = amodal_pass(scene, results, args, where)
+        if replaced:
+            results, messages = estimate(scene)
     if association is not None:
         association.restore_indices(results)
     write_output(args, results, scene)

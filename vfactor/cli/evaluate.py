@@ -31,6 +31,8 @@ def evaluate(args) -> int:
         raise InputError("--levels", f"eval {args.experiment} has no noise levels (frames and association have)")
     if args.weights is not None and args.experiment != "images":
         raise InputError("--weights", f"eval {args.experiment} uses no keypoint network (eval images does)")
+    if args.amodal_pass and not (args.experiment == "images" and args.clipped_boxes):
+        raise InputError("--amodal-pass", "only with eval images --clipped-boxes (whole boxes stop at no image border)")
     if args.experiment in ("images", "paper") and (args.workers is not None or args.scheduler is not None):
         raise InputError("--workers" if args.workers is not None else "--scheduler",
                          f"eval {args.experiment} runs in this process (frames, tracks and association take a cluster)")
@@ -49,7 +51,7 @@ def evaluate(args) -> int:
                                              _levels(args.levels) if args.levels else (None,))
     elif args.experiment == "images":
         sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed, args.weights,
-                                args.detector_offsets, args.clipped_boxes)
+                                args.detector_offsets, args.clipped_boxes, args.amodal_pass)
     else:
         if args.scenario:
             raise InputError("--scenario", "the paper comparison uses its own scenario (paper_webots)")
@@ -109,7 +111,8 @@ def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper"
 
 
 def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = None,
-                 detector_offsets: bool | None = None, clipped_boxes: bool = False) -> list[str]:
+                 detector_offsets: bool | None = None, clipped_boxes: bool = False,
+                 amodal_pass: bool = False) -> list[str]:
     try:
         from vfactor.net.end_to_end import evaluate_images, images_report
         from vfactor.net.infer import KeypointDetector
@@ -123,7 +126,8 @@ def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = No
 
     track_options = TrackOptions(detector_offsets=detector_offsets)
     return [images_report(evaluate_images(scenario_name, frames, seed, detector, progress=progress("rendering"),
-                                          track_options=track_options, clip_boxes=clipped_boxes))]
+                                          track_options=track_options, clip_boxes=clipped_boxes,
+                                          amodal_pass=amodal_pass))]
 
 
 def _eval_association(scenario_name, frames, seed: int, seeds: int, engine=None, levels=(None,)) -> list[str]:

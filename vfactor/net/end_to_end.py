@@ -24,13 +24,13 @@ from pathlib import Path
 import numpy as np
 
 from vfactor.evaluation import (accuracy_table, body_type_of, body_type_table, compare_methods, compare_tracking,
-                                consistency_table, summarise_methods, tracking_table)
+                                consistency_table, held_out_scene_model, summarise_methods, tracking_table)
 from vfactor.graph import roi_cut_by_border
 from vfactor.net.evaluate import pck
 from vfactor.net.pipeline import detect_scene
 from vfactor.sim import load_scenario, simulate
 from vfactor.vehicle_library import BODY_TYPES
-from vfactor.solve import SolveOptions
+from vfactor.solve import SolveOptions, solve_scene
 
 __all__ = ["evaluate_images", "render_and_detect", "keypoint_accuracy", "calibration_table", "images_report",
            "network_saw"]
@@ -184,7 +184,7 @@ def render_and_detect(scenario: str, seed: int, frames: int | None = None, detec
 
 def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, seed: int = 0, detector=None,
                     work_dir: str | Path | None = None, options: SolveOptions = SolveOptions(),
-                    progress=None, track_options=None, clip_boxes: bool = False) -> dict:
+                    progress=None, track_options=None, clip_boxes: bool = False, amodal_pass: bool = False) -> dict:
     """Runs the image-to-pose pipeline on rendered scenes of a scenario and scores it.
 
     Args:
@@ -198,6 +198,10 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
         progress: called with ``(images rendered, images total)``.
         track_options: the tracking comparison's :class:`~vfactor.track.TrackOptions` (default: the defaults).
         clip_boxes: the network gets the boxes clipped to the image (:func:`render_and_detect`).
+        amodal_pass: the keypoints of the vehicles whose boxes stop at the image border are found again in the
+            boxes of the vehicles a first solve found (tracked where the scenario moves, else one frame at a time;
+            each vehicle with the shape model learnt without it), and everything is evaluated on those
+            (:func:`vfactor.net.amodal.redetect_clipped`).
 
     Returns:
         ``{"scenario", "seed", "frames", "keypoints": keypoint_accuracy(...),
@@ -209,16 +213,32 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
         its frames); without motion every frame holds new vehicles and there is
         nothing to track.
     """
-    sim, rendered, detected, detector = render_and_detect(scenario, seed, frames, detector, work_dir, progress,
-                                                          clip_boxes)
+    replaced = None
+    with tempfile.TemporaryDirectory(prefix="vfactor_eval_images_") as tmp:  # the images, for the amodal pass
+        folder = work_dir if work_dir is not None or not amodal_pass else tmp
+        sim, rendered, detected, detector = render_and_detect(scenario, seed, frames, detector, folder, progress,
+                                                              clip_boxes)
+        tracked = sim.scenario.motion is not None
+        if amodal_pass:
+            from vfactor.net.amodal import redetect_clipped
+            from vfactor.track import TrackOptions, track_scene
+
+            model = held_out_scene_model(sim)
+            first = (track_scene(detected, track_options or TrackOptions(), prior=model).frames if tracked else
+                     solve_scene(detected, dataclasses.replace(options, covariance=False), prior=model))
+            given = dataclasses.replace(detected, frames=[  # the given boxes (a work_dir's scene holds the crops')
+                dataclasses.replace(frame, detections=[dataclasses.replace(d, roi=g.roi) for d, g in
+                                                       zip(frame.detections, raw.detections)])
+                for frame, raw in zip(detected.frames, rendered.scene.frames)])
+            detected, replaced = redetect_clipped(given, first, detector)
     body_types = {(f, vid): body_type_of(sim.truth[f][vid].preset) for f in range(len(sim.scene.frames))
                   for vid in sim.truth[f]}
     keypoints = keypoint_accuracy(detected, rendered, detector.crop_box, body_types)
     rows = compare_methods(dataclasses.replace(sim, scene=detected), options)
     rows["factor_graph_simulated_noise"] = compare_methods(sim, options, methods=("factor_graph",))["factor_graph"]
-    tracked = sim.scenario.motion is not None
     tracking = compare_tracking(dataclasses.replace(sim, scene=detected), track_options) if tracked else None
     return {"scenario": sim.scenario.name, "seed": seed, "frames": len(sim.scene.frames), "clip_boxes": clip_boxes,
+            "amodal_pass_boxes": replaced,
             "keypoints": keypoints,
             "summary": summarise_methods(rows), "rows": rows, "tracking": tracking}
 
@@ -230,7 +250,10 @@ def images_report(evaluation: dict) -> str:
         f"### {evaluation['scenario']}: rendered images -> keypoint network -> factor graph, "
         f"{evaluation['frames']} frames, seed {evaluation['seed']}"
         + (", boxes clipped to the image" if evaluation.get("clip_boxes") else "") + "\n\n"
-        f"Network keypoints on the full images: PCK@0.1 {k['pck_visible']:.3f} visible ({k['visible']}), "
+        + (f"Amodal pass: {evaluation['amodal_pass_boxes']} boxes clipped by the image border replaced by the "
+           f"boxes of the vehicles a first solve found, their keypoints found again.\n\n"
+           if evaluation.get("amodal_pass_boxes") is not None else "")
+        + f"Network keypoints on the full images: PCK@0.1 {k['pck_visible']:.3f} visible ({k['visible']}), "
         f"{k['pck_self_occluded']:.3f} self-occluded or hidden ({k['self_occluded']}); median error of visible "
         f"keypoints {k['median_px_visible']:.1f} px ({100 * k['median_rel_visible']:.1f} % of the crop side); "
         f"{k['missed']} not found.\n\n"

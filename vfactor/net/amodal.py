@@ -44,7 +44,7 @@ BODY_SHARE = (1.0 / 1.18, 1.0 / 1.22)
 #: (intersection over union).
 MIN_AGREEMENT = 0.5
 #: ... and where at least this share of the projected box lies inside the image (the network needs a quarter,
-#: :func:`vfactor.heatmaps.check_roi_in_image`).
+#: :func:`vfactor.net.crop.check_roi_in_image`).
 MIN_INSIDE = 0.3
 
 
@@ -105,7 +105,8 @@ def amodal_boxes(scene: Scene, results: list[FrameResult]) -> tuple[Scene, int]:
         detections = list(frame.detections)
         for j, det in enumerate(detections):
             camera = scene.cameras[det.camera]
-            if det.roi is None or det.vehicle not in boxes or not clipped_by_border(det.roi, camera.image_size):
+            if det.roi is None or camera.image_size is None or det.vehicle not in boxes or \
+                    not clipped_by_border(det.roi, camera.image_size):
                 continue
             whole = projected_box(camera, boxes[det.vehicle])
             if whole is None:

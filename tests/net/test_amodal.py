@@ -22,9 +22,9 @@ from vfactor.heatmaps import edges_at_border  # noqa: E402
 from vfactor.net.amodal import amodal_boxes, clipped_by_border, projected_box, redetect_clipped  # noqa: E402
 from vfactor.net.infer import KeypointDetector  # noqa: E402
 from vfactor.net.pipeline import detect_scene  # noqa: E402
-from vfactor.render.renderer import RenderingUnavailable, get_context  # noqa: E402
 from vfactor.result import FrameResult, Status, VehicleResult  # noqa: E402
-from vfactor.sim import simulate  # noqa: E402
+
+from tests.net.rendered import cut_van_frame, require_rendering  # noqa: E402
 
 
 def _iou(a, b) -> float:
@@ -35,15 +35,10 @@ def _iou(a, b) -> float:
 @pytest.fixture(scope="module")
 def clipped(tmp_path_factory):
     """(simulation, rendered scene with clipped boxes, the true results: each vehicle's true pose, shape and box)."""
-    try:
-        get_context()
-    except RenderingUnavailable as exc:
-        pytest.skip(f"no OpenGL rendering here: {exc}")
+    require_rendering()
     from vfactor.render.scenes import render_simulation
 
-    sim = simulate("tracks_3veh", seed=231)
-    sim = dataclasses.replace(sim, scene=dataclasses.replace(sim.scene, frames=sim.scene.frames[:1]),
-                              truth=sim.truth[:1])
+    sim = cut_van_frame()
     rendered = render_simulation(sim, tmp_path_factory.mktemp("clipped"), seed=231, clip_boxes=True)
     truth = [FrameResult(frame.t, [
         VehicleResult(vid, Status.CONVERGED, world_T_vehicle=t.world_T_vehicle, wireframe=t.wireframe,
@@ -54,7 +49,8 @@ def clipped(tmp_path_factory):
 
 def test_a_box_at_the_image_border_is_clipped():
     assert edges_at_border((-0.5, 10, 300, 719.5), 1280, 720) == (True, False, False, True)
-    assert clipped_by_border((0.2, 10, 300, 200), (1280, 720)) and clipped_by_border((900, 10, 1279.4, 200), (1280, 720))
+    assert clipped_by_border((0.2, 10, 300, 200), (1280, 720))
+    assert clipped_by_border((900, 10, 1279.4, 200), (1280, 720))
     assert not clipped_by_border((5, 10, 300, 200), (1280, 720))
     assert not clipped_by_border((-80, 10, 300, 200), (1280, 720))  # a whole vehicle's box, beyond the border
 

@@ -21,19 +21,17 @@ from vfactor.errors import InputError, SceneError  # noqa: E402
 from vfactor.metrics import pose_errors  # noqa: E402
 from vfactor.net.infer import KeypointDetector  # noqa: E402
 from vfactor.net.pipeline import detect_scene  # noqa: E402
-from vfactor.render.renderer import RenderingUnavailable, get_context  # noqa: E402
 from vfactor.scene import load_results, load_scene  # noqa: E402
 from vfactor.sim import simulate  # noqa: E402
 from vfactor.solve import solve_scene  # noqa: E402
+
+from tests.net.rendered import cut_van_frame, require_rendering  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
     """Two frames of intersection_2cam rendered (images + boxes), with the simulation."""
-    try:
-        get_context()
-    except RenderingUnavailable as exc:
-        pytest.skip(f"no OpenGL rendering here: {exc}")
+    require_rendering()
     from vfactor.render.scenes import render_simulation
 
     sim = simulate("intersection_2cam", seed=3, num_frames=2)
@@ -311,16 +309,11 @@ def test_detection_on_a_dask_cluster_equals_in_process(rendered, detector, tmp_p
 def test_rendered_scenes_can_give_boxes_clipped_by_the_image(tmp_path):
     """render_simulation(clip_boxes=True): every box within the image, as a 2D detector gives it (tracks_3veh seed
     231's van is cut by cam1's border in every frame); the images and the true (whole) boxes are the same."""
-    try:
-        get_context()
-    except RenderingUnavailable as exc:
-        pytest.skip(f"no OpenGL rendering here: {exc}")
+    require_rendering()
     from vfactor.graph import roi_cut_by_border
     from vfactor.render.scenes import render_simulation
 
-    sim = simulate("tracks_3veh", seed=231)
-    sim = dataclasses.replace(sim, scene=dataclasses.replace(sim.scene, frames=sim.scene.frames[:1]),
-                              truth=sim.truth[:1])
+    sim = cut_van_frame()
     whole = render_simulation(sim, tmp_path / "whole", seed=231)
     clipped = render_simulation(sim, tmp_path / "clipped", seed=231, clip_boxes=True)
     assert whole.boxes_true == clipped.boxes_true

@@ -320,7 +320,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: the whole vehicle's box, beyond the image where the image cuts the vehicle)")
     p.add_argument("--amodal-pass", action="store_true",
                    help="images, with --clipped-boxes: find the clipped vehicles' keypoints again in the boxes of the "
-                   "vehicles a first solve found (tracked where the scenario moves), then evaluate (vfactor.net.amodal)")
+                   "vehicles a first solve found (tracked where the scenario moves), then evaluate "
+                   "(vfactor.net.amodal)")
     p.add_argument("--detector-offsets", action=argparse.BooleanOptionalAction, default=None,
                    help="images: track with each camera's detector pose offset (TrackOptions.detector_offsets; "
                    "default: on where the scene gives a road plane)")

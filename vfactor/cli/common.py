@@ -197,7 +197,8 @@ def detect(scene, args, engine=None):
 
 def amodal_pass(scene, results, args, engine=None):
     """``--amodal-pass``: the scene with the keypoints of each vehicle whose box stops at the image border found
-    again in the box of the vehicle ``results`` (the first solve's) holds (:func:`vfactor.net.amodal.redetect_clipped`)."""
+    again in the box of the vehicle ``results`` (the first solve's) holds
+    (:func:`vfactor.net.amodal.redetect_clipped`), and how many boxes were replaced."""
     from vfactor.net.amodal import redetect_clipped
     from vfactor.net.infer import KeypointDetector
 

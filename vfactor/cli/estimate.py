@@ -161,7 +161,8 @@ def track(args) -> int:
         raise InputError("--batch", "batch smoothing uses every frame: it takes neither --lag nor --online")
     if is_stream(args):
         if args.amodal_pass:
-            raise InputError("--amodal-pass", "not with a stream (--follow or standard input): it solves the scene twice")
+            raise InputError("--amodal-pass",
+                             "not with a stream (--follow or standard input): it solves the scene twice")
         return track_stream_command(args)
     if args.idle_timeout is not None:
         raise InputError("--idle-timeout", "only with --follow")

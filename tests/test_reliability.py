@@ -557,12 +557,14 @@ def test_eval_says_how_many_poor_fits_and_how_far_off():
     assert poor_fit_summary({"factor_graph": rows["factor_graph"][:2]}) == "Reported poor_fit by factor_graph: 0 of 2."
 
 
-def test_a_view_cut_by_the_image_border_is_not_blamed_on_its_camera():
+@pytest.mark.parametrize("left_edge", [-2.0, -0.5])
+def test_a_view_cut_by_the_image_border_is_not_blamed_on_its_camera(left_edge):
     """Keypoints that make a vehicle of their own elsewhere, from a camera whose box of the vehicle reaches beyond
-    its image: a detector may draw a whole vehicle in the part of it that it sees (tracks_3cam seed 0 from images,
-    frame 29, v1: the network's keypoints in cam1 60-520 px off, and consistent). The vehicle is solved from the
-    others, the robust loss leaves those keypoints out, and its message says so; the same keypoints in a box inside
-    the image still fail the vehicle on its camera (here cam1 turned by 10 deg stands for either)."""
+    its image (``left_edge`` -2: a whole vehicle's box) or stops at its border (-0.5: a 2D detector's box, clipped
+    to the image): a detector may draw a whole vehicle in the part of it that it sees (tracks_3cam seed 0 from
+    images, frame 29, v1: the network's keypoints in cam1 60-520 px off, and consistent). The vehicle is solved from
+    the others, the robust loss leaves those keypoints out, and its message says so; the same keypoints in a box
+    inside the image still fail the vehicle on its camera (here cam1 turned by 10 deg stands for either)."""
     from vfactor.sim import simulate
     from vfactor.solve import solve_frame
 
@@ -572,9 +574,9 @@ def test_a_view_cut_by_the_image_border_is_not_blamed_on_its_camera():
                                           world_T_camera=turned(cameras["cam1"].world_T_camera, 10.0, (1.0, 2.0, 0.5)))
     options = SolveOptions(covariance=False).for_scene(sim.scene)
 
-    def past_the_border(d):  # a box as large as the keypoints' (the same pixel sigmas), over the image's left edge
+    def past_the_border(d):  # a box as large as the keypoints' (the same pixel sigmas), at the image's left edge
         lo, hi = d.keypoints[d.seen].min(axis=0), d.keypoints[d.seen].max(axis=0)
-        return dataclasses.replace(d, roi=(-2.0, float(lo[1]), float(hi[0] - lo[0]) - 2.0, float(hi[1])))
+        return dataclasses.replace(d, roi=(left_edge, float(lo[1]), float(hi[0] - lo[0]) + left_edge, float(hi[1])))
 
     checked = 0
     for frame in sim.scene.frames:

@@ -74,7 +74,7 @@ class KeypointObservations:
             vehicle's shape, of the observation's detection (``Detection.shape_sigma``; 0: none);
             None: no observation has one.
         cut: optional (n,) bools: the observation's detection box (``Detection.roi``) reaches beyond its camera's
-            image, so that view of the vehicle is cut by the image border; None: none is.
+            image or stops at its border, so that view of the vehicle is cut by the image border; None: none is.
     """
 
     cameras: tuple[Camera, ...]

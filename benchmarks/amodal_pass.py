@@ -26,10 +26,10 @@ import tempfile
 import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
-from vfactor.evaluation import (body_type_of, class_rows, final_shape_errors, held_out_scene_model,  # noqa: E402
-                                pose_rows)
-from vfactor.heatmaps import clip_roi_to_image  # noqa: E402
-from vfactor.net.amodal import clipped_by_border, redetect_clipped  # noqa: E402
+from vfactor.evaluation import (class_rows, final_shape_errors, held_out_scene_model, pose_rows,  # noqa: E402
+                                track_body_types)
+from vfactor.heatmaps import clip_roi_to_image, clipped_by_border  # noqa: E402
+from vfactor.net.amodal import redetect_clipped  # noqa: E402
 from vfactor.net.infer import KeypointDetector  # noqa: E402
 from vfactor.net.pipeline import detect_scene  # noqa: E402
 from vfactor.render.scenes import render_simulation  # noqa: E402
@@ -64,14 +64,14 @@ def scene_rows(scenario: str, seed: int, detector, poses: dict, shapes: dict) ->
         runs = {"whole": (whole, track_scene(whole, TrackOptions(), prior=model).frames), "clipped": (clipped, first),
                 "amodal pass": (again, track_scene(again, TrackOptions(), prior=model).frames)}
     rig = "three cameras, road plane" if sim.scene.ground_plane is not None else "two cameras, no plane"
+    body_types = track_body_types(sim)
     for boxes, (scene, frames) in runs.items():
         truth = dataclasses.replace(sim, scene=scene)
         for row in class_rows(sim, pose_rows(truth, frames), scene):
             for kind in (row[0], "all"):
                 poses[(rig, boxes, kind)].append(row)
         for vid, error in final_shape_errors(truth, frames).items():
-            kind = body_type_of(next(t[vid] for t in sim.truth if vid in t).preset)
-            for key in (kind, "all"):
+            for key in (body_types[vid], "all"):
                 shapes[(rig, boxes, key)].append(100 * float(np.linalg.norm(error, axis=1).mean()))
     at_border = sum(clipped_by_border(d.roi, given.cameras[d.camera].image_size)
                     for frame in given.frames for d in frame.detections)

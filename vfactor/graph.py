@@ -29,8 +29,8 @@ from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_prior import shape_prior_factor
 from vfactor.factors.shape_terms import cross, evaluate_terms, shape_terms_factor
 from vfactor.factors.symmetry import symmetry_factor
-from vfactor.heatmaps import edges_at_border
 from vfactor.factors.trapezoid import trapezoid_term
+from vfactor.heatmaps import clipped_by_border
 from vfactor.keypoints import LAYER_NAMES
 from vfactor.keys import KeyScheme
 from vfactor.observations import Detection
@@ -302,10 +302,10 @@ def _stacked(parts: list, empty_shape: tuple, dtype) -> np.ndarray:
 def _roi_cut(camera: Camera, roi) -> bool:
     """Whether the detection box ``roi`` says the image border cuts the vehicle: it reaches beyond the camera's image
     (a whole vehicle's box), or an edge stops at the border (a 2D detector's box, clipped to the image:
-    :func:`vfactor.heatmaps.edges_at_border`). False where either is not known."""
+    :func:`vfactor.heatmaps.clipped_by_border`). False where either is not known."""
     if roi is None or camera.image_size is None:
         return False
-    return roi_cut_by_border(roi, camera.image_size) or any(edges_at_border(roi, *camera.image_size))
+    return roi_cut_by_border(roi, camera.image_size) or clipped_by_border(roi, camera.image_size)
 
 
 def roi_cut_by_border(roi, image_size) -> bool:

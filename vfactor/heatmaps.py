@@ -37,6 +37,7 @@ __all__ = [
     "image_to_heatmap",
     "extend_clipped_roi",
     "edges_at_border",
+    "clipped_by_border",
     "clip_roi_to_image",
     "CLIPPED_EXTENSION",
 ]
@@ -404,6 +405,12 @@ def edges_at_border(roi, width: int, height: int) -> tuple[bool, bool, bool, boo
     x0, y0, x1, y1 = (float(v) for v in roi)
     return (abs(x0 + 0.5) <= 1.0, abs(y0 + 0.5) <= 1.0, abs(x1 - (width - 0.5)) <= 1.0,
             abs(y1 - (height - 0.5)) <= 1.0)
+
+
+def clipped_by_border(roi, image_size) -> bool:
+    """Whether a box ``(x0, y0, x1, y1)`` (pixel edges) stops at the border of an image of ``(width, height)``
+    pixels (:func:`edges_at_border`): a 2D detector's box of a vehicle the border cuts."""
+    return any(edges_at_border(roi, *image_size))
 
 
 def clip_roi_to_image(roi, width: int, height: int) -> np.ndarray:

@@ -132,16 +132,32 @@ def _world_pose(world_T_camera: gtsam.Pose3, rvec, tvec) -> gtsam.Pose3 | None:
     return world_T_camera.compose(gtsam.Pose3(camera_T_vehicle))
 
 
-def _sqpnp(camera, world_T_camera: gtsam.Pose3, labellings, image_uv, threshold_px) -> dict:
-    """SQPnP poses (world_T_vehicle) of one camera's keypoints under each labelling of them, each fitted on every
-    point, and what RANSAC (:func:`_ransac_pnp`) needs of them.
+@dataclass(frozen=True)
+class _PnPFits:
+    """One camera's SQPnP fits (:func:`_sqpnp`) and what RANSAC (:func:`_ransac_pnp`) needs of them.
 
-    Each labelling is the (n, 3) body-frame points its labels name, seen at ``image_uv`` (n, 2 pixels).
-
-    Returns:
-        ``{"poses": per labelling its SQPnP pose (none where it failed), "within": per labelling the points its fit
-        keeps within ``threshold_px`` (-1 without a fit), and the PnP inputs}``.
+    Attributes:
+        poses: per labelling its SQPnP pose (world_T_vehicle; none where it failed).
+        within: per labelling the points its fit keeps within the threshold (-1 without a fit).
+        labellings: per labelling the (n, 3) body-frame points its labels name.
+        img, K, dist: :meth:`vfactor.camera.Camera.pnp_inputs` of the keypoints.
+        threshold: the inlier threshold in the units of ``img``.
+        world_T_camera: the camera's pose.
     """
+
+    poses: list
+    within: list
+    labellings: tuple
+    img: np.ndarray
+    K: np.ndarray
+    dist: np.ndarray | None
+    threshold: float
+    world_T_camera: gtsam.Pose3
+
+
+def _sqpnp(camera, world_T_camera: gtsam.Pose3, labellings, image_uv, threshold_px) -> _PnPFits:
+    """SQPnP poses (world_T_vehicle) of one camera's keypoints under each labelling of them, each fitted on every
+    point. Each labelling is the (n, 3) body-frame points its labels name, seen at ``image_uv`` (n, 2 pixels)."""
     img, K, dist, px_per_unit = camera.pnp_inputs(image_uv)  # a fisheye lens: normalised points, identity K
     threshold = threshold_px / px_per_unit
     poses, within = [], []
@@ -159,28 +175,26 @@ def _sqpnp(camera, world_T_camera: gtsam.Pose3, labellings, image_uv, threshold_
             pass
         poses.append(found)
         within.append(kept)
-    return {"poses": poses, "within": within, "labellings": labellings, "inputs": (img, K, dist, threshold),
-            "world_T_camera": world_T_camera}
+    return _PnPFits(poses, within, labellings, img, K, dist, threshold, world_T_camera)
 
 
-def _ransac_pnp(fits: dict, every_labelling: bool = False) -> list[list[gtsam.Pose3]]:
-    """RANSAC PnP poses (EPnP, the threshold of :func:`_sqpnp`'s ``fits``; 6 points or more) per labelling.
+def _ransac_pnp(fits: _PnPFits, every_labelling: bool = False) -> list[list[gtsam.Pose3]]:
+    """RANSAC PnP poses (EPnP, the threshold of the SQPnP ``fits``; 6 points or more) per labelling.
 
     RANSAC runs only where the SQPnP fit leaves some point beyond the threshold (with every point within it RANSAC
     would keep them all: the same fit), and only for the labellings whose SQPnP fit keeps the most points within
     it: RANSAC looks for the outliers of the labelling the keypoints favour, the others keep their SQPnP pose
     (``every_labelling``: RANSAC for each labelling whose fit leaves a point out).
     """
-    img, K, dist, threshold = fits["inputs"]
     out = []
-    for object_p, kept in zip(fits["labellings"], fits["within"]):
+    for object_p, kept in zip(fits.labellings, fits.within):
         found = []
-        if len(object_p) >= 6 and kept < len(object_p) and (every_labelling or kept == max(fits["within"])):
+        if len(object_p) >= 6 and kept < len(object_p) and (every_labelling or kept == max(fits.within)):
             ok, rvec, tvec, _ = cv2.solvePnPRansac(
-                object_p.astype(np.float64), img, K, dist, iterationsCount=200, reprojectionError=threshold,
-                confidence=0.999, flags=cv2.SOLVEPNP_EPNP,
+                object_p.astype(np.float64), fits.img, fits.K, fits.dist, iterationsCount=200,
+                reprojectionError=fits.threshold, confidence=0.999, flags=cv2.SOLVEPNP_EPNP,
             )
-            pose = _world_pose(fits["world_T_camera"], rvec, tvec) if ok else None
+            pose = _world_pose(fits.world_T_camera, rvec, tvec) if ok else None
             if pose is not None:
                 found.append(pose)
         out.append(found)
@@ -228,7 +242,7 @@ class StartSearch:
         flip = gtsam.Pose3(gtsam.Rot3.Yaw(np.pi), np.zeros(3))
         for c, (name, fits) in enumerate(self._cameras):
             for j, tag in enumerate(("pnp", "pnp-mirrored")):
-                for pose in fits["poses"][j] + (self._ransac[c][j] if ransac else []):
+                for pose in fits.poses[j] + (self._ransac[c][j] if ransac else []):
                     out.append((pose, self.wireframe, f"{tag}:{name}"))
                     out.append((pose.compose(flip), self.wireframe, f"{tag}-turned:{name}"))
         if self._triangulated is not None:

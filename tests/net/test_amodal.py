@@ -18,8 +18,8 @@ pytest.importorskip("torch")
 from vfactor.box import vehicle_box  # noqa: E402
 from vfactor.cli import main  # noqa: E402
 from vfactor.evaluation import body_type_of  # noqa: E402
-from vfactor.heatmaps import edges_at_border  # noqa: E402
-from vfactor.net.amodal import amodal_boxes, clipped_by_border, projected_box, redetect_clipped  # noqa: E402
+from vfactor.heatmaps import clipped_by_border, edges_at_border  # noqa: E402
+from vfactor.net.amodal import amodal_boxes, projected_box, redetect_clipped  # noqa: E402
 from vfactor.net.infer import KeypointDetector  # noqa: E402
 from vfactor.net.pipeline import detect_scene  # noqa: E402
 from vfactor.result import FrameResult, Status, VehicleResult  # noqa: E402

@@ -28,12 +28,11 @@ import numpy as np
 
 from vfactor.box import Box
 from vfactor.camera import Camera
-from vfactor.heatmaps import clip_roi_to_image, edges_at_border
+from vfactor.heatmaps import clip_roi_to_image, clipped_by_border
 from vfactor.observations import Scene
 from vfactor.result import FrameResult
 
-__all__ = ["BODY_SHARE", "MIN_AGREEMENT", "MIN_INSIDE", "clipped_by_border", "projected_box", "amodal_boxes",
-           "redetect_clipped"]
+__all__ = ["BODY_SHARE", "MIN_AGREEMENT", "MIN_INSIDE", "projected_box", "amodal_boxes", "redetect_clipped"]
 
 #: Share of the width and height of a 3D box's image box that the vehicle's body covers: the box's corners reach
 #: beyond the rounded body (roof, bumpers, wheel arches). Median over the 242 whole (unclipped) detections of two
@@ -46,12 +45,6 @@ MIN_AGREEMENT = 0.5
 #: ... and where at least this share of the projected box lies inside the image (the network needs a quarter,
 #: :func:`vfactor.net.crop.check_roi_in_image`).
 MIN_INSIDE = 0.3
-
-
-def clipped_by_border(roi, image_size) -> bool:
-    """Whether a box ``(x0, y0, x1, y1)`` (pixel edges) stops at the border of an image of ``(width, height)``
-    pixels: an edge within a pixel of the image's edge, as a 2D detector's box of a vehicle the border cuts."""
-    return any(edges_at_border(roi, *image_size))
 
 
 def projected_box(camera: Camera, box: Box) -> tuple[float, float, float, float] | None:

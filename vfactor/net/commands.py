@@ -302,7 +302,7 @@ def _sample_options(clipped_box_share: float | None):
 
 def _render(path: Path, n: int, seed: int, size: int, held_out: bool, workers: int, verbose: bool,
             split=None, options=None) -> Path:
-    from vfactor.render import make_dataset  # noqa: PLC0415
+    from vfactor.render import SampleOptions, make_dataset  # noqa: PLC0415
 
     if any(path.glob("*.npz")):
         if verbose:
@@ -310,8 +310,8 @@ def _render(path: Path, n: int, seed: int, size: int, held_out: bool, workers: i
         return path
     if verbose:
         print(f"rendering {n} {'held-out ' if held_out else ''}crops of {size} px into {path}", file=sys.stderr)
-    kwargs = {"options": options} if options is not None else {}
-    make_dataset(n, seed=seed, size=size, path=path, held_out=held_out, workers=workers, split=split, **kwargs)
+    make_dataset(n, seed=seed, size=size, path=path, held_out=held_out, workers=workers, split=split,
+                 options=options or SampleOptions())
     return path
 
 

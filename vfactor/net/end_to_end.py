@@ -17,6 +17,7 @@ iSAM2, fixed lag and batch smoothing beside frame-by-frame solving).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import tempfile
 from pathlib import Path
@@ -214,8 +215,11 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
         nothing to track.
     """
     replaced = None
-    with tempfile.TemporaryDirectory(prefix="vfactor_eval_images_") as tmp:  # the images, for the amodal pass
-        folder = work_dir if work_dir is not None or not amodal_pass else tmp
+    # the amodal pass reads the images again: they stay in a temporary folder until it is done (without it, or with
+    # a work_dir, render_and_detect keeps or removes them itself)
+    images = tempfile.TemporaryDirectory(prefix="vfactor_eval_images_") if amodal_pass and work_dir is None else \
+        contextlib.nullcontext(work_dir)
+    with images as folder:
         sim, rendered, detected, detector = render_and_detect(scenario, seed, frames, detector, folder, progress,
                                                               clip_boxes)
         tracked = sim.scenario.motion is not None

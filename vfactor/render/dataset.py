@@ -314,10 +314,12 @@ def random_vehicle(rng: np.random.Generator, split: SplitSpec = TRAIN, max_tries
         (wireframe, wheel_radius, source) where source is the library id, the preset name or ``"pascal3d:<index>"``.
     """
     shapes = pascal3d_shapes()
+    # each library model's chance in a library draw (None: uniform), made once per vehicle, not per try
+    chances = split.library_draw_probabilities() if split.library_models and split.library_probability > 0 else None
     for _ in range(max_tries):
         if split.library_models and rng.uniform() < split.library_probability:
-            p = split.library_draw_probabilities()
-            index = rng.integers(len(split.library_models)) if p is None else rng.choice(len(split.library_models), p=p)
+            n = len(split.library_models)
+            index = rng.integers(n) if chances is None else rng.choice(n, p=chances)
             vehicle_id = split.library_models[index]
             wf, radius, source = draw_vehicle(vehicle_id, rng, RandomShape(jitter=0.03))
         elif split.presets and (not split.pascal_models or rng.uniform() < split.preset_probability):

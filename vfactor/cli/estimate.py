@@ -132,13 +132,18 @@ def _solve_one(args, engine: _Engine) -> int:
     options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
     t0 = time.perf_counter()
     results = []
-    if args.amodal_pass:  # a first solve gives the clipped vehicles' whole boxes
-        first = list(iter_solve_scene(scene, dataclasses.replace(options, covariance=False),
-                                      progress=progress("first solve", not args.quiet), engine=engine.get()))
+    solved_frames = iter_solve_scene(scene, options, progress=progress("solving", not args.quiet), engine=engine.get())
+    if args.amodal_pass:  # the first solve gives the clipped vehicles' whole boxes; only the frames it changes again
+        first, before = list(solved_frames), scene
         scene, _ = amodal_pass(scene, first, args, engine.get())
+        again = {i for i, (old, new) in enumerate(zip(before.frames, scene.frames))
+                 if any(a is not b for a, b in zip(old.detections, new.detections))}
+        redone = iter_solve_scene(dataclasses.replace(scene, frames=[scene.frames[i] for i in sorted(again)]),
+                                  options, progress=progress("solving again", not args.quiet), engine=engine.get())
+        solved_frames = (next(redone) if i in again else frame for i, frame in enumerate(first))
 
     def frames():  # written to --out as they come (vfactor.formats.write_results)
-        for frame in iter_solve_scene(scene, options, progress=progress("solving", not args.quiet), engine=engine.get()):
+        for frame in solved_frames:
             if association is not None:
                 association.restore_indices([frame], len(results))
             results.append(frame)

@@ -14,6 +14,7 @@ solve (docs/performance.md, "Scale-out (issue 15)").
 * :mod:`kernels.motion` — Pose3 between, Logmap and Jacobians of the motion factors
 * :mod:`kernels.ground_plane` — the ground-plane factor
 * :mod:`kernels.shape_evidence` — the noise scale's fixed point and the body types' evidence
+* :mod:`kernels.linalg` — the eigen-decomposition of the per-vehicle covariances, single-threaded
 
 After editing a file here, rebuild the extension (``pip install -e .``, or
 ``python setup.py build_ext --inplace`` where numba is installed);

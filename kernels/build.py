@@ -22,6 +22,7 @@ from numba.pycc import CC
 
 from kernels import source_digest
 from kernels.ground_plane import ground_plane_kernel
+from kernels.linalg import symmetric_eigen_kernel
 from kernels.motion import acceleration_kernel, nonholonomic_kernel, step_twist_kernel
 from kernels.projection import projection_kernel, robust_cost_kernel
 from kernels.robust import robust_scale
@@ -58,6 +59,7 @@ EXPORTS = {
     "ground_plane_kernel": (ground_plane_kernel, types.void(_V2, _V1, _B1, _V1, _V2)),
     "fit_at_scale_kernel": (fit_at_scale_kernel, _F8(_V2, _V2, _V1, _V1, _V2, _V1, _F8, _F8, _V1, _V1)),
     "log_evidence_kernel": (log_evidence_kernel, types.void(_V2, _V1, _V3, _V2, _V1, _V1)),
+    "symmetric_eigen_kernel": (symmetric_eigen_kernel, _I8(_V2, _V1, _V2)),
     # the digest of the kernels' sources it was built from (tests/test_kernels.py)
     "source_digest": (_source_digest, _I8()),
 }

@@ -11,7 +11,7 @@ from scipy.stats import chi2
 
 from vfactor.evaluation import NOISE_LEVELS, compare_methods, noise_variant
 from vfactor.metrics import CHI2_95, keypoint_nees, nees_summary, pose_nees
-from vfactor.shape_evidence import covariance_inflation, covariance_upper_bound, sandwich_covariance
+from vfactor.shape_evidence import covariance_inflation, covariance_upper_bound, sandwich_covariance, symmetric_eigen
 from vfactor.sim import load_scenario, simulate
 from vfactor.solve import SolveOptions
 
@@ -103,6 +103,37 @@ def test_covariance_upper_bound_is_wider_than_both_and_the_least_such_in_the_mod
     assert widening == pytest.approx(2.0)
     with pytest.raises(np.linalg.LinAlgError):
         covariance_upper_bound(-model, other)
+
+
+def _hard_symmetric_matrices(rng):
+    """Symmetric matrices of the sizes a solve meets (42: pose and shape) and a few that stress the iteration: a
+    1 x 1, a diagonal one, repeated eigenvalues, an indefinite one, a covariance spanning eight decades, a zero."""
+    X = rng.normal(size=(42, 42))
+    yield X @ X.T
+    yield X + X.T  # indefinite
+    yield np.array([[3.0]])
+    yield np.diag(rng.normal(size=7))
+    Q = np.linalg.qr(rng.normal(size=(12, 12)))[0]
+    yield Q @ np.diag([2.0] * 6 + [5.0] * 6) @ Q.T  # two eigenvalues, each six times
+    D = np.diag(10.0 ** np.linspace(-4, 4, 42))
+    Q = np.linalg.qr(rng.normal(size=(42, 42)))[0]
+    yield Q @ D @ Q.T
+    yield np.zeros((5, 5))
+
+
+def test_symmetric_eigen_is_numpys_eigh_single_threaded():
+    rng = np.random.default_rng(11)
+    for A in _hard_symmetric_matrices(rng):
+        w, V = symmetric_eigen(A)
+        scale = max(np.abs(A).max(), 1e-300)
+        np.testing.assert_allclose(w, np.linalg.eigvalsh(A), rtol=0, atol=1e-12 * scale)
+        assert np.all(np.diff(w) >= 0)
+        np.testing.assert_allclose(V.T @ V, np.eye(len(A)), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(V * w @ V.T, A, rtol=0, atol=1e-12 * scale)
+    A = np.eye(3)
+    A[2, 0] = A[0, 2] = np.nan
+    with pytest.raises(np.linalg.LinAlgError, match="did not converge"):
+        symmetric_eigen(A)
 
 
 @pytest.mark.parametrize("level", ["clean", "paper"])

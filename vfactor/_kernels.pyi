@@ -10,7 +10,7 @@ import numpy as np
 
 __all__ = ["projection_kernel", "robust_cost_kernel", "robust_scale", "truncated_means_kernel", "step_twist_kernel",
            "nonholonomic_kernel", "acceleration_kernel", "ground_plane_kernel", "fit_at_scale_kernel",
-           "log_evidence_kernel", "source_digest"]
+           "log_evidence_kernel", "symmetric_eigen_kernel", "source_digest"]
 
 def projection_kernel(R: np.ndarray, t: np.ndarray, points: np.ndarray, keypoint_index: np.ndarray, R_cw: np.ndarray,
                       t_cw: np.ndarray, intrinsics: np.ndarray, lens: np.ndarray, dist: np.ndarray, uv: np.ndarray,
@@ -54,6 +54,9 @@ def fit_at_scale_kernel(total: np.ndarray, projection: np.ndarray, total_eta: np
 def log_evidence_kernel(information: np.ndarray, eta: np.ndarray, precisions: np.ndarray, precision_means: np.ndarray,
                         quadratic_out: np.ndarray, logdet_out: np.ndarray) -> None:
     """kernels.shape_evidence.log_evidence_kernel."""
+
+def symmetric_eigen_kernel(A: np.ndarray, w_out: np.ndarray, V_out: np.ndarray) -> int:
+    """kernels.linalg.symmetric_eigen_kernel."""
 
 def source_digest() -> int:
     """kernels.source_digest() of the sources this module was built from."""

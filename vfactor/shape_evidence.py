@@ -22,13 +22,13 @@ from functools import lru_cache
 import gtsam
 import numpy as np
 
-from vfactor._kernels import fit_at_scale_kernel
+from vfactor._kernels import fit_at_scale_kernel, symmetric_eigen_kernel
 from vfactor.keys import KeyScheme
 from vfactor.shape_model import ANY, ShapeModel, ShapePrior
 from vfactor.stats import chi2_quantile, f_quantile
 
 __all__ = ["Linearisation", "linearise", "noise_scale", "inlier_noise_scale", "covariance_inflation", "sandwich_covariance",
-           "covariance_upper_bound", "shape_information", "BodyTypeChoice", "choose_body_type",
+           "covariance_upper_bound", "symmetric_eigen", "shape_information", "BodyTypeChoice", "choose_body_type",
            "TrackShape", "track_shape", "NOISE_SCALE_RANGE"]
 
 #: The noise scale is kept within this range: down to a thirtieth of the detector's nominal sigma, up to four times it
@@ -309,9 +309,27 @@ def covariance_upper_bound(model: np.ndarray, other: np.ndarray) -> tuple[np.nda
     """
     L = np.linalg.cholesky(0.5 * (model + model.T))
     L_inv = np.linalg.inv(L)
-    w, V = np.linalg.eigh(L_inv @ (0.5 * (other + other.T)) @ L_inv.T)
+    w, V = symmetric_eigen(L_inv @ (0.5 * (other + other.T)) @ L_inv.T)
     LV = L @ V
     return (LV * np.maximum(w, 1.0)) @ LV.T, float(w.max())
+
+
+def symmetric_eigen(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``numpy.linalg.eigh`` of a symmetric matrix (its lower triangle), computed single-threaded
+    (:func:`vfactor._kernels.symmetric_eigen_kernel`): on a machine whose cores are busy, the multi-threaded BLAS
+    under NumPy's LAPACK made a 42 x 42 ``eigh`` several times slower than alone (docs/performance.md).
+
+    Returns:
+        (w, V): the eigenvalues ascending, and the orthonormal eigenvectors as columns.
+
+    Raises:
+        numpy.linalg.LinAlgError: the iteration did not converge (a matrix with NaN or infinite entries).
+    """
+    A = np.asarray(A, dtype=float)
+    w, V = np.empty(A.shape[0]), np.empty(A.shape)
+    if not np.all(np.isfinite(A)) or symmetric_eigen_kernel(A, w, V) != 0:
+        raise np.linalg.LinAlgError("symmetric_eigen: the eigenvalues did not converge")
+    return w, V
 
 
 @lru_cache(maxsize=1024)

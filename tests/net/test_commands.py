@@ -58,6 +58,8 @@ def test_train_command_reports_bad_input(tmp_path, capsys):
         assert err.startswith("error: --library-weight") and len(err.strip().splitlines()) == 1, err
     assert main(["train", "--render", "2", "--clipped-box-share", "2", "--out", str(tmp_path / "run")]) == 2
     assert capsys.readouterr().err.startswith("error: --clipped-box-share")
+    assert main(["train", "--render", "2", "--shape-stretch", "0.7", "--out", str(tmp_path / "run")]) == 2
+    assert capsys.readouterr().err.startswith("error: --shape-stretch")
 
 
 def test_detect_command_writes_keypoints_and_heatmaps(tmp_path, capsys):

@@ -156,6 +156,31 @@ def test_library_type_weights_set_how_often_each_body_type_is_drawn(gl_context, 
         replace(TRAIN, library_type_weights=(("van", -1.0),))
 
 
+def test_shape_stretch_draws_shapes_between_and_beyond_the_models_within_the_hwc_bounds():
+    from dataclasses import replace
+
+    from vfactor.render.dataset import random_vehicle
+    from vfactor.sim.vehicles import within_hwc_bounds
+
+    stretched, plain = replace(TRAIN, shape_stretch=0.12), np.random.default_rng(3)
+    rng = np.random.default_rng(3)
+    ratios = []
+    for _ in range(60):
+        wf, _, source = random_vehicle(rng, stretched)
+        assert within_hwc_bounds(wf)
+        p = wf.vehicle_p_keypoints
+        assert np.allclose(p[0::2, 1], -p[1::2, 1])  # still left/right symmetric
+        if source in library_ids():  # its length against the model's (within the 3 cm jitter)
+            q = library_vehicle(source).wireframe.vehicle_p_keypoints
+            ratios.append(np.ptp(p[:, 0]) / np.ptp(q[:, 0]))
+    assert len(ratios) >= 10 and min(ratios) < 0.96 and max(ratios) > 1.04 and 0.86 < min(ratios)
+    assert max(ratios) < 1.14
+    # without a stretch the draws are those of before, to the bit
+    assert random_vehicle(plain, TRAIN)[2] == random_vehicle(np.random.default_rng(3), replace(TRAIN))[2]
+    with pytest.raises(ValueError, match="shape_stretch"):
+        replace(TRAIN, shape_stretch=0.6)
+
+
 def test_command_line(gl_context, tmp_path, capsys):
     from vfactor.render.dataset import main
 

@@ -153,6 +153,9 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--library-weight", action="append", default=[], metavar="TYPE=W",
                    help="draw the --render crops' library models of body TYPE W times as often as the others' "
                    "(repeatable; e.g. van=3)")
+    p.add_argument("--shape-stretch", type=float, metavar="S",
+                   help="stretch each --render crop's vehicle shape along its length, width and height by independent "
+                   "factors in [1 - S, 1 + S] (default 0: the models as they are)")
     p.add_argument("--export", metavar="PATH",
                    help="also copy the weights to PATH: those of the epoch with the best validation PCK when there "
                    "are validation crops (OUT/weights_best.pt), else the final ones")
@@ -216,7 +219,8 @@ def run_train(args: argparse.Namespace) -> int:
     train_paths, val_paths = [Path(p) for p in args.data], [Path(p) for p in args.val]
     if args.render:
         train_paths.append(_render(out / "data" / "train", args.render, config.seed, S, False, args.render_workers,
-                                   not args.quiet, _training_split(args.library_share, args.library_weight),
+                                   not args.quiet, _training_split(args.library_share, args.library_weight,
+                                                                   args.shape_stretch),
                                    _sample_options(args.clipped_box_share)))
     if args.render_val:
         val_paths.append(_render(out / "data" / "val", args.render_val, config.seed, S, True, args.render_workers,
@@ -264,11 +268,13 @@ def _train_config(args):
         raise InputError("--config", str(exc)) from None
 
 
-def _training_split(library_share: float | None, library_weights=()):
-    """The training split with ``library_share`` library vehicles and ``library_weights`` (``TYPE=W`` strings) per
-    body type (None and none: :data:`vfactor.render.dataset.TRAIN`)."""
-    if library_share is None and not library_weights:
+def _training_split(library_share: float | None, library_weights=(), shape_stretch: float | None = None):
+    """The training split with ``library_share`` library vehicles, ``library_weights`` (``TYPE=W`` strings) per
+    body type and ``shape_stretch`` (None and none: :data:`vfactor.render.dataset.TRAIN`)."""
+    if library_share is None and not library_weights and shape_stretch is None:
         return None
+    if shape_stretch is not None and not 0.0 <= shape_stretch < 0.5:
+        raise InputError("--shape-stretch", f"expected a number in [0, 0.5), got {shape_stretch}")
     if library_share is not None and not 0.0 <= library_share <= 1.0:
         raise InputError("--library-share", f"expected a share in [0, 1], got {library_share}")
     from dataclasses import replace  # noqa: PLC0415
@@ -284,7 +290,8 @@ def _training_split(library_share: float | None, library_weights=()):
             raise InputError("--library-weight", f"expected TYPE=W (e.g. van=3), got {text!r}") from None
     share = TRAIN.library_probability if library_share is None else float(library_share)
     try:
-        return replace(TRAIN, library_probability=share, library_type_weights=tuple(weights))
+        return replace(TRAIN, library_probability=share, library_type_weights=tuple(weights),
+                       shape_stretch=float(shape_stretch or 0.0))
     except ValueError as exc:
         raise InputError("--library-weight", str(exc)) from None
 

@@ -93,6 +93,11 @@ class SplitSpec:
         library_probability: chance that a vehicle is one of ``library_models``.
         library_type_weights: ``((body type, weight), ...)``: a library model of that body type is drawn ``weight``
             times as often as one of a type not listed (weight 1); empty (default): every model equally often.
+        shape_stretch: each drawn shape (library vehicle, preset or PASCAL3D+ shape) is stretched along its
+            length, width and height by three independent factors uniform in ``[1 - shape_stretch, 1 +
+            shape_stretch]`` (about the hubs' centre; the wheel radius kept), and drawn again where that leaves the
+            HWC bounds: shapes between and beyond the split's models, so that the network learns the body types
+            rather than the few models of each (0, the default: the models as they are).
         parity: 0 or 1: the bins (below) the split keeps: ``floor(value / bin) % 2 == parity``.
         hue_bin_deg: paint hue bins (degrees) for coloured paints.
         grey_bin: grey-level bins for achromatic paints (white, silver, grey, black).
@@ -108,6 +113,7 @@ class SplitSpec:
     library_models: tuple = ()
     library_probability: float = 0.0
     library_type_weights: tuple = ()
+    shape_stretch: float = 0.0
     parity: int = 0
     hue_bin_deg: float = 20.0
     grey_bin: float = 0.1
@@ -121,6 +127,8 @@ class SplitSpec:
             raise ValueError(f"library_type_weights: unknown body type {unknown[0]!r} (one of {', '.join(BODY_TYPES)})")
         if not all(isinstance(w, (int, float)) and math.isfinite(w) and w >= 0 for w in weights.values()):
             raise ValueError(f"library_type_weights: expected weights >= 0, got {self.library_type_weights!r}")
+        if not (isinstance(self.shape_stretch, (int, float)) and 0.0 <= self.shape_stretch < 0.5):
+            raise ValueError(f"shape_stretch: expected a number in [0, 0.5), got {self.shape_stretch!r}")
 
     def library_draw_probabilities(self) -> np.ndarray | None:
         """The probability of each of ``library_models`` in a library draw (None: uniform, the default)."""
@@ -308,7 +316,7 @@ def crop_camera(camera: Camera, roi, size) -> Camera:
 
 def random_vehicle(rng: np.random.Generator, split: SplitSpec = TRAIN, max_tries: int = 50):
     """A vehicle shape of the split: a library vehicle, a preset, or a random PASCAL3D+ car (wheelbase 2.45-3.05 m,
-    jittered).
+    jittered); stretched by ``split.shape_stretch``.
 
     Returns:
         (wireframe, wheel_radius, source) where source is the library id, the preset name or ``"pascal3d:<index>"``.
@@ -332,6 +340,11 @@ def random_vehicle(rng: np.random.Generator, split: SplitSpec = TRAIN, max_tries
             points = symmetrised(points)
             points -= points[list(LAYERS["wheel"])].mean(axis=0)
             wf, radius, source = Wireframe(points), float(rng.uniform(0.30, 0.37)), f"pascal3d:{k}"
+            if not within_hwc_bounds(wf):
+                continue
+        if split.shape_stretch > 0:
+            factors = rng.uniform(1.0 - split.shape_stretch, 1.0 + split.shape_stretch, size=3)
+            wf = Wireframe(wf.vehicle_p_keypoints * factors)  # body frame: origin at the hubs' centre
             if not within_hwc_bounds(wf):
                 continue
         try:

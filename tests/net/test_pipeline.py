@@ -176,6 +176,9 @@ def test_cli_eval_images(rendered, tmp_path, capsys):
     assert "Tracking" not in text  # accuracy_2cam's frames hold new vehicles each: nothing to track
     assert main(["eval", "images", "--frames", "1", "--seed", "4", "--clipped-boxes", "--markdown", str(md)]) == 0
     assert "1 frames, seed 4, boxes clipped to the image" in md.read_text()
+    assert main(["eval", "images", "--scenario", "library_2cam", "--frames", "1", "--seed", "4", "--real-roofs",
+                 "--markdown", str(md)]) == 0
+    assert "1 frames, seed 4, roofs at the published heights" in md.read_text()
 
 
 def test_cli_eval_images_evaluates_the_given_weights(rendered, tmp_path, capsys):
@@ -203,6 +206,8 @@ def test_cli_eval_images_evaluates_the_given_weights(rendered, tmp_path, capsys)
     assert "--weights" in capsys.readouterr().err
     assert main(["eval", "frames", "--weights", str(weights)]) == 2
     assert "--weights" in capsys.readouterr().err
+    assert main(["eval", "tracks", "--real-roofs"]) == 2
+    assert capsys.readouterr().err == "vfactor eval: error: --real-roofs: eval tracks renders no images (eval images does)\n"
 
 
 def test_lens_distortion_end_to_end(rendered, detector, tmp_path):

@@ -71,6 +71,30 @@ def test_asymmetric_wireframe_is_warped_onto_its_keypoints():
     assert _point_in_triangles(points[4], mesh.triangles, tol=1e-9).any()
 
 
+@pytest.mark.parametrize("model", ["citroen_jumper_l3h3", "toyota_camry_xv70_se", "ford_transit_connect_2014_l1"])
+def test_a_roof_at_the_published_height_stands_on_the_window_tops(model):
+    from vfactor.vehicle_library import vehicle_library
+
+    vehicle = vehicle_library()[model]
+    wf, radius = vehicle.wireframe, 0.34
+    roof = vehicle.dimensions.height - radius
+    low, high = vehicle_mesh(wf, None, radius), vehicle_mesh(wf, None, radius, roof=roof)
+    kp = wf.vehicle_p_keypoints
+    assert low.vertices[:, 2].max() == pytest.approx(kp[8:, 2].max())  # without: the roof is at the window tops
+    assert high.vertices[:, 2].max() == pytest.approx(roof) and roof > kp[8:, 2].max() + 0.05
+    assert high.vertices[:, 2].min() == pytest.approx(low.vertices[:, 2].min())
+    for k in range(8, 12):  # the window tops are still vertices of the glass and the paint
+        d = np.linalg.norm(high.triangles - kp[k], axis=2).min(axis=1)
+        assert {Part.GLASS, Part.BODY} <= set(high.parts[d < 1e-9]), (model, k)
+    top = high.triangles[np.all(np.isclose(high.triangles[..., 2], roof), axis=1)]
+    assert len(top) == 2  # the roof: one quad over the four window tops
+    np.testing.assert_allclose(np.sort(top.reshape(-1, 3)[:, :2], axis=0)[[0, -1]],
+                               np.sort(kp[8:, :2], axis=0)[[0, -1]])
+    # a roof at (or under) the window tops adds nothing
+    same = vehicle_mesh(wf, None, radius, roof=float(kp[8:, 2].max()))
+    np.testing.assert_array_equal(same.triangles, low.triangles)
+
+
 def test_geometry_rejects_reversed_wireframes():
     wf = PRESETS["lincoln_mkz"].wireframe()
     with pytest.raises(ValueError, match="along body x"):

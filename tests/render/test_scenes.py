@@ -32,6 +32,19 @@ def test_images_boxes_and_truth(gl_context, tmp_path):
         assert r.visible[0][key].sum() >= 4
 
 
+def test_real_roofs_raise_a_high_roof_vans_box_and_not_its_keypoints(gl_context, tmp_path):
+    sim = simulate("library_2cam", seed=300, num_frames=6)  # frame 5: a Renault Master L2H2 (high roof)
+    sim = dataclasses.replace(sim, scene=dataclasses.replace(sim.scene, frames=sim.scene.frames[5:]),
+                              truth=sim.truth[5:])
+    assert [t.preset for t in sim.truth[0].values()] == ["renault_master_3_l2h2"]
+    low = render_simulation(sim, tmp_path / "low", seed=1, box_noise=0.0, pixel_noise=0.0)
+    high = render_simulation(sim, tmp_path / "high", seed=1, box_noise=0.0, pixel_noise=0.0, real_roofs=True)
+    for key, box in low.boxes_true[0].items():  # the roof shows above the window tops: the box's top rises
+        assert high.boxes_true[0][key][1] < box[1] - 10, key
+        np.testing.assert_allclose(high.boxes_true[0][key][3], box[3], atol=1.0)
+        np.testing.assert_array_equal(high.keypoints_true[0][key], low.keypoints_true[0][key])
+
+
 def test_same_seed_same_images(gl_context, tmp_path):
     sim = simulate("intersection_2cam", seed=5, num_frames=1)
     a = render_simulation(sim, tmp_path / "a", seed=1)

@@ -31,6 +31,8 @@ def evaluate(args) -> int:
         raise InputError("--levels", f"eval {args.experiment} has no noise levels (frames and association have)")
     if args.weights is not None and args.experiment != "images":
         raise InputError("--weights", f"eval {args.experiment} uses no keypoint network (eval images does)")
+    if args.real_roofs and args.experiment != "images":
+        raise InputError("--real-roofs", f"eval {args.experiment} renders no images (eval images does)")
     if args.amodal_pass and not (args.experiment == "images" and args.clipped_boxes):
         raise InputError("--amodal-pass", "only with eval images --clipped-boxes (whole boxes stop at no image border)")
     if args.experiment in ("images", "paper") and (args.workers is not None or args.scheduler is not None):
@@ -51,7 +53,7 @@ def evaluate(args) -> int:
                                              _levels(args.levels) if args.levels else (None,))
     elif args.experiment == "images":
         sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed, args.weights,
-                                args.detector_offsets, args.clipped_boxes, args.amodal_pass)
+                                args.detector_offsets, args.clipped_boxes, args.amodal_pass, args.real_roofs)
     else:
         if args.scenario:
             raise InputError("--scenario", "the paper comparison uses its own scenario (paper_webots)")
@@ -112,7 +114,7 @@ def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper"
 
 def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = None,
                  detector_offsets: bool | None = None, clipped_boxes: bool = False,
-                 amodal_pass: bool = False) -> list[str]:
+                 amodal_pass: bool = False, real_roofs: bool = False) -> list[str]:
     try:
         from vfactor.net.end_to_end import evaluate_images, images_report
         from vfactor.net.infer import KeypointDetector
@@ -127,7 +129,7 @@ def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = No
     track_options = TrackOptions(detector_offsets=detector_offsets)
     return [images_report(evaluate_images(scenario_name, frames, seed, detector, progress=progress("rendering"),
                                           track_options=track_options, clip_boxes=clipped_boxes,
-                                          amodal_pass=amodal_pass))]
+                                          amodal_pass=amodal_pass, real_roofs=real_roofs))]
 
 
 def _eval_association(scenario_name, frames, seed: int, seeds: int, engine=None, levels=(None,)) -> list[str]:

@@ -153,7 +153,8 @@ def calibration_table(keypoints: dict) -> str:
 
 
 def render_and_detect(scenario: str, seed: int, frames: int | None = None, detector=None,
-                      work_dir: str | Path | None = None, progress=None, clip_boxes: bool = False):
+                      work_dir: str | Path | None = None, progress=None, clip_boxes: bool = False,
+                      real_roofs: bool = False):
     """Simulates a scenario, renders its camera images and finds the keypoints in the vehicles' boxes.
 
     Args:
@@ -166,6 +167,8 @@ def render_and_detect(scenario: str, seed: int, frames: int | None = None, detec
         progress: called with ``(images rendered, images total)``.
         clip_boxes: give the network the boxes clipped to the image, as a 2D detector gives them (default: the
             whole vehicles' boxes; :func:`vfactor.render.scenes.render_simulation`).
+        real_roofs: draw the library vehicles' roofs at their published heights
+            (:func:`vfactor.render.scenes.render_simulation`).
 
     Returns:
         ``(simulation, rendered scene, detected scene, detector)``: the detected scene holds the network's
@@ -178,14 +181,16 @@ def render_and_detect(scenario: str, seed: int, frames: int | None = None, detec
     sim = simulate(load_scenario(scenario), seed=seed, num_frames=frames)
     with tempfile.TemporaryDirectory(prefix="vfactor_eval_images_") as tmp:
         folder = Path(work_dir) if work_dir is not None else Path(tmp)
-        rendered = render_simulation(sim, folder, seed=seed, progress=progress, clip_boxes=clip_boxes)
+        rendered = render_simulation(sim, folder, seed=seed, progress=progress, clip_boxes=clip_boxes,
+                                     real_roofs=real_roofs)
         detected = detect_scene(rendered.scene, detector, heatmaps_dir=folder / "heatmaps" if work_dir else None)
     return sim, rendered, detected, detector
 
 
 def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, seed: int = 0, detector=None,
                     work_dir: str | Path | None = None, options: SolveOptions = SolveOptions(),
-                    progress=None, track_options=None, clip_boxes: bool = False, amodal_pass: bool = False) -> dict:
+                    progress=None, track_options=None, clip_boxes: bool = False, amodal_pass: bool = False,
+                    real_roofs: bool = False) -> dict:
     """Runs the image-to-pose pipeline on rendered scenes of a scenario and scores it.
 
     Args:
@@ -199,6 +204,7 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
         progress: called with ``(images rendered, images total)``.
         track_options: the tracking comparison's :class:`~vfactor.track.TrackOptions` (default: the defaults).
         clip_boxes: the network gets the boxes clipped to the image (:func:`render_and_detect`).
+        real_roofs: the library vehicles' roofs drawn at their published heights (:func:`render_and_detect`).
         amodal_pass: the keypoints of the vehicles whose boxes stop at the image border are found again in the
             boxes of the vehicles a first solve found (tracked where the scenario moves, else one frame at a time;
             each vehicle with the shape model learnt without it), and everything is evaluated on those
@@ -221,7 +227,7 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
         contextlib.nullcontext(work_dir)
     with images as folder:
         sim, rendered, detected, detector = render_and_detect(scenario, seed, frames, detector, folder, progress,
-                                                              clip_boxes)
+                                                              clip_boxes, real_roofs)
         tracked = sim.scenario.motion is not None
         if amodal_pass:
             from vfactor.net.amodal import redetect_clipped
@@ -242,6 +248,7 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
     rows["factor_graph_simulated_noise"] = compare_methods(sim, options, methods=("factor_graph",))["factor_graph"]
     tracking = compare_tracking(dataclasses.replace(sim, scene=detected), track_options) if tracked else None
     return {"scenario": sim.scenario.name, "seed": seed, "frames": len(sim.scene.frames), "clip_boxes": clip_boxes,
+            "real_roofs": real_roofs,
             "amodal_pass_boxes": replaced,
             "keypoints": keypoints,
             "summary": summarise_methods(rows), "rows": rows, "tracking": tracking}
@@ -253,7 +260,8 @@ def images_report(evaluation: dict) -> str:
     return (
         f"### {evaluation['scenario']}: rendered images -> keypoint network -> factor graph, "
         f"{evaluation['frames']} frames, seed {evaluation['seed']}"
-        + (", boxes clipped to the image" if evaluation.get("clip_boxes") else "") + "\n\n"
+        + (", boxes clipped to the image" if evaluation.get("clip_boxes") else "")
+        + (", roofs at the published heights" if evaluation.get("real_roofs") else "") + "\n\n"
         + (f"Amodal pass: {evaluation['amodal_pass_boxes']} boxes clipped by the image border replaced by the "
            f"boxes of the vehicles a first solve found, their keypoints found again.\n\n"
            if evaluation.get("amodal_pass_boxes") is not None else "")

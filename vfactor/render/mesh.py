@@ -326,6 +326,10 @@ def _symmetrised(points: np.ndarray) -> np.ndarray:
     return 0.5 * (points + points[MIRROR_PERMUTATION] * [1.0, -1.0, 1.0])
 
 
+#: :func:`vehicle_mesh` adds a roof box only where the roof stands at least this far (metres) above the window tops.
+_MIN_ROOF_BOX = 0.01
+
+
 def vehicle_geometry(wireframe: Wireframe, appearance: Appearance | None = None, wheel_radius: float = 0.33):
     """The loft's dimensions for a (symmetrised) wireframe; see :class:`VehicleGeometry`."""
     a = Appearance() if appearance is None else appearance
@@ -504,7 +508,8 @@ def _disc_points(center, radius, n, axis_y_sign=1.0):
     return pts
 
 
-def vehicle_mesh(wireframe: Wireframe, appearance: Appearance | None = None, wheel_radius: float = 0.33) -> Mesh:
+def vehicle_mesh(wireframe: Wireframe, appearance: Appearance | None = None, wheel_radius: float = 0.33,
+                 roof: float | None = None) -> Mesh:
     """The low-poly vehicle mesh of a wireframe, in the body frame.
 
     Args:
@@ -512,6 +517,11 @@ def vehicle_mesh(wireframe: Wireframe, appearance: Appearance | None = None, whe
         appearance: colours and free shape details (default :class:`Appearance`).
         wheel_radius: hub height above the road, metres; each tyre's radius is
             its hub's height above the road plane ``z = -wheel_radius``.
+        roof: the roof's height above the hubs (body z, metres: a vehicle's published height less its wheel
+            radius). ``None`` (the default): the roof is the quad between the window tops, as the 12 keypoints
+            alone say. Above the window tops, a roof box stands on that quad, its sides straight up from the
+            glass tops (a real vehicle's roof is 8-12 cm above them, a high-roof van's up to 0.7 m: the
+            vehicle library's rules, docs/vehicles.md); the keypoints stay its vertices.
 
     Returns:
         :class:`Mesh` in the body frame.
@@ -638,6 +648,14 @@ def vehicle_mesh(wireframe: Wireframe, appearance: Appearance | None = None, whe
     C = {1.0: s[10], -1.0: s[11]}
     b.quads(np.array([A[-1.0], A[1.0], B[1.0], B[-1.0]]), a.glass, Part.GLASS, a.glass_specular)
     b.quads(np.array([B[1.0], B[-1.0], C[-1.0], C[1.0]]), roof_c, Part.BODY, ps)
+    if roof is not None and roof > max(B[1.0][2], C[1.0][2]) + _MIN_ROOF_BOX:
+        Bu = {sgn: np.array([B[sgn][0], B[sgn][1], roof]) for sgn in (1.0, -1.0)}
+        Cu = {sgn: np.array([C[sgn][0], C[sgn][1], roof]) for sgn in (1.0, -1.0)}
+        b.quads(np.array([Bu[1.0], Bu[-1.0], Cu[-1.0], Cu[1.0]]), roof_c, Part.BODY, ps)  # the roof
+        b.quads(np.array([B[-1.0], B[1.0], Bu[1.0], Bu[-1.0]]), paint, Part.BODY, ps)  # above the windshield
+        b.quads(np.array([C[1.0], C[-1.0], Cu[-1.0], Cu[1.0]]), paint, Part.BODY, ps)  # above the rear window
+        for sgn in (1.0, -1.0):  # the sides above the side windows
+            b.quads(np.array([B[sgn], C[sgn], Cu[sgn], Bu[sgn]]), paint, Part.BODY, ps)
     b.quads(np.array([D[1.0], D[-1.0], C[-1.0], C[1.0]]), a.glass, Part.GLASS, a.glass_specular)
     # Sides: a bilinear patch A (front bottom), D (rear bottom), B (front top), C (rear top), split into
     # pillars and windows.

@@ -166,21 +166,24 @@ class VehicleInstance:
         world_T_vehicle: pose (body -> world).
         appearance: colours and details (default :class:`Appearance`).
         wheel_radius: hub height above the road; ``None``: the hubs' mean world z (the road is z = 0).
+        roof: the roof's height above the hubs, metres (:func:`vfactor.render.mesh.vehicle_mesh`); ``None``:
+            at the window tops.
     """
 
     wireframe: Wireframe
     world_T_vehicle: gtsam.Pose3
     appearance: Appearance | None = None
     wheel_radius: float | None = None
+    roof: float | None = None
 
     @classmethod
     def coerce(cls, item) -> "VehicleInstance":
         if isinstance(item, VehicleInstance):
             return item
-        if isinstance(item, (tuple, list)) and 2 <= len(item) <= 4:
+        if isinstance(item, (tuple, list)) and 2 <= len(item) <= 5:
             return cls(*item)
         raise TypeError(
-            "vehicles: expected VehicleInstance or (Wireframe, gtsam.Pose3[, Appearance[, wheel_radius]]), "
+            "vehicles: expected VehicleInstance or (Wireframe, gtsam.Pose3[, Appearance[, wheel_radius[, roof]]]), "
             f"got {type(item).__name__}"
         )
 
@@ -197,12 +200,13 @@ class VehicleInstance:
         return r
 
     def body_mesh(self) -> Mesh:
-        return _cached_vehicle_mesh(self.wireframe, self.appearance, self.resolved_wheel_radius())
+        return _cached_vehicle_mesh(self.wireframe, self.appearance, self.resolved_wheel_radius(), self.roof)
 
 
 @lru_cache(maxsize=64)
-def _cached_vehicle_mesh(wireframe: Wireframe, appearance: Appearance | None, wheel_radius: float) -> Mesh:
-    return vehicle_mesh(wireframe, appearance, wheel_radius)
+def _cached_vehicle_mesh(wireframe: Wireframe, appearance: Appearance | None, wheel_radius: float,
+                         roof: float | None = None) -> Mesh:
+    return vehicle_mesh(wireframe, appearance, wheel_radius, roof)
 
 
 @dataclass

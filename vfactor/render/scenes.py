@@ -37,6 +37,7 @@ from vfactor.render.dataset import HELD_OUT, SplitSpec, random_appearance, rando
 from vfactor.render.renderer import Renderer
 from vfactor.scene import save_scene
 from vfactor.sim import Simulation
+from vfactor.vehicle_library import vehicle_library
 
 __all__ = ["RenderedScene", "render_simulation"]
 
@@ -61,6 +62,14 @@ class RenderedScene:
     visible: list[dict]
 
 
+def _published_roof(model: str, wheel_radius: float) -> float | None:
+    """The roof's height above the hubs (metres) of a vehicle-library model: its published height less its wheel
+    radius (the hubs stand a wheel radius above the road); None for a preset or a PASCAL3D+ shape (no height
+    published)."""
+    vehicle = vehicle_library().get(model)
+    return None if vehicle is None else float(vehicle.dimensions.height) - float(wheel_radius)
+
+
 def _share_inside(box, size) -> float:
     """Share of a box's area ``(x0, y0, x1, y1)`` inside an image of ``size = (width, height)``."""
     w = min(box[2], size[0]) - max(box[0], 0.0)
@@ -81,6 +90,7 @@ def render_simulation(
     progress: Callable[[int, int], None] | None = None,
     min_inside: float = 0.25,
     clip_boxes: bool = False,
+    real_roofs: bool = False,
 ) -> RenderedScene:
     """Renders every camera image of a simulation and writes a scene file of images and boxes.
 
@@ -101,6 +111,9 @@ def render_simulation(
         clip_boxes: report each box clipped to the image, as a 2D detector gives the box of a vehicle the image
             border cuts (default: the whole vehicle's box, which reaches beyond the image there; docs/network.md,
             "Boxes clipped by the image border"). The images and the true boxes are the same either way.
+        real_roofs: draw each vehicle-library vehicle's roof at its published height (``roof`` of
+            :func:`vfactor.render.mesh.vehicle_mesh`) instead of at its window tops (the default, as the network's
+            training crops were drawn; docs/rendering.md, "Roofs").
 
     Returns:
         :class:`RenderedScene`.
@@ -127,7 +140,8 @@ def render_simulation(
         for f, frame in enumerate(sim.scene.frames):
             truth = sim.truth[f]
             order = list(truth)
-            vehicles = [(truth[v].wireframe, truth[v].world_T_vehicle, appearance[v], truth[v].wheel_radius)
+            vehicles = [(truth[v].wireframe, truth[v].world_T_vehicle, appearance[v], truth[v].wheel_radius,
+                         _published_roof(truth[v].preset, truth[v].wheel_radius) if real_roofs else None)
                         for v in order]
             images, boxes_f, uv_f, vis_f, detections = {}, {}, {}, {}, []
             reported = {(d.camera, d.vehicle) for d in frame.detections}

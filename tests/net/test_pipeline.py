@@ -207,7 +207,8 @@ def test_cli_eval_images_evaluates_the_given_weights(rendered, tmp_path, capsys)
     assert main(["eval", "frames", "--weights", str(weights)]) == 2
     assert "--weights" in capsys.readouterr().err
     assert main(["eval", "tracks", "--real-roofs"]) == 2
-    assert capsys.readouterr().err == "vfactor eval: error: --real-roofs: eval tracks renders no images (eval images does)\n"
+    err = capsys.readouterr().err
+    assert err == "vfactor eval: error: --real-roofs: eval tracks renders no images (eval images does)\n"
 
 
 def test_lens_distortion_end_to_end(rendered, detector, tmp_path):

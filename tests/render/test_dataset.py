@@ -137,6 +137,23 @@ def test_vehicles_cut_by_the_image_can_be_framed_from_their_clipped_box(gl_conte
     assert default.meta["box_clipped"] is False
 
 
+def test_real_roofs_stand_above_the_window_tops_and_move_no_keypoint(gl_context):
+    from vfactor.box import default_box_model
+    from vfactor.render.dataset import SampleOptions, roof_height
+    from vfactor.wireframe import PRESETS
+
+    van = library_vehicle("citroen_jumper_l3h3")
+    assert roof_height(van.wireframe, van.id, 0.34) == pytest.approx(van.dimensions.height - 0.34)
+    preset = PRESETS["bmw_x5"].wireframe()
+    top = max(preset.vehicle_p_keypoints[[8, 9], 2].mean(), preset.vehicle_p_keypoints[[10, 11], 2].mean())
+    assert roof_height(preset, "bmw_x5", 0.35) == pytest.approx(top + default_box_model().mean["any"][2])
+    for i in range(4):  # the same draws; the roof only raises the vehicle's box
+        low = random_training_sample(sample_rng(9, i), 64)
+        high = random_training_sample(sample_rng(9, i), 64, options=SampleOptions(real_roofs=True))
+        assert high.meta["source"] == low.meta["source"]
+        assert high.meta["box"][1] < low.meta["box"][1] and high.meta["box"][3] == pytest.approx(low.meta["box"][3])
+
+
 def test_library_type_weights_set_how_often_each_body_type_is_drawn(gl_context, tmp_path):
     from dataclasses import replace
 

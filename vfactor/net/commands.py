@@ -153,6 +153,9 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--library-weight", action="append", default=[], metavar="TYPE=W",
                    help="draw the --render crops' library models of body TYPE W times as often as the others' "
                    "(repeatable; e.g. van=3)")
+    p.add_argument("--real-roofs", action="store_true",
+                   help="draw the --render crops' vehicles with their roofs at their real heights (default: at their "
+                   "window tops, as the shipped weights' crops; docs/rendering.md, \"Roofs\")")
     p.add_argument("--shape-stretch", type=float, metavar="S",
                    help="stretch each --render crop's vehicle shape along its length, width and height by independent "
                    "factors in [1 - S, 1 + S] (default 0: the models as they are)")
@@ -221,10 +224,10 @@ def run_train(args: argparse.Namespace) -> int:
         train_paths.append(_render(out / "data" / "train", args.render, config.seed, S, False, args.render_workers,
                                    not args.quiet, _training_split(args.library_share, args.library_weight,
                                                                    args.shape_stretch),
-                                   _sample_options(args.clipped_box_share)))
+                                   _sample_options(args.clipped_box_share, args.real_roofs)))
     if args.render_val:
         val_paths.append(_render(out / "data" / "val", args.render_val, config.seed, S, True, args.render_workers,
-                                 not args.quiet))
+                                 not args.quiet, None, _sample_options(None, args.real_roofs)))  # roofs as trained
     parts = [_load(p, "--data", S) for p in train_paths]
     if args.pascal3d:
         from vfactor.net.pascal3d import load_pascal3d  # noqa: PLC0415
@@ -296,15 +299,15 @@ def _training_split(library_share: float | None, library_weights=(), shape_stret
         raise InputError("--library-weight", str(exc)) from None
 
 
-def _sample_options(clipped_box_share: float | None):
-    """The renderer's sample options with ``clipped_box_share`` (None: the defaults)."""
+def _sample_options(clipped_box_share: float | None, real_roofs: bool = False):
+    """The renderer's sample options with ``clipped_box_share`` (None: the default) and ``real_roofs``."""
     from vfactor.render.dataset import SampleOptions  # noqa: PLC0415
 
     if clipped_box_share is None:
-        return SampleOptions()
+        return SampleOptions(real_roofs=real_roofs)
     if not 0.0 <= clipped_box_share <= 1.0:
         raise InputError("--clipped-box-share", f"expected a share in [0, 1], got {clipped_box_share}")
-    return SampleOptions(clipped_box_probability=float(clipped_box_share))
+    return SampleOptions(clipped_box_probability=float(clipped_box_share), real_roofs=real_roofs)
 
 
 def _render(path: Path, n: int, seed: int, size: int, held_out: bool, workers: int, verbose: bool,

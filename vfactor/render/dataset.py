@@ -65,6 +65,7 @@ __all__ = [
     "random_training_sample",
     "random_vehicle",
     "random_appearance",
+    "roof_height",
     "random_light",
     "random_ground",
     "roi_from_box",
@@ -194,6 +195,9 @@ class SampleOptions:
             image (as a 2D detector gives it), grown beyond the border as the detector grows such boxes
             (:func:`vfactor.heatmaps.extend_clipped_roi`), instead of from its whole box; 0 (default): whole boxes,
             and the samples are those of before.
+        real_roofs: draw each vehicle's roof at its real height (:func:`crop_roof`) instead of at its window tops
+            (the default, as the shipped network's crops were drawn; docs/rendering.md, "Roofs"); False: the
+            samples are those of before.
         square: square ROIs (the box's larger side); else the box's own aspect, resized anisotropically.
         other_vehicles: probabilities of 0, 1, 2, 3 other vehicles near the target.
         occluder_probability: chance of a prop between the camera and the target.
@@ -215,6 +219,7 @@ class SampleOptions:
     jitter: float = 0.05
     edge_probability: float = 0.2
     clipped_box_probability: float = 0.0
+    real_roofs: bool = False
     square: bool = True
     other_vehicles: tuple = (0.35, 0.3, 0.2, 0.15)
     occluder_probability: float = 0.35
@@ -355,6 +360,26 @@ def random_vehicle(rng: np.random.Generator, split: SplitSpec = TRAIN, max_tries
     raise RuntimeError(f"random_vehicle: no valid shape in {max_tries} draws for split {split.name!r}")
 
 
+def roof_height(wireframe: Wireframe, model: str, wheel_radius: float) -> float:
+    """The roof's height above the hubs (metres) at which to draw a vehicle (``vehicle_mesh(..., roof=)``): a
+    vehicle-library model's published height less its wheel radius, else (a preset, a PASCAL3D+ shape: no height
+    published) its higher window pair's mean height plus the library's mean roof offset above it
+    (:class:`vfactor.box.BoxModel`, ``"any"``: about 0.1 m).
+
+    Args:
+        wireframe: the vehicle's keypoints (body frame, metres); ``model``: its library id, preset name or other
+            source name (:func:`random_vehicle`'s source, a simulated vehicle's ``preset``); ``wheel_radius``: its
+            hubs' height above the road, metres.
+    """
+    from vfactor.box import box_features, default_box_model  # noqa: PLC0415  (vfactor.box imports the library)
+
+    vehicle = vehicle_library().get(model)
+    if vehicle is not None:
+        return float(vehicle.dimensions.height) - float(wheel_radius)
+    top = box_features(wireframe.vehicle_p_keypoints)[0][2]
+    return float(top + default_box_model().mean["any"][2])
+
+
 def random_appearance(rng, split: SplitSpec) -> Appearance:
     """A random paint (in the split's colour bins) and details."""
     paint = random_paint(rng, hue_ok=split.hue_ok, grey_ok=split.grey_ok)
@@ -475,7 +500,7 @@ def _kerb(rng, centre, yaw) -> list[Mesh]:
     return [box_mesh([ctr[0], ctr[1], 0.075], (60.0, width, 0.15), yaw, colour)]
 
 
-def _place_others(rng, split, target_fp, target_xy, yaw, camera_xy, count):
+def _place_others(rng, split, target_fp, target_xy, yaw, camera_xy, count, real_roofs: bool = False):
     placed = [target_fp]
     others = []
     for _ in range(count):
@@ -500,7 +525,8 @@ def _place_others(rng, split, target_fp, target_xy, yaw, camera_xy, count):
             if any(footprints_overlap(fp, q, gap=0.2) for q in placed):
                 continue
             placed.append(fp)
-            others.append(VehicleInstance(wf, pose, random_appearance(rng, split), radius))
+            others.append(VehicleInstance(wf, pose, random_appearance(rng, split), radius,
+                                          roof_height(wf, source, radius) if real_roofs else None))
             break
     return others
 
@@ -546,7 +572,7 @@ def random_training_sample(
     yaw = float(rng.uniform(0.0, 2 * np.pi))
     target_xy = rng.uniform(-3.0, 3.0, 2)
     pose = road_pose(target_xy[0], target_xy[1], yaw, radius)
-    target = VehicleInstance(wf, pose, appearance, radius)
+    target = VehicleInstance(wf, pose, appearance, radius, roof_height(wf, source, radius) if o.real_roofs else None)
     centre = wf.in_world(pose).mean(axis=0)
 
     # --- the camera: azimuth and elevation in the split's bins, pole height and distance in range
@@ -608,7 +634,7 @@ def random_training_sample(
     # --- the surroundings
     n_others = int(rng.choice(len(o.other_vehicles), p=np.asarray(o.other_vehicles) / np.sum(o.other_vehicles)))
     target_fp = footprint(wf, pose, pad=0.15)
-    others = _place_others(rng, split, target_fp, target_xy, yaw, eye[:2], n_others)
+    others = _place_others(rng, split, target_fp, target_xy, yaw, eye[:2], n_others, o.real_roofs)
     props: list[Mesh] = []
     if rng.uniform() < o.occluder_probability:
         length = float(np.ptp(wf.vehicle_p_keypoints[:, 0]))

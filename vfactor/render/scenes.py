@@ -33,11 +33,10 @@ import numpy as np
 
 from vfactor.heatmaps import clip_roi_to_image
 from vfactor.observations import Detection, Frame, Scene
-from vfactor.render.dataset import HELD_OUT, SplitSpec, random_appearance, random_ground, random_light
+from vfactor.render.dataset import HELD_OUT, SplitSpec, random_appearance, random_ground, random_light, roof_height
 from vfactor.render.renderer import Renderer
 from vfactor.scene import save_scene
 from vfactor.sim import Simulation
-from vfactor.vehicle_library import vehicle_library
 
 __all__ = ["RenderedScene", "render_simulation"]
 
@@ -60,14 +59,6 @@ class RenderedScene:
     boxes_true: list[dict]
     keypoints_true: list[dict]
     visible: list[dict]
-
-
-def _published_roof(model: str, wheel_radius: float) -> float | None:
-    """The roof's height above the hubs (metres) of a vehicle-library model: its published height less its wheel
-    radius (the hubs stand a wheel radius above the road); None for a preset or a PASCAL3D+ shape (no height
-    published)."""
-    vehicle = vehicle_library().get(model)
-    return None if vehicle is None else float(vehicle.dimensions.height) - float(wheel_radius)
 
 
 def _share_inside(box, size) -> float:
@@ -111,8 +102,8 @@ def render_simulation(
         clip_boxes: report each box clipped to the image, as a 2D detector gives the box of a vehicle the image
             border cuts (default: the whole vehicle's box, which reaches beyond the image there; docs/network.md,
             "Boxes clipped by the image border"). The images and the true boxes are the same either way.
-        real_roofs: draw each vehicle-library vehicle's roof at its published height (``roof`` of
-            :func:`vfactor.render.mesh.vehicle_mesh`) instead of at its window tops (the default, as the network's
+        real_roofs: draw each vehicle's roof at its real height (:func:`vfactor.render.dataset.roof_height`: a
+            library vehicle's published one) instead of at its window tops (the default, as the shipped network's
             training crops were drawn; docs/rendering.md, "Roofs").
 
     Returns:
@@ -141,7 +132,8 @@ def render_simulation(
             truth = sim.truth[f]
             order = list(truth)
             vehicles = [(truth[v].wireframe, truth[v].world_T_vehicle, appearance[v], truth[v].wheel_radius,
-                         _published_roof(truth[v].preset, truth[v].wheel_radius) if real_roofs else None)
+                         roof_height(truth[v].wireframe, truth[v].preset, truth[v].wheel_radius)
+                         if real_roofs else None)
                         for v in order]
             images, boxes_f, uv_f, vis_f, detections = {}, {}, {}, {}, []
             reported = {(d.camera, d.vehicle) for d in frame.detections}

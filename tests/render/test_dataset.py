@@ -140,10 +140,14 @@ def test_vehicles_cut_by_the_image_can_be_framed_from_their_clipped_box(gl_conte
 def test_real_roofs_stand_above_the_window_tops_and_move_no_keypoint(gl_context):
     from vfactor.box import default_box_model
     from vfactor.render.dataset import SampleOptions, roof_height
-    from vfactor.wireframe import PRESETS
+    from vfactor.wireframe import PRESETS, Wireframe
 
     van = library_vehicle("citroen_jumper_l3h3")
     assert roof_height(van.wireframe, van.id, 0.34) == pytest.approx(van.dimensions.height - 0.34)
+    lower = Wireframe(van.wireframe.vehicle_p_keypoints * [1.0, 1.0, 0.9])  # stretched: the roof follows
+    offset = van.dimensions.height - 0.34 - van.wireframe.vehicle_p_keypoints[8:, 2].max()
+    assert roof_height(lower, van.id, 0.34, follow_window_tops=True) == pytest.approx(
+        lower.vehicle_p_keypoints[8:, 2].max() + offset, abs=0.02)
     preset = PRESETS["bmw_x5"].wireframe()
     top = max(preset.vehicle_p_keypoints[[8, 9], 2].mean(), preset.vehicle_p_keypoints[[10, 11], 2].mean())
     assert roof_height(preset, "bmw_x5", 0.35) == pytest.approx(top + default_box_model().mean["any"][2])

@@ -195,7 +195,7 @@ class SampleOptions:
             image (as a 2D detector gives it), grown beyond the border as the detector grows such boxes
             (:func:`vfactor.heatmaps.extend_clipped_roi`), instead of from its whole box; 0 (default): whole boxes,
             and the samples are those of before.
-        real_roofs: draw each vehicle's roof at its real height (:func:`crop_roof`) instead of at its window tops
+        real_roofs: draw each vehicle's roof at its real height (:func:`roof_height`) instead of at its window tops
             (the default, as the shipped network's crops were drawn; docs/rendering.md, "Roofs"); False: the
             samples are those of before.
         square: square ROIs (the box's larger side); else the box's own aspect, resized anisotropically.
@@ -360,24 +360,30 @@ def random_vehicle(rng: np.random.Generator, split: SplitSpec = TRAIN, max_tries
     raise RuntimeError(f"random_vehicle: no valid shape in {max_tries} draws for split {split.name!r}")
 
 
-def roof_height(wireframe: Wireframe, model: str, wheel_radius: float) -> float:
-    """The roof's height above the hubs (metres) at which to draw a vehicle (``vehicle_mesh(..., roof=)``): a
-    vehicle-library model's published height less its wheel radius, else (a preset, a PASCAL3D+ shape: no height
-    published) its higher window pair's mean height plus the library's mean roof offset above it
+def roof_height(wireframe: Wireframe, model: str, wheel_radius: float, follow_window_tops: bool = False) -> float:
+    """The roof's height above the hubs (metres) at which to draw a vehicle (``vehicle_mesh(..., roof=)``).
+
+    A vehicle-library model's: its published height less its wheel radius. A preset's or a PASCAL3D+ shape's (no
+    height published): its higher window pair's mean height plus the library's mean roof offset above it
     (:class:`vfactor.box.BoxModel`, ``"any"``: about 0.1 m).
 
     Args:
         wireframe: the vehicle's keypoints (body frame, metres); ``model``: its library id, preset name or other
             source name (:func:`random_vehicle`'s source, a simulated vehicle's ``preset``); ``wheel_radius``: its
             hubs' height above the road, metres.
+        follow_window_tops: a library model's roof at its own offset above ``wireframe``'s window tops instead
+            of at its published height: for a shape stretched away from the model's (``SplitSpec.shape_stretch``).
     """
     from vfactor.box import box_features, default_box_model  # noqa: PLC0415  (vfactor.box imports the library)
 
-    vehicle = vehicle_library().get(model)
-    if vehicle is not None:
-        return float(vehicle.dimensions.height) - float(wheel_radius)
     top = box_features(wireframe.vehicle_p_keypoints)[0][2]
-    return float(top + default_box_model().mean["any"][2])
+    vehicle = vehicle_library().get(model)
+    if vehicle is None:
+        return float(top + default_box_model().mean["any"][2])
+    roof = float(vehicle.dimensions.height) - float(wheel_radius)
+    if follow_window_tops:
+        roof += top - box_features(vehicle.wireframe.vehicle_p_keypoints)[0][2]
+    return roof
 
 
 def random_appearance(rng, split: SplitSpec) -> Appearance:
@@ -526,7 +532,8 @@ def _place_others(rng, split, target_fp, target_xy, yaw, camera_xy, count, real_
                 continue
             placed.append(fp)
             others.append(VehicleInstance(wf, pose, random_appearance(rng, split), radius,
-                                          roof_height(wf, source, radius) if real_roofs else None))
+                                          roof_height(wf, source, radius, split.shape_stretch > 0) if real_roofs
+                                          else None))
             break
     return others
 
@@ -572,7 +579,8 @@ def random_training_sample(
     yaw = float(rng.uniform(0.0, 2 * np.pi))
     target_xy = rng.uniform(-3.0, 3.0, 2)
     pose = road_pose(target_xy[0], target_xy[1], yaw, radius)
-    target = VehicleInstance(wf, pose, appearance, radius, roof_height(wf, source, radius) if o.real_roofs else None)
+    roof = roof_height(wf, source, radius, split.shape_stretch > 0) if o.real_roofs else None
+    target = VehicleInstance(wf, pose, appearance, radius, roof)
     centre = wf.in_world(pose).mean(axis=0)
 
     # --- the camera: azimuth and elevation in the split's bins, pole height and distance in range

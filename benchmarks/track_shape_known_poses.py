@@ -32,7 +32,8 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 import vfactor.track as track  # noqa: E402
-from vfactor.evaluation import final_shape_errors, final_shape_table, held_out_scene_model, track_body_types  # noqa: E402
+from vfactor.evaluation import (final_shape_errors, final_shape_table, held_out_scene_model,  # noqa: E402
+                                track_body_types)
 from vfactor.factors.motion import MotionModel  # noqa: E402
 from vfactor.keys import KeyScheme  # noqa: E402
 from vfactor.sim import load_scenario, simulate  # noqa: E402

@@ -22,12 +22,12 @@ find, or found elsewhere, keeps its box.
 from __future__ import annotations
 
 import dataclasses
-import itertools
 
 import numpy as np
 
 from vfactor.box import Box
 from vfactor.camera import Camera
+from vfactor.formats.common import box_corners
 from vfactor.heatmaps import clip_roi_to_image, clipped_by_border
 from vfactor.observations import Scene
 from vfactor.result import FrameResult
@@ -51,11 +51,7 @@ def projected_box(camera: Camera, box: Box) -> tuple[float, float, float, float]
     """The image box ``(x0, y0, x1, y1)`` (pixel edges; it may reach beyond the image) of the vehicle whose 3D box
     is ``box`` (world frame): the box of its eight corners' pixels shrunk about its centre to :data:`BODY_SHARE`;
     None where a corner is not in front of the camera."""
-    length, width, height = np.asarray(box.size, float)
-    corners_box = np.array(list(itertools.product((-length / 2, length / 2), (-width / 2, width / 2),
-                                                  (-height / 2, height / 2))))
-    world_T_box = box.world_T_box.matrix()
-    uv, depth = camera.project(corners_box @ world_T_box[:3, :3].T + world_T_box[:3, 3])
+    uv, depth = camera.project(box_corners(box))
     if not (np.all(depth > 0) and np.all(np.isfinite(uv))):
         return None
     x0, y0 = uv.min(axis=0) - 0.5

@@ -167,8 +167,8 @@ def render_and_detect(scenario: str, seed: int, frames: int | None = None, detec
         progress: called with ``(images rendered, images total)``.
         clip_boxes: give the network the boxes clipped to the image, as a 2D detector gives them (default: the
             whole vehicles' boxes; :func:`vfactor.render.scenes.render_simulation`).
-        real_roofs: draw the library vehicles' roofs at their published heights
-            (:func:`vfactor.render.scenes.render_simulation`).
+        real_roofs: draw each vehicle's roof at its real height (a library vehicle's published one;
+            :func:`vfactor.render.scenes.render_simulation`).
 
     Returns:
         ``(simulation, rendered scene, detected scene, detector)``: the detected scene holds the network's
@@ -204,7 +204,7 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
         progress: called with ``(images rendered, images total)``.
         track_options: the tracking comparison's :class:`~vfactor.track.TrackOptions` (default: the defaults).
         clip_boxes: the network gets the boxes clipped to the image (:func:`render_and_detect`).
-        real_roofs: the library vehicles' roofs drawn at their published heights (:func:`render_and_detect`).
+        real_roofs: each vehicle's roof drawn at its real height (:func:`render_and_detect`).
         amodal_pass: the keypoints of the vehicles whose boxes stop at the image border are found again in the
             boxes of the vehicles a first solve found (tracked where the scenario moves, else one frame at a time;
             each vehicle with the shape model learnt without it), and everything is evaluated on those

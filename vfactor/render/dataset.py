@@ -34,6 +34,7 @@ from pathlib import Path
 import gtsam
 import numpy as np
 
+from vfactor.box import box_features, default_box_model
 from vfactor.camera import Camera
 from vfactor.heatmaps import clip_roi_to_image, extend_clipped_roi
 from vfactor.keypoints import LAYERS, NUM_KEYPOINTS
@@ -374,8 +375,6 @@ def roof_height(wireframe: Wireframe, model: str, wheel_radius: float, follow_wi
         follow_window_tops: a library model's roof at its own offset above ``wireframe``'s window tops instead
             of at its published height: for a shape stretched away from the model's (``SplitSpec.shape_stretch``).
     """
-    from vfactor.box import box_features, default_box_model  # noqa: PLC0415  (vfactor.box imports the library)
-
     top = box_features(wireframe.vehicle_p_keypoints)[0][2]
     vehicle = vehicle_library().get(model)
     if vehicle is None:

@@ -176,9 +176,9 @@ def test_cli_eval_images(rendered, tmp_path, capsys):
     assert "Tracking" not in text  # accuracy_2cam's frames hold new vehicles each: nothing to track
     assert main(["eval", "images", "--frames", "1", "--seed", "4", "--clipped-boxes", "--markdown", str(md)]) == 0
     assert "1 frames, seed 4, boxes clipped to the image" in md.read_text()
-    assert main(["eval", "images", "--scenario", "library_2cam", "--frames", "1", "--seed", "4", "--real-roofs",
+    assert main(["eval", "images", "--scenario", "library_2cam", "--frames", "1", "--seed", "4", "--no-real-roofs",
                  "--markdown", str(md)]) == 0
-    assert "1 frames, seed 4, roofs at the published heights" in md.read_text()
+    assert "1 frames, seed 4, roofs at the window tops" in md.read_text()
 
 
 def test_cli_eval_images_evaluates_the_given_weights(rendered, tmp_path, capsys):
@@ -209,6 +209,8 @@ def test_cli_eval_images_evaluates_the_given_weights(rendered, tmp_path, capsys)
     assert main(["eval", "tracks", "--real-roofs"]) == 2
     err = capsys.readouterr().err
     assert err == "vfactor eval: error: --real-roofs: eval tracks renders no images (eval images does)\n"
+    assert main(["eval", "frames", "--no-real-roofs"]) == 2
+    assert capsys.readouterr().err.startswith("vfactor eval: error: --no-real-roofs: eval frames renders no images")
 
 
 def test_lens_distortion_end_to_end(rendered, detector, tmp_path):

@@ -318,10 +318,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--clipped-boxes", action="store_true",
                    help="images: give the network each vehicle's box clipped to the image, as a 2D detector gives it "
                    "(default: the whole vehicle's box, beyond the image where the image cuts the vehicle)")
-    p.add_argument("--real-roofs", action="store_true",
-                   help="images: draw each vehicle's roof at its real height (a library vehicle's published one; "
-                   "default: at its window tops, as the network's training crops were drawn; docs/rendering.md, "
-                   "\"Roofs\")")
+    p.add_argument("--real-roofs", action=argparse.BooleanOptionalAction, default=None,
+                   help="images: draw each vehicle's roof at its real height (a library vehicle's published one; the "
+                   "default); --no-real-roofs: at its window tops, the renderer's earlier default "
+                   "(docs/rendering.md, \"Roofs\")")
     p.add_argument("--amodal-pass", action="store_true",
                    help="images, with --clipped-boxes: find the clipped vehicles' keypoints again in the boxes of the "
                    "vehicles a first solve found (tracked where the scenario moves), then evaluate "

@@ -31,8 +31,9 @@ def evaluate(args) -> int:
         raise InputError("--levels", f"eval {args.experiment} has no noise levels (frames and association have)")
     if args.weights is not None and args.experiment != "images":
         raise InputError("--weights", f"eval {args.experiment} uses no keypoint network (eval images does)")
-    if args.real_roofs and args.experiment != "images":
-        raise InputError("--real-roofs", f"eval {args.experiment} renders no images (eval images does)")
+    if args.real_roofs is not None and args.experiment != "images":
+        flag = "--real-roofs" if args.real_roofs else "--no-real-roofs"
+        raise InputError(flag, f"eval {args.experiment} renders no images (eval images does)")
     if args.amodal_pass and not (args.experiment == "images" and args.clipped_boxes):
         raise InputError("--amodal-pass", "only with eval images --clipped-boxes (whole boxes stop at no image border)")
     if args.experiment in ("images", "paper") and (args.workers is not None or args.scheduler is not None):
@@ -53,7 +54,7 @@ def evaluate(args) -> int:
                                              _levels(args.levels) if args.levels else (None,))
     elif args.experiment == "images":
         sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed, args.weights,
-                                args.detector_offsets, args.clipped_boxes, args.amodal_pass, args.real_roofs)
+                                args.detector_offsets, args.clipped_boxes, args.amodal_pass, args.real_roofs is not False)
     else:
         if args.scenario:
             raise InputError("--scenario", "the paper comparison uses its own scenario (paper_webots)")
@@ -114,7 +115,7 @@ def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper"
 
 def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = None,
                  detector_offsets: bool | None = None, clipped_boxes: bool = False,
-                 amodal_pass: bool = False, real_roofs: bool = False) -> list[str]:
+                 amodal_pass: bool = False, real_roofs: bool = True) -> list[str]:
     try:
         from vfactor.net.end_to_end import evaluate_images, images_report
         from vfactor.net.infer import KeypointDetector

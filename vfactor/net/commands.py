@@ -153,9 +153,10 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--library-weight", action="append", default=[], metavar="TYPE=W",
                    help="draw the --render crops' library models of body TYPE W times as often as the others' "
                    "(repeatable; e.g. van=3)")
-    p.add_argument("--real-roofs", action="store_true",
-                   help="draw the --render crops' vehicles with their roofs at their real heights (default: at their "
-                   "window tops, as the shipped weights' crops; docs/rendering.md, \"Roofs\")")
+    p.add_argument("--real-roofs", action=argparse.BooleanOptionalAction, default=True,
+                   help="draw the --render crops' vehicles with their roofs at their real heights (the default); "
+                   "--no-real-roofs: at their window tops, the renderer's earlier default "
+                   "(docs/rendering.md, \"Roofs\")")
     p.add_argument("--shape-stretch", type=float, metavar="S",
                    help="stretch each --render crop's vehicle shape along its length, width and height by independent "
                    "factors in [1 - S, 1 + S] (default 0: the models as they are)")
@@ -299,7 +300,7 @@ def _training_split(library_share: float | None, library_weights=(), shape_stret
         raise InputError("--library-weight", str(exc)) from None
 
 
-def _sample_options(clipped_box_share: float | None, real_roofs: bool = False):
+def _sample_options(clipped_box_share: float | None, real_roofs: bool = True):
     """The renderer's sample options with ``clipped_box_share`` (None: the default) and ``real_roofs``."""
     from vfactor.render.dataset import SampleOptions  # noqa: PLC0415
 

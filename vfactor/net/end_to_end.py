@@ -154,7 +154,7 @@ def calibration_table(keypoints: dict) -> str:
 
 def render_and_detect(scenario: str, seed: int, frames: int | None = None, detector=None,
                       work_dir: str | Path | None = None, progress=None, clip_boxes: bool = False,
-                      real_roofs: bool = False):
+                      real_roofs: bool = True):
     """Simulates a scenario, renders its camera images and finds the keypoints in the vehicles' boxes.
 
     Args:
@@ -167,8 +167,8 @@ def render_and_detect(scenario: str, seed: int, frames: int | None = None, detec
         progress: called with ``(images rendered, images total)``.
         clip_boxes: give the network the boxes clipped to the image, as a 2D detector gives them (default: the
             whole vehicles' boxes; :func:`vfactor.render.scenes.render_simulation`).
-        real_roofs: draw each vehicle's roof at its real height (a library vehicle's published one;
-            :func:`vfactor.render.scenes.render_simulation`).
+        real_roofs: draw each vehicle's roof at its real height (a library vehicle's published one; the default);
+            False: at its window tops (:func:`vfactor.render.scenes.render_simulation`).
 
     Returns:
         ``(simulation, rendered scene, detected scene, detector)``: the detected scene holds the network's
@@ -190,7 +190,7 @@ def render_and_detect(scenario: str, seed: int, frames: int | None = None, detec
 def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, seed: int = 0, detector=None,
                     work_dir: str | Path | None = None, options: SolveOptions = SolveOptions(),
                     progress=None, track_options=None, clip_boxes: bool = False, amodal_pass: bool = False,
-                    real_roofs: bool = False) -> dict:
+                    real_roofs: bool = True) -> dict:
     """Runs the image-to-pose pipeline on rendered scenes of a scenario and scores it.
 
     Args:
@@ -261,7 +261,7 @@ def images_report(evaluation: dict) -> str:
         f"### {evaluation['scenario']}: rendered images -> keypoint network -> factor graph, "
         f"{evaluation['frames']} frames, seed {evaluation['seed']}"
         + (", boxes clipped to the image" if evaluation.get("clip_boxes") else "")
-        + (", roofs at the published heights" if evaluation.get("real_roofs") else "") + "\n\n"
+        + ("" if evaluation.get("real_roofs", True) else ", roofs at the window tops") + "\n\n"
         + (f"Amodal pass: {evaluation['amodal_pass_boxes']} boxes clipped by the image border replaced by the "
            f"boxes of the vehicles a first solve found, their keypoints found again.\n\n"
            if evaluation.get("amodal_pass_boxes") is not None else "")

@@ -196,9 +196,9 @@ class SampleOptions:
             image (as a 2D detector gives it), grown beyond the border as the detector grows such boxes
             (:func:`vfactor.heatmaps.extend_clipped_roi`), instead of from its whole box; 0 (default): whole boxes,
             and the samples are those of before.
-        real_roofs: draw each vehicle's roof at its real height (:func:`roof_height`) instead of at its window tops
-            (the default, as the shipped network's crops were drawn; docs/rendering.md, "Roofs"); False: the
-            samples are those of before.
+        real_roofs: draw each vehicle's roof at its real height (:func:`roof_height`; the default) instead of at
+            its window tops (False: the renderer's earlier default, as the networks up to the second shipped one
+            were trained; docs/rendering.md, "Roofs").
         square: square ROIs (the box's larger side); else the box's own aspect, resized anisotropically.
         other_vehicles: probabilities of 0, 1, 2, 3 other vehicles near the target.
         occluder_probability: chance of a prop between the camera and the target.
@@ -220,7 +220,7 @@ class SampleOptions:
     jitter: float = 0.05
     edge_probability: float = 0.2
     clipped_box_probability: float = 0.0
-    real_roofs: bool = False
+    real_roofs: bool = True
     square: bool = True
     other_vehicles: tuple = (0.35, 0.3, 0.2, 0.15)
     occluder_probability: float = 0.35

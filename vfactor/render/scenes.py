@@ -81,7 +81,7 @@ def render_simulation(
     progress: Callable[[int, int], None] | None = None,
     min_inside: float = 0.25,
     clip_boxes: bool = False,
-    real_roofs: bool = False,
+    real_roofs: bool = True,
 ) -> RenderedScene:
     """Renders every camera image of a simulation and writes a scene file of images and boxes.
 
@@ -103,8 +103,8 @@ def render_simulation(
             border cuts (default: the whole vehicle's box, which reaches beyond the image there; docs/network.md,
             "Boxes clipped by the image border"). The images and the true boxes are the same either way.
         real_roofs: draw each vehicle's roof at its real height (:func:`vfactor.render.dataset.roof_height`: a
-            library vehicle's published one) instead of at its window tops (the default, as the shipped network's
-            training crops were drawn; docs/rendering.md, "Roofs").
+            library vehicle's published one; the default) instead of at its window tops (False: the renderer's
+            earlier default; docs/rendering.md, "Roofs").
 
     Returns:
         :class:`RenderedScene`.

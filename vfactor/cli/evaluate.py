@@ -54,7 +54,8 @@ def evaluate(args) -> int:
                                              _levels(args.levels) if args.levels else (None,))
     elif args.experiment == "images":
         sections = _eval_images(args.scenario or "accuracy_2cam", frames, args.seed, args.weights,
-                                args.detector_offsets, args.clipped_boxes, args.amodal_pass, args.real_roofs is not False)
+                                args.detector_offsets, args.clipped_boxes, args.amodal_pass,
+                                args.real_roofs is not False)
     else:
         if args.scenario:
             raise InputError("--scenario", "the paper comparison uses its own scenario (paper_webots)")

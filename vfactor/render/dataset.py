@@ -197,8 +197,8 @@ class SampleOptions:
             (:func:`vfactor.heatmaps.extend_clipped_roi`), instead of from its whole box; 0 (default): whole boxes,
             and the samples are those of before.
         real_roofs: draw each vehicle's roof at its real height (:func:`roof_height`; the default) instead of at
-            its window tops (False: the renderer's earlier default, as the networks up to the second shipped one
-            were trained; docs/rendering.md, "Roofs").
+            its window tops (False: the renderer's earlier default, as the shipped network's crops were drawn;
+            docs/rendering.md, "Roofs").
         square: square ROIs (the box's larger side); else the box's own aspect, resized anisotropically.
         other_vehicles: probabilities of 0, 1, 2, 3 other vehicles near the target.
         occluder_probability: chance of a prop between the camera and the target.

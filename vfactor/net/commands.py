@@ -272,13 +272,15 @@ def _train_config(args):
         raise InputError("--config", str(exc)) from None
 
 
+#: SplitSpec field -> the train flag that sets it (for its errors).
+_SPLIT_FLAGS = {"library_type_weights": "--library-weight", "shape_stretch": "--shape-stretch"}
+
+
 def _training_split(library_share: float | None, library_weights=(), shape_stretch: float | None = None):
     """The training split with ``library_share`` library vehicles, ``library_weights`` (``TYPE=W`` strings) per
     body type and ``shape_stretch`` (None and none: :data:`vfactor.render.dataset.TRAIN`)."""
     if library_share is None and not library_weights and shape_stretch is None:
         return None
-    if shape_stretch is not None and not 0.0 <= shape_stretch < 0.5:
-        raise InputError("--shape-stretch", f"expected a number in [0, 0.5), got {shape_stretch}")
     if library_share is not None and not 0.0 <= library_share <= 1.0:
         raise InputError("--library-share", f"expected a share in [0, 1], got {library_share}")
     from dataclasses import replace  # noqa: PLC0415
@@ -296,8 +298,9 @@ def _training_split(library_share: float | None, library_weights=(), shape_stret
     try:
         return replace(TRAIN, library_probability=share, library_type_weights=tuple(weights),
                        shape_stretch=float(shape_stretch or 0.0))
-    except ValueError as exc:
-        raise InputError("--library-weight", str(exc)) from None
+    except ValueError as exc:  # SplitSpec names the field: "<field>: <what is wrong>"
+        field, _, message = str(exc).partition(": ")
+        raise InputError(_SPLIT_FLAGS.get(field, "--library-weight"), message or str(exc)) from None
 
 
 def _sample_options(clipped_box_share: float | None, real_roofs: bool = True):

@@ -505,7 +505,13 @@ def _kerb(rng, centre, yaw) -> list[Mesh]:
     return [box_mesh([ctr[0], ctr[1], 0.075], (60.0, width, 0.15), yaw, colour)]
 
 
-def _place_others(rng, split, target_fp, target_xy, yaw, camera_xy, count, real_roofs: bool = False):
+def _roof(options: SampleOptions, wireframe: Wireframe, source: str, radius: float, split: SplitSpec):
+    """The roof height to draw a sampled vehicle with (:func:`roof_height`; a stretched shape's follows its window
+    tops), or None where ``options`` draw roofs at the window tops."""
+    return roof_height(wireframe, source, radius, split.shape_stretch > 0) if options.real_roofs else None
+
+
+def _place_others(rng, split, target_fp, target_xy, yaw, camera_xy, count, options: SampleOptions):
     placed = [target_fp]
     others = []
     for _ in range(count):
@@ -531,8 +537,7 @@ def _place_others(rng, split, target_fp, target_xy, yaw, camera_xy, count, real_
                 continue
             placed.append(fp)
             others.append(VehicleInstance(wf, pose, random_appearance(rng, split), radius,
-                                          roof_height(wf, source, radius, split.shape_stretch > 0) if real_roofs
-                                          else None))
+                                          _roof(options, wf, source, radius, split)))
             break
     return others
 
@@ -578,8 +583,7 @@ def random_training_sample(
     yaw = float(rng.uniform(0.0, 2 * np.pi))
     target_xy = rng.uniform(-3.0, 3.0, 2)
     pose = road_pose(target_xy[0], target_xy[1], yaw, radius)
-    roof = roof_height(wf, source, radius, split.shape_stretch > 0) if o.real_roofs else None
-    target = VehicleInstance(wf, pose, appearance, radius, roof)
+    target = VehicleInstance(wf, pose, appearance, radius, _roof(o, wf, source, radius, split))
     centre = wf.in_world(pose).mean(axis=0)
 
     # --- the camera: azimuth and elevation in the split's bins, pole height and distance in range
@@ -641,7 +645,7 @@ def random_training_sample(
     # --- the surroundings
     n_others = int(rng.choice(len(o.other_vehicles), p=np.asarray(o.other_vehicles) / np.sum(o.other_vehicles)))
     target_fp = footprint(wf, pose, pad=0.15)
-    others = _place_others(rng, split, target_fp, target_xy, yaw, eye[:2], n_others, o.real_roofs)
+    others = _place_others(rng, split, target_fp, target_xy, yaw, eye[:2], n_others, o)
     props: list[Mesh] = []
     if rng.uniform() < o.occluder_probability:
         length = float(np.ptp(wf.vehicle_p_keypoints[:, 0]))

@@ -19,12 +19,13 @@ import pytest
 
 from vfactor.evaluation import held_out_scene_model
 from vfactor.graph import (MAX_SIZE_IN_IMAGES, RESIZE_SHARE, GraphConfig, observations_from_detections,
-                           vehicle_image_sizes)
+                           resized_observations, sigma_change, sized_observations, vehicle_image_sizes)
 from vfactor.metrics import ray_nees
 from vfactor.observations import Detection
 from vfactor.sim import load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations, solve_vehicle
 from vfactor.track import TrackOptions, smooth_scene, track_scene
+from vfactor.wireframe import Wireframe
 
 
 def _exact_detection(sim, frame: int, vehicle: str, camera: str) -> Detection:
@@ -84,6 +85,37 @@ def test_tracks_keep_one_camera_depths_within_their_covariance(method):
                     along.append(ray_nees(v.world_T_vehicle, v.pose_covariance, sim.truth[f][v.id].world_T_vehicle,
                                           centre)[1])
         assert len(along) >= 5 and np.mean(along) < 2.0, (seed, np.mean(along), len(along))
+
+
+def test_resized_observations_measure_the_change_without_stacking_and_stack_only_beyond_the_share():
+    """resized_observations: the change is sigma_change's between the plain and the sized stacking, to the bit, on
+    views cut by the image border and whole ones, with and without covariances of the keypoints' own (kept as
+    they are); the sized observations come back only where the change is beyond the share."""
+    sim = simulate(load_scenario("library_tracks_2cam"), seed=3, num_frames=12)
+    config = GraphConfig()
+    changes = []
+    for f, frame in enumerate(sim.scene.frames):
+        for vid in frame.vehicle_ids():
+            truth = sim.truth[f][vid]
+            wireframe = Wireframe(truth.world_T_vehicle.transformTo(np.asarray(truth.keypoints_world).T).T)
+            detections = list(frame.detections_of(vid))
+            own = [dataclasses.replace(d, covariance=np.where((np.arange(12)[:, None, None] % 3 == 0) | (i == 0),
+                                                              4.0 * np.eye(2), np.nan))
+                   for i, d in enumerate(detections)]  # the first detection's keypoints all have their own
+            for dets in (detections, own):
+                plain = observations_from_detections(dets, sim.scene.cameras, config)
+                sized = sized_observations(dets, sim.scene.cameras, config, truth.world_T_vehicle, wireframe)
+                expected = sigma_change(plain, sized)
+                for share in (RESIZE_SHARE, 0.0):
+                    got, change = resized_observations(dets, sim.scene.cameras, config, truth.world_T_vehicle,
+                                                       wireframe, share)
+                    assert change == expected
+                    if expected > share:
+                        np.testing.assert_array_equal(got.sqrt_information, sized.sqrt_information)
+                    else:
+                        assert got is None
+                changes.append(expected)
+    assert max(changes) > RESIZE_SHARE and min(changes) <= RESIZE_SHARE  # both ways seen
 
 
 def test_a_one_frame_solve_sizes_a_cut_views_keypoints_by_the_vehicle_it_finds():

@@ -22,7 +22,7 @@ import numpy as np
 
 from vfactor.baselines import known_shape, pnp, triangulation
 from vfactor.box import BoxModel, default_box_model, published_box
-from vfactor.graph import observations_from_detections, sized_observations
+from vfactor.graph import observations_from_detections, resized_observations
 from vfactor.metrics import keypoint_nees, nees_summary, pose_errors, pose_nees, pose_nees_components
 from vfactor.shape_model import ShapeModel, car_hwc_bounds, default_shape_model, default_shape_prior, pascal3d_wireframes
 from vfactor.sim import Scenario, Simulation, load_scenario, simulate
@@ -114,7 +114,7 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
                 t0 = time.perf_counter()
                 if method == "factor_graph":  # as solve_vehicle: the sigmas sized by the vehicle it finds
                     result = solve_held_out(obs, truth.preset, options, vid, hints, resize=partial(
-                        sized_observations, detections, sim.scene.cameras, options.graph))
+                        resized_observations, detections, sim.scene.cameras, options.graph))
                 elif method == "car_prior":
                     result = solve_observations(obs, car_options, vid, default_shape_prior(), car_hwc_bounds())
                 elif method == "triangulation":

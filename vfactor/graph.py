@@ -43,6 +43,7 @@ __all__ = [
     "roi_cut_by_border",
     "vehicle_image_sizes",
     "sized_observations",
+    "resized_observations",
     "sigma_change",
     "MAX_SIZE_IN_IMAGES",
     "RESIZE_SHARE",
@@ -205,16 +206,11 @@ def observations_from_detections(
         if len(seen) == 0:
             continue
         edges = _truncation_window(cameras[d.camera], d.keypoints[seen]) if config.truncation else None
-        size = d.box_diagonal()
-        if d.roi is None and vehicle_sizes and d.camera in vehicle_sizes:
-            size = max(size, float(vehicle_sizes[d.camera]))
-        base_sigma = max(config.min_pixel_sigma, config.relative_pixel_sigma * size)
+        base_sigma = _base_sigma(d, config, vehicle_sizes)
         L = np.asarray(d.confidence[seen], dtype=float)[:, None, None] / base_sigma * np.eye(2)
-        given = np.zeros(len(seen), dtype=bool)
-        if d.covariance is not None:
-            given = np.all(np.isfinite(d.covariance[seen]), axis=(1, 2))
-            if given.any():
-                L[given] = np.swapaxes(np.linalg.cholesky(np.linalg.inv(d.covariance[seen][given])), 1, 2)
+        given = _own_covariance(d, seen)
+        if given.any():
+            L[given] = np.swapaxes(np.linalg.cholesky(np.linalg.inv(d.covariance[seen][given])), 1, 2)
         calibrated.append(given & bool(d.covariance_calibrated))
         shape_sigma.append(np.full(len(seen), float(d.shape_sigma or 0.0)))
         cut.append(np.full(len(seen), _roi_cut(cameras[d.camera], d.roi)))
@@ -274,6 +270,21 @@ MAX_SIZE_IN_IMAGES = 2.0
 RESIZE_SHARE = 0.3
 
 
+def _base_sigma(d: Detection, config: GraphConfig, vehicle_sizes: dict[str, float] | None = None) -> float:
+    """The isotropic pixel sigma of a detection's keypoints at confidence 1 (:func:`observations_from_detections`)."""
+    size = d.box_diagonal()
+    if d.roi is None and vehicle_sizes and d.camera in vehicle_sizes:
+        size = max(size, float(vehicle_sizes[d.camera]))
+    return max(config.min_pixel_sigma, config.relative_pixel_sigma * size)
+
+
+def _own_covariance(d: Detection, seen: np.ndarray) -> np.ndarray:
+    """Which of a detection's ``seen`` keypoints (indices) come with a covariance of their own (a finite 2x2)."""
+    if d.covariance is None:
+        return np.zeros(len(seen), dtype=bool)
+    return np.all(np.isfinite(d.covariance[seen]), axis=(1, 2))
+
+
 def sized_observations(detections: list[Detection], cameras: dict[str, Camera], config: GraphConfig,
                        world_T_vehicle: gtsam.Pose3, wireframe: Wireframe) -> KeypointObservations:
     """:func:`observations_from_detections` with each keypoint's sigma sized by the vehicle at ``world_T_vehicle``
@@ -281,6 +292,34 @@ def sized_observations(detections: list[Detection], cameras: dict[str, Camera], 
     detector kept of a vehicle the image border cuts (docs/factors.md, "Keypoint noise sized by the vehicle")."""
     sizes = vehicle_image_sizes(cameras, world_T_vehicle, wireframe, sorted({d.camera for d in detections}))
     return observations_from_detections(detections, cameras, config, sizes)
+
+
+def resized_observations(detections: list[Detection], cameras: dict[str, Camera], config: GraphConfig,
+                         world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, share: float = RESIZE_SHARE
+                         ) -> tuple[KeypointObservations | None, float]:
+    """:func:`sized_observations` where they would change a keypoint's sigma by more than ``share``, for
+    :func:`vfactor.solve.solve_observations`' ``resize``.
+
+    The change is :func:`sigma_change`'s between the detections' observations as stacked and as sized, computed
+    from each detection's sigma alone: the observations are stacked again only where they are returned.
+
+    Returns:
+        (the sized observations, or None where no sigma changes by more than ``share``; the largest relative
+        change of a keypoint's sigma).
+    """
+    sizes = vehicle_image_sizes(cameras, world_T_vehicle, wireframe, sorted({d.camera for d in detections}))
+    change = 0.0
+    for d in detections:
+        seen = np.flatnonzero(d.confidence > 0)
+        plain = seen[~_own_covariance(d, seen)]  # keypoints with a covariance of their own keep it
+        if len(plain) == 0 or d.camera not in cameras:
+            continue
+        confidence = np.asarray(d.confidence[plain], dtype=float)
+        before, after = confidence / _base_sigma(d, config), confidence / _base_sigma(d, config, sizes)
+        change = max(change, float(np.abs(after / before - 1.0).max()))
+    if change <= share:
+        return None, change
+    return observations_from_detections(detections, cameras, config, sizes), change
 
 
 def sigma_change(before: KeypointObservations, after: KeypointObservations) -> float:

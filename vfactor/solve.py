@@ -28,7 +28,6 @@ from vfactor.factors.projection import KeypointObservations, projection_factor, 
 from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_prior import shape_prior_factor
 from vfactor.graph import (
-    RESIZE_SHARE,
     GraphConfig,
     build_vehicle_graph,
     copy_graph,
@@ -38,8 +37,7 @@ from vfactor.graph import (
     hwc_terms,
     insert_vehicle_values,
     observations_from_detections,
-    sigma_change,
-    sized_observations,
+    resized_observations,
     wireframe_from_values,
 )
 from vfactor.init import StartSearch, best_candidates, distinct_poses
@@ -200,9 +198,10 @@ def solve_observations(
         hints: 2D-detector classes of the vehicle (``"car"``, ``"truck"``,
             ``"bus"`` or a body type), weighing the body types
             (:data:`vfactor.shape_model.CLASS_HINTS`); never a hard rule.
-        resize: ``resize(world_T_vehicle, wireframe)`` -> the same observations with each keypoint's sigma sized
-            by that vehicle (:func:`vfactor.graph.sized_observations`; :func:`solve_vehicle` passes it). Where the
-            first solution sizes them otherwise by more than :data:`vfactor.graph.RESIZE_SHARE`, the refinement
+        resize: ``resize(world_T_vehicle, wireframe)`` -> (the same observations with each keypoint's sigma sized
+            by that vehicle, or None where that changes no sigma by more than :data:`vfactor.graph.RESIZE_SHARE`;
+            the largest relative change) (:func:`vfactor.graph.resized_observations`; :func:`solve_vehicle` passes
+            it). Where the first solution sizes them otherwise, the refinement
             starts with one LM at those sigmas (``extras["resized"]``: the largest relative change): a detector's
             few keypoints of a vehicle the image border cuts, sized by their own small box, were weighed as if
             several times more precise than they are (docs/factors.md, "Keypoint noise sized by the vehicle").
@@ -277,9 +276,8 @@ def solve_observations(
     refining = model is not None or options.estimate_noise
     unsized = as_given, obs
     if resize is not None and refining:  # the keypoints' sigmas sized by the vehicle the first solution found
-        sized = resize(best[0].atPose3(keys.pose_key()), wireframe_from_values(best[0], keys))
-        change = sigma_change(as_given, sized)
-        if change > RESIZE_SHARE:
+        sized, change = resize(best[0].atPose3(keys.pose_key()), wireframe_from_values(best[0], keys))
+        if sized is not None:
             as_given, obs, resized = sized, apply_swaps(sized, swaps) if swaps else sized, change
     extras = {}
     nominal = obs
@@ -897,7 +895,7 @@ def solve_vehicle(
     obs = observations_from_detections(detections, cameras, options.graph)
     hints = tuple(d.vehicle_class for d in detections if d.vehicle_class)
     return solve_observations(obs, options, vehicle_id, prior, bounds, hints=hints,
-                              resize=partial(sized_observations, detections, cameras, options.graph))
+                              resize=partial(resized_observations, detections, cameras, options.graph))
 
 
 def solve_frame(frame: Frame, cameras: dict[str, Camera], options: SolveOptions = SolveOptions(), **kwargs) -> FrameResult:

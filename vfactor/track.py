@@ -52,6 +52,7 @@ from vfactor.graph import (
     hwc_violation,
     insert_vehicle_values,
     observations_from_detections,
+    resized_observations,
     sized_observations,
     wireframe_from_values,
 )
@@ -1334,7 +1335,7 @@ def _solve_alone(obs: KeypointObservations, options: SolveOptions, vid: str, pri
     """One frame of a track solved on its own (with ``detections``, those of ``obs``, as :func:`solve_vehicle`
     solves them (:func:`vfactor.solve.solve_vehicle`): the keypoints' sigmas sized by the vehicle it finds); a numerical failure is a ``failed``
     result, not an exception."""
-    resize = None if detections is None else partial(sized_observations, detections, cameras, options.graph)
+    resize = None if detections is None else partial(resized_observations, detections, cameras, options.graph)
     try:
         return solve_observations(obs, options, vid, prior, bounds, resize=resize)
     except (RuntimeError, np.linalg.LinAlgError) as exc:

@@ -300,8 +300,9 @@ def resized_observations(detections: list[Detection], cameras: dict[str, Camera]
     """:func:`sized_observations` where they would change a keypoint's sigma by more than ``share``, for
     :func:`vfactor.solve.solve_observations`' ``resize``.
 
-    The change is :func:`sigma_change`'s between the detections' observations as stacked and as sized, computed
-    from each detection's sigma alone: the observations are stacked again only where they are returned.
+    The change is :func:`sigma_change`'s between the detections' observations as :func:`observations_from_detections`
+    stacks them with ``config`` and as sized, computed from each detection's sigma alone: the observations are
+    stacked again only where they are returned.
 
     Returns:
         (the sized observations, or None where no sigma changes by more than ``share``; the largest relative
@@ -312,7 +313,7 @@ def resized_observations(detections: list[Detection], cameras: dict[str, Camera]
     for d in detections:
         seen = np.flatnonzero(d.confidence > 0)
         plain = seen[~_own_covariance(d, seen)]  # keypoints with a covariance of their own keep it
-        if len(plain) == 0 or d.camera not in cameras:
+        if len(plain) == 0:
             continue
         confidence = np.asarray(d.confidence[plain], dtype=float)
         before, after = confidence / _base_sigma(d, config), confidence / _base_sigma(d, config, sizes)

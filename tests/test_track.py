@@ -321,17 +321,28 @@ def _mean_nees(sim, frames):
 def test_detector_offsets_model_errors_that_repeat_from_frame_to_frame(sim):
     """With each camera's view of the vehicle off by its own fixed rigid motion, a track that counts every frame
     as new information is far too sure of its poses; one pose offset per camera (its prior from the detections'
-    shape_sigma) keeps the covariances near the errors, in the tracker and in batch smoothing."""
+    shape_sigma) keeps the covariances near the errors, in the tracker and in batch smoothing. Without the offsets
+    in the estimate (``detector_offsets=False``) the smoothed covariances still consider them where the detections
+    say how large they are: the same poses, covariances near their errors; without a ``shape_sigma`` they cannot."""
     clean = dataclasses.replace(load_scenario("intersection_2cam_track"),
                                 noise=NoiseModel(relative_sigma=0.003, outlier_rate=0, swap_rate=0, missing_rate=0))
     truth = simulate(clean, seed=1)
     scene = _with_detector_offsets(truth, 0.04, seed=5)
-    plain = track_scene(scene, TrackOptions(detector_offsets=False))
+    unaware = dataclasses.replace(scene, frames=[dataclasses.replace(
+        f, detections=[dataclasses.replace(d, shape_sigma=None) for d in f.detections]) for f in scene.frames])
+    plain = track_scene(unaware, TrackOptions(detector_offsets=False))
+    assert _mean_nees(truth, plain.frames) > 3 * 6  # the repeated errors counted as new in every frame
+    (rotation_plain, _), _ = mean_errors(truth, plain.frames)
+    for considered in (track_scene(scene, TrackOptions(detector_offsets=False)).frames,
+                       smooth_scene(scene, TrackOptions(detector_offsets=False))):
+        assert 0.4 * 6 < _mean_nees(truth, considered) < 1.5 * 6
+    considered = track_scene(scene, TrackOptions(detector_offsets=False)).frames
+    for a, b in zip(plain.frames, considered):  # the estimate is the unaware track's
+        for u, v in zip(a.vehicles, b.vehicles):
+            np.testing.assert_allclose(u.world_T_vehicle.matrix(), v.world_T_vehicle.matrix(), atol=1e-9)
     tracker_options = TrackOptions(detector_offsets=True)
     offsets = track_scene(scene, tracker_options)
     batch = smooth_scene(scene, tracker_options)
-    assert _mean_nees(truth, plain.frames) > 3 * 6  # the repeated errors counted as new in every frame
-    (rotation_plain, _), _ = mean_errors(truth, plain.frames)
     for frames in (offsets.frames, batch):
         assert all(v.ok for fr in frames for v in fr.vehicles)
         assert 0.4 * 6 < _mean_nees(truth, frames) < 1.5 * 6

@@ -132,7 +132,9 @@ class TrackOptions:
             frame in iSAM2. Where the detections carry a ``bias_sigma`` (the detector's error that repeats over a
             vehicle's frames and cameras), the track gets one more offset, which every camera's keypoints share,
             with that prior; the cameras' own offsets are then tied to it (docs/factors.md): unless
-            ``detector_offsets`` is ``False``, with or without a plane.
+            ``detector_offsets`` is ``False``, with or without a plane. Off, the smoothed covariances still consider
+            each camera's offset (a variable at the identity in the covariances' graph only, docs/factors.md,
+            "Covariances of tracks"): the estimate does without it, the covariances do not.
         optimizer: iSAM2's step: ``"dogleg"`` (Powell's dogleg, a trust region;
             the default, as Gauss-Newton steps can diverge when a weakly
             constrained track is suddenly well seen) or ``"gn"`` (Gauss-Newton).
@@ -438,10 +440,10 @@ class Tracker:
             if isinstance(factor, gtsam.CustomFactor) and layer_keys <= factor_keys and factor_keys & observed.keys():
                 continue  # a frame's projection factor: replaced below
             kept.append(factor)
-        graph = _covariance_graph(kept, [(frame, obs, offsets) for frame, obs, offsets in observed.values()],
-                                  estimate, self.keys, track.index, self.options.solve.graph)
+        graph, values = _covariance_graph(kept, [(frame, obs, offsets) for frame, obs, offsets in observed.values()],
+                                          estimate, self.keys, track.index, self.options.solve.graph)
         try:
-            return gtsam.Marginals(graph, estimate)
+            return gtsam.Marginals(graph, values)
         except RuntimeError:
             return None
 
@@ -1491,8 +1493,8 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         if options.covariance:
             replaced = {j for rows, *_ in projections for j in rows}
             kept = [graph.at(j) for j in range(graph.size()) if j not in replaced]
-            marginals = gtsam.Marginals(_covariance_graph(kept, [p[1:] for p in projections], estimate, keys, index,
-                                                          config), estimate)
+            marginals = gtsam.Marginals(*_covariance_graph(kept, [p[1:] for p in projections], estimate, keys, index,
+                                                           config))
         else:
             marginals = None
     except RuntimeError as exc:
@@ -1519,17 +1521,24 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
 
 
 def _covariance_graph(factors: list, projections: list, estimate: gtsam.Values, keys: KeyScheme, index: int,
-                      config: GraphConfig) -> gtsam.NonlinearFactorGraph:
-    """The graph whose marginals are a track's covariances: its factors but the keypoints', and each frame's keypoints
-    as least squares on its inliers (docs/factors.md, "Covariances of tracks"), as the one-frame solve's covariances
-    take them.
+                      config: GraphConfig) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+    """The graph whose marginals are a track's covariances, and the values to take them at: its factors but the
+    keypoints', each frame's keypoints as least squares on its inliers (docs/factors.md, "Covariances of tracks"),
+    as the one-frame solve's covariances take them, and each camera's detector error considered where the track
+    does not estimate it.
 
-    The robust loss's Gauss-Newton information down-weights every keypoint by its residual, inliers too (the Cauchy
-    loss gives one 1.5 sigmas off 63 % of its information), so the marginals of the solved graph are too wide where
-    the keypoints are good. Here each frame's projection factors are replaced by factors without the loss on its
-    observations whose whitened residual's square at ``estimate`` is within :data:`~vfactor.solve.INLIER_BOUND`
-    (at the track's noise scale, which the observations carry); the motion, ground-plane, hub-height, shape, HWC and
-    offset factors stay.
+    * **Inliers at full weight.** The robust loss's Gauss-Newton information down-weights every keypoint by its
+      residual, inliers too (the Cauchy loss gives one 1.5 sigmas off 63 % of its information), so the marginals of
+      the solved graph are too wide where the keypoints are good. Here each frame's projection factors are replaced by
+      factors without the loss on its observations whose whitened residual's square at ``estimate`` is within
+      :data:`~vfactor.solve.INLIER_BOUND` (at the track's noise scale, which the observations carry); the motion,
+      ground-plane, hub-height, shape, HWC and offset factors stay.
+    * **The cameras' offsets considered.** A camera whose detections carry a ``shape_sigma`` and that has no
+      detector offset of its own in the track (``TrackOptions.detector_offsets`` off, as without a road plane)
+      repeats its error in every frame all the same; the track's estimate does without the offset, its covariances
+      do not: that camera's keypoints move through an offset variable at the identity with the offset prior
+      (:func:`vfactor.graph.detector_offset_prior`, tied to the track's common offset where it has one), added to
+      the returned values only ("consider" parameters: the estimate stays that of the graph without them).
 
     Args:
         factors: the solved track graph's factors without its projection factors.
@@ -1537,24 +1546,39 @@ def _covariance_graph(factors: list, projections: list, estimate: gtsam.Values, 
             detector offset key)``.
         estimate: the solution.
         index: the track's vehicle index in ``keys``.
+
+    Returns:
+        (the graph, ``estimate`` with the considered offsets at the identity).
     """
     out = gtsam.NonlinearFactorGraph()
     for factor in factors:
         out.add(factor)
+    values = gtsam.Values(estimate)
     least_squares = dataclasses.replace(config, loss=RobustLoss("none"))
     points = wireframe_from_values(estimate, keys, index).vehicle_p_keypoints
+    considered: dict[str, int] = {}
     for frame, obs, offsets in projections:
+        offsets = dict(offsets)
+        common = offsets.get(COMMON_OFFSET)
+        for name, sigma in detector_shape_sigmas(obs).items():
+            if offsets.get(name, common) != common:
+                continue  # the track estimates this camera's offset
+            if name not in considered:  # numbered from the top: the track numbers its own offsets from 0
+                considered[name] = keys.offset_key(index, keys.frame_stride - 1 - len(considered))
+                values.insert(considered[name], gtsam.Pose3())
+                out.add(detector_offset_prior(considered[name], sigma, points, common))
+            offsets[name] = considered[name]
         world_T_vehicle = estimate.atPose3(keys.pose_key(index, frame))
         residuals = whitened_residuals(obs, world_T_vehicle, points)
         for c, camera in enumerate(obs.cameras):  # a camera's detector offset moves the vehicle as its factor does
             rows = obs.camera_index == c
             if camera.name in offsets and rows.any():
                 residuals[rows] = whitened_residuals(
-                    obs.subset(rows), world_T_vehicle.compose(estimate.atPose3(offsets[camera.name])), points)
+                    obs.subset(rows), world_T_vehicle.compose(values.atPose3(offsets[camera.name])), points)
         inlier = np.sum(residuals ** 2, axis=1) < INLIER_BOUND
         if inlier.any():
             add_observation_factor(out, keys, obs.subset(inlier), index, frame, least_squares, offsets)
-    return out
+    return out, values
 
 
 def _box(world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, body_type: str | None):

@@ -1548,12 +1548,13 @@ def _covariance_graph(factors: list, projections: list, estimate: gtsam.Values, 
         index: the track's vehicle index in ``keys``.
 
     Returns:
-        (the graph, ``estimate`` with the considered offsets at the identity).
+        (the graph, the values to take its marginals at: ``estimate``, with the considered offsets at the identity
+        where there are any).
     """
     out = gtsam.NonlinearFactorGraph()
     for factor in factors:
         out.add(factor)
-    values = gtsam.Values(estimate)
+    values = estimate  # copied when a considered offset is first added
     least_squares = dataclasses.replace(config, loss=RobustLoss("none"))
     points = wireframe_from_values(estimate, keys, index).vehicle_p_keypoints
     considered: dict[str, int] = {}
@@ -1565,6 +1566,8 @@ def _covariance_graph(factors: list, projections: list, estimate: gtsam.Values, 
                 continue  # the track estimates this camera's offset
             if name not in considered:  # numbered from the top: the track numbers its own offsets from 0
                 considered[name] = keys.offset_key(index, keys.frame_stride - 1 - len(considered))
+                if values is estimate:
+                    values = gtsam.Values(estimate)
                 values.insert(considered[name], gtsam.Pose3())
                 out.add(detector_offset_prior(considered[name], sigma, points, common))
             offsets[name] = considered[name]

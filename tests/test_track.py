@@ -333,10 +333,9 @@ def test_detector_offsets_model_errors_that_repeat_from_frame_to_frame(sim):
     plain = track_scene(unaware, TrackOptions(detector_offsets=False))
     assert _mean_nees(truth, plain.frames) > 3 * 6  # the repeated errors counted as new in every frame
     (rotation_plain, _), _ = mean_errors(truth, plain.frames)
-    for considered in (track_scene(scene, TrackOptions(detector_offsets=False)).frames,
-                       smooth_scene(scene, TrackOptions(detector_offsets=False))):
-        assert 0.4 * 6 < _mean_nees(truth, considered) < 1.5 * 6
     considered = track_scene(scene, TrackOptions(detector_offsets=False)).frames
+    for frames in (considered, smooth_scene(scene, TrackOptions(detector_offsets=False))):
+        assert 0.4 * 6 < _mean_nees(truth, frames) < 1.5 * 6
     for a, b in zip(plain.frames, considered):  # the estimate is the unaware track's
         for u, v in zip(a.vehicles, b.vehicles):
             np.testing.assert_allclose(u.world_T_vehicle.matrix(), v.world_T_vehicle.matrix(), atol=1e-9)

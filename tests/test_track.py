@@ -785,3 +785,30 @@ def test_a_poor_fit_frame_does_not_start_its_pose_in_batch_smoothing():
               for f, fr in enumerate(out) if fr.vehicles and fr.vehicles[0].ok]
     assert len(errors) >= 20
     assert max(e["rotation_deg"] for e in errors) < 10, [round(e["rotation_deg"]) for e in errors]
+
+
+@pytest.mark.parametrize("shape_sigma", [1e-300, 1e300])
+def test_an_absurd_shape_sigma_is_held_to_its_range_in_frames_and_tracks(shape_sigma):
+    """A detection's ``shape_sigma`` of 1e-300 m (the widening's ``sigma ** -2`` overflowed: an ``OverflowError``
+    out of the one-frame solve) or 1e300 m: held within ``SHAPE_SIGMA_RANGE``, every frame and track is solved with
+    finite covariances, with and without the cameras' offsets in the estimate; only offsets as loose as ten metres
+    may leave a track's pose undetermined, which is then reported ``failed``, never raised."""
+    from vfactor.graph import SHAPE_SIGMA_RANGE, detector_shape_sigmas, observations_from_detections
+    from vfactor.solve import solve_vehicle
+
+    sim = simulate(load_scenario("library_tracks_2cam"), seed=3, num_frames=8)
+    scene = dataclasses.replace(sim.scene, frames=[
+        dataclasses.replace(f, detections=[dataclasses.replace(d, shape_sigma=shape_sigma) for d in f.detections])
+        for f in sim.scene.frames])
+    frame = scene.frames[0]
+    obs = observations_from_detections(frame.detections, scene.cameras)
+    assert all(SHAPE_SIGMA_RANGE[0] <= s <= SHAPE_SIGMA_RANGE[1] for s in detector_shape_sigmas(obs).values())
+    results = [solve_vehicle(frame.detections_of(vid), scene.cameras) for vid in frame.vehicle_ids()]
+    runs = [results, *(f.vehicles for f in track_scene(scene).frames), *(f.vehicles for f in smooth_scene(scene))]
+    for vehicles in runs:
+        for v in vehicles:
+            assert v.ok and np.all(np.isfinite(v.pose_covariance))
+    for frame in track_scene(scene, TrackOptions(detector_offsets=True)).frames:
+        for v in frame.vehicles:
+            assert (v.ok and np.all(np.isfinite(v.pose_covariance))) or (v.status.value == "failed" and v.message)
+            assert v.ok or shape_sigma > 1.0

@@ -50,6 +50,7 @@ __all__ = [
     "add_shape_factors",
     "add_observation_factor",
     "detector_shape_sigmas",
+    "SHAPE_SIGMA_RANGE",
     "detector_offset_prior",
     "detector_bias_sigma",
     "detector_bias_prior",
@@ -463,15 +464,23 @@ def add_observation_factor(
 
 def detector_shape_sigmas(observations: KeypointObservations) -> dict[str, float]:
     """Camera name -> the ``shape_sigma`` (metres) of its detection of the vehicle, for the cameras whose
-    detection has one (a camera's largest, if its observations differ); empty where none has."""
+    detection has one (a camera's largest, if its observations differ), held within :data:`SHAPE_SIGMA_RANGE`;
+    empty where none has."""
     if observations.shape_sigma is None:
         return {}
     out = {}
     for c in np.unique(observations.camera_index):
         sigma = float(np.max(observations.shape_sigma[observations.camera_index == c]))
         if sigma > 0:
-            out[observations.cameras[c].name] = sigma
+            out[observations.cameras[c].name] = float(np.clip(sigma, *SHAPE_SIGMA_RANGE))
     return out
+
+
+#: The range (metres) :func:`detector_shape_sigmas` holds a detection's ``shape_sigma`` to: a tenth of a millimetre
+#: is finer than any keypoint, ten metres more than any vehicle; beyond them the widening's arithmetic overflows (a
+#: scene's ``shape_sigma`` of 1e-300 stopped the solve with an ``OverflowError``), and a detector offset's prior
+#: could no longer hold its variable.
+SHAPE_SIGMA_RANGE = (1e-4, 10.0)
 
 
 def detector_offset_prior(offset_key: int, sigma: float, vehicle_p_keypoints: np.ndarray,

@@ -40,3 +40,20 @@ def test_input_error_field_and_prefix():
     assert isinstance(err, InputError) and isinstance(err, ValueError)
     moved = err.within("cameras[1]")
     assert moved.field == "cameras[1].K" and str(moved) == "cameras[1].K: singular"
+
+
+def test_a_message_is_one_line_whatever_the_input_names_hold(tmp_path):
+    """A key of the user's file may hold a newline, a tab or a NUL (the long fuzzing profile drew a scene with a key
+    ``"\\n"``): the error writes such characters as escapes, so the CLI's message stays one line."""
+    import json
+
+    from vfactor.scene import load_scene
+
+    error = InputError("frames[0].a\nb", "unknown key\t\x00")
+    assert str(error) == "frames[0].a\\nb: unknown key\\t\\x00" and "\n" not in str(error)
+    assert str(error.within("scene")) == str(InputError("scene.frames[0].a\nb", "unknown key\t\x00"))
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps({"cameras": [], "frames": [], "\n": 1}))
+    with pytest.raises(SceneError) as raised:
+        load_scene(path)
+    assert "\n" not in str(raised.value) and "\\n" in str(raised.value)

@@ -52,13 +52,21 @@ def report():
 
 
 # ----------------------------------------------------------------------------- base inputs
-def _scene_dict(scenario: str, frames: int, seed: int) -> dict:
+def _scene_dict(scenario: str, frames: int, seed: int, detector: dict | None = None) -> dict:
+    """A simulated scene as its file holds it; ``detector``: fields every detection gets (a learnt detector's)."""
     sim = simulate(load_scenario(scenario), seed=seed, num_frames=frames)
-    return json.loads(json.dumps(scene_to_dict(sim.scene, base_dir=Path.cwd())))
+    data = json.loads(json.dumps(scene_to_dict(sim.scene, base_dir=Path.cwd())))
+    for frame in data["frames"]:
+        for detection in frame["detections"]:
+            detection.update(detector or {})
+    return data
 
 
+#: What the keypoint network's calibration gives each detection: its error of the shape and its bias (so that the
+#: mutations reach them too).
+NETWORK_FIELDS = {"shape_sigma": 0.046, "bias_sigma": [0.0137, 0.0116, 0.0125, 0.0302, 0.0072, 0.0288]}
 BASE_SCENE = _scene_dict("intersection_2cam", 1, 3)  # one frame, one vehicle, two cameras
-BASE_TRACK = _scene_dict("intersection_2cam_track", 3, 0)  # three frames of one track
+BASE_TRACK = _scene_dict("intersection_2cam_track", 3, 0, NETWORK_FIELDS)  # three frames of one track
 
 
 def _base_result_text() -> str:

@@ -27,9 +27,9 @@ class InputError(ValueError):
     """
 
     def __init__(self, field: str, problem: str):
-        self.field = field
-        self.problem = problem
-        super().__init__(f"{field}: {problem}" if field else problem)
+        self.field = _printable(str(field))  # a key or name from the input may hold a newline, a tab, a NUL
+        self.problem = _printable(str(problem))
+        super().__init__(f"{self.field}: {self.problem}" if self.field else self.problem)
 
     def within(self, prefix: str) -> "InputError":
         """Returns the same error with ``prefix`` put in front of its field path."""
@@ -37,6 +37,14 @@ class InputError(ValueError):
             return self
         field = f"{prefix}.{self.field}" if self.field and not self.field.startswith("[") else f"{prefix}{self.field}"
         return type(self)(field, self.problem)
+
+
+def _printable(text: str) -> str:
+    """``text`` with its unprintable characters (newline, tab, NUL, ...) written as escapes, so that a message is
+    one line whatever the input's keys and names hold."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
 
 
 class SceneError(InputError):

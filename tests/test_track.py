@@ -793,7 +793,8 @@ def test_an_absurd_shape_sigma_is_held_to_its_range_in_frames_and_tracks(shape_s
     out of the one-frame solve) or 1e300 m: held within ``SHAPE_SIGMA_RANGE``, every frame and track is solved with
     finite covariances, with and without the cameras' offsets in the estimate; only offsets as loose as ten metres
     may leave a track's pose undetermined, which is then reported ``failed``, never raised."""
-    from vfactor.graph import SHAPE_SIGMA_RANGE, detector_shape_sigmas, observations_from_detections
+    from vfactor.graph import (SHAPE_SIGMA_RANGE, detector_offset_prior, detector_shape_sigmas,
+                               observations_from_detections)
     from vfactor.solve import solve_vehicle
 
     sim = simulate(load_scenario("library_tracks_2cam"), seed=3, num_frames=8)
@@ -803,6 +804,9 @@ def test_an_absurd_shape_sigma_is_held_to_its_range_in_frames_and_tracks(shape_s
     frame = scene.frames[0]
     obs = observations_from_detections(frame.detections, scene.cameras)
     assert all(SHAPE_SIGMA_RANGE[0] <= s <= SHAPE_SIGMA_RANGE[1] for s in detector_shape_sigmas(obs).values())
+    truth = sim.truth[0][frame.vehicle_ids()[0]]  # a caller giving the prior a detection's raw shape_sigma
+    R = detector_offset_prior(0, shape_sigma, truth.wireframe.vehicle_p_keypoints).noiseModel().R()
+    assert np.all(np.isfinite(R)) and np.linalg.matrix_rank(R) == 6
     results = [solve_vehicle(frame.detections_of(vid), scene.cameras) for vid in frame.vehicle_ids()]
     runs = [results, *(f.vehicles for f in track_scene(scene).frames), *(f.vehicles for f in smooth_scene(scene))]
     for vehicles in runs:

@@ -496,12 +496,15 @@ def detector_offset_prior(offset_key: int, sigma: float, vehicle_p_keypoints: np
 
     Args:
         offset_key: key of the ``gtsam.Pose3`` offset.
-        sigma: metres on each keypoint coordinate.
+        sigma: metres on each keypoint coordinate, held within :data:`SHAPE_SIGMA_RANGE` (as
+            :func:`detector_shape_sigmas` holds it; this also serves callers that read a detection's
+            ``shape_sigma`` themselves, as ``vfactor.net.bias_error`` does).
         vehicle_p_keypoints: (12, 3) the track's keypoints (body frame, metres) when the offset is made.
         common_key: where the track has a common offset (the detector's bias, :func:`detector_bias_prior`), its
             key: the prior is then about that offset (a ``BetweenFactorPose3`` with the same noise: the camera's
             offset is the common one and the camera's own part).
     """
+    sigma = float(np.clip(sigma, *SHAPE_SIGMA_RANGE))
     p = np.asarray(vehicle_p_keypoints, dtype=float).reshape(12, 3)
     p = np.concatenate([p, p * [-1.0, -1.0, 1.0]])
     J = np.zeros((len(p), 3, 6))

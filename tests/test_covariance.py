@@ -88,6 +88,35 @@ def test_sandwich_covariance_sees_errors_larger_than_the_model_says():
     assert 0.8 * 4 < np.mean(sandwich) < 1.3 * 4
 
 
+def test_the_sandwich_takes_the_residuals_of_the_covariance_graphs_own_solution():
+    """A linear problem linearised away from its least-squares solution (as the covariance graph is at a solution the
+    solve reached with other weights): the widening is that of the graph's own solution, not of the point's
+    residuals, which carry the prior's pull."""
+    from vfactor.solve import _widened_by_residuals
+
+    rng = np.random.default_rng(3)
+    A, H, P = _regression(rng, n=12, m=5, prior=4.0)
+    noise = gtsam.noiseModel.Unit.Create(len(A))
+    prior = gtsam.noiseModel.Isotropic.Sigma(5, 0.5)
+    y = A @ rng.normal(size=5) + rng.normal(size=len(A))
+    x_star = P @ (A.T @ y)  # the graph's own solution (prior mean 0)
+
+    def linearised_at(x):  # factor 0 the observations, then the prior: residuals A x - y and x, at x + dx
+        graph = gtsam.GaussianFactorGraph()
+        graph.add(gtsam.JacobianFactor(0, A[:, :3], 1, A[:, 3:], y - A @ x, noise))
+        graph.add(gtsam.JacobianFactor(0, np.eye(5)[:, :3], 1, np.eye(5)[:, 3:], -x, prior))
+        return graph
+
+    widened = {}
+    for name, x in (("own", x_star), ("pulled", x_star - 0.8 * x_star)):  # the second held towards the prior mean
+        extras = {}
+        widened[name] = _widened_by_residuals(P, 1.0, linearised_at(x), 1.0, extras)
+        assert extras["covariance_widening"] >= 1.0
+    np.testing.assert_allclose(widened["pulled"], widened["own"], rtol=1e-9, atol=1e-12)
+    pulled_residuals = covariance_upper_bound(P, sandwich_covariance(P, A, y - A @ (0.2 * x_star)))[0]
+    assert not np.allclose(pulled_residuals, widened["own"], rtol=1e-3)  # what the solution's residuals gave
+
+
 def test_covariance_upper_bound_is_wider_than_both_and_the_least_such_in_the_model_frame():
     rng = np.random.default_rng(5)
     for _ in range(20):

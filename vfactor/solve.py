@@ -375,7 +375,7 @@ def solve_observations(
             joint = inflation * pose_shape_covariance(gtsam.Marginals(linear, estimate), keys)
             result.extras["covariance_inflation"] = inflation
             if options.estimate_noise and options.graph.covariance_sandwich_weight > 0:
-                joint = _widened_by_residuals(joint, inflation, linear.at(0), options.graph.covariance_sandwich_weight,
+                joint = _widened_by_residuals(joint, inflation, linear, options.graph.covariance_sandwich_weight,
                                               result.extras)
             shape_variance = detector_shape_variance(obs)
             if shape_variance > 0:  # the detectors' shape-like error, which no residual shows (item 6)
@@ -483,18 +483,24 @@ def detector_shape_variance(obs: KeypointObservations) -> float:
     return 1.0 / precision if precision > 0 else 0.0
 
 
-def _widened_by_residuals(joint: np.ndarray, inflation: float, projection: gtsam.GaussianFactor, weight: float,
+def _widened_by_residuals(joint: np.ndarray, inflation: float, linear: gtsam.GaussianFactorGraph, weight: float,
                           extras: dict) -> np.ndarray:
     """``joint`` (the model's (42, 42) covariance of pose and shape, times ``inflation``) widened where the residuals
     say the keypoints are off by more than it assumes: a covariance wider than both it and ``weight`` times the
-    sandwich of ``projection`` (the covariance graph's linearised projection factor; docs/factors.md, "Covariances",
-    item 5). Sets ``extras["covariance_widening"]``; ``joint`` as it is where the sandwich is not defined (a
-    numerically singular covariance)."""
+    sandwich of the covariance graph ``linear`` (linearised at the solution; factor 0 its projection factor;
+    docs/factors.md, "Covariances", item 5). The residuals are those the covariance graph's own least squares leaves
+    (one Gauss-Newton step from the solution), not the solution's: the solve weighs the shape prior and the bounds
+    otherwise (its own sigmas and robust loss), and the share of their pull that shows in the residuals is no
+    spread of the keypoints. Sets ``extras["covariance_widening"]``; ``joint`` as it is where the sandwich is not
+    defined (a numerically singular covariance)."""
+    projection = linear.at(0)
     jacobian, rhs = projection.jacobian()  # columns [pose, wheel, light, roof]
     try:
+        step = linear.optimize()
+        rhs = rhs - jacobian @ np.concatenate([step.at(key) for key in projection.keys()])
         sandwich = sandwich_covariance(joint / inflation, jacobian, rhs)
         widened, widening = covariance_upper_bound(joint, weight * sandwich)
-    except np.linalg.LinAlgError:
+    except (np.linalg.LinAlgError, RuntimeError):
         return joint
     if not np.all(np.isfinite(widened)):
         return joint

@@ -7,9 +7,11 @@ they are and once with their ``bias_sigma`` removed, and prints per method and p
 road plane, two without) the mean rotation and translation errors, the pose NEES (x 6) and the share of poses
 under the chi-square 95 % bound, and per body type the pose NEES.
 
-Run: ``python benchmarks/network_track_bias.py [--cache DIR] [--bias R P Y X Y Z] SCENARIO:SEED ...`` (about two
-minutes a scene to render and detect on two CPU cores; ``--cache`` keeps the detected scenes; ``--bias`` replaces
-the shipped calibration's bias_sigma, radians and metres). Needs torch and moderngl.
+Run: ``python benchmarks/network_track_bias.py [--cache DIR] [--bias R P Y X Y Z] SCENARIO:SEED ...
+[--runs without with]`` (about two minutes a scene to render and detect on two CPU cores; ``--cache`` keeps the detected
+scenes, which are given the shipped calibration's ``shape_sigma`` when read back; ``--bias`` replaces the shipped
+calibration's bias_sigma, radians and metres; ``--runs with`` tracks with the bias only). Needs torch and
+moderngl.
 """
 
 from __future__ import annotations
@@ -44,10 +46,15 @@ def detected_scene(spec: str, cache: Path | None):
     return sim, detected
 
 
-def with_bias(scene, bias):
-    """``scene`` with every detection that carries a ``shape_sigma`` (the network's) given ``bias`` (None: none)."""
-    frames = [dataclasses.replace(f, detections=[dataclasses.replace(d, bias_sigma=bias if d.shape_sigma else None)
-                                                 for d in f.detections]) for f in scene.frames]
+def with_bias(scene, bias, shape_sigma=None):
+    """``scene`` with every detection that carries a ``shape_sigma`` (the network's) given ``bias`` (None: none)
+    and, where given, ``shape_sigma`` (the calibration's: a cached scene keeps the one it was detected with)."""
+    def calibrated(d):
+        if not d.shape_sigma:
+            return dataclasses.replace(d, bias_sigma=None)
+        return dataclasses.replace(d, bias_sigma=bias, shape_sigma=shape_sigma or d.shape_sigma)
+
+    frames = [dataclasses.replace(f, detections=[calibrated(d) for d in f.detections]) for f in scene.frames]
     return dataclasses.replace(scene, frames=frames)
 
 
@@ -56,21 +63,24 @@ def main(argv=None) -> None:
     parser.add_argument("scenes", nargs="+", metavar="SCENARIO:SEED")
     parser.add_argument("--cache", type=Path, help="folder that keeps the detected scenes")
     parser.add_argument("--bias", type=float, nargs=6, metavar="S", help="bias_sigma to use (default: the shipped)")
+    parser.add_argument("--runs", nargs="+", choices=("without", "with"), default=["without", "with"],
+                        help="track without the bias, with it, or both (default)")
     args = parser.parse_args(argv)
-    if args.bias is None:
-        from vfactor.net.infer import KeypointDetector, default_weights_path
+    from vfactor.net.infer import KeypointDetector, default_weights_path
 
-        bias = KeypointDetector(default_weights_path()).calibration.bias_sigma
-    else:
-        bias = tuple(args.bias)
-    print(f"bias_sigma {bias}")
+    calibration = KeypointDetector(default_weights_path()).calibration
+    bias = calibration.bias_sigma if args.bias is None else tuple(args.bias)
+    shape_sigma = calibration.shape_sigma  # the shipped calibration's, also for scenes detected before it
+    print(f"bias_sigma {bias}, shape_sigma {shape_sigma}")
     rows: dict[tuple[str, str, str], list] = {}
     for spec in args.scenes:
         sim, detected = detected_scene(spec, args.cache)
         model = held_out_scene_model(sim)
         rig = "3 cameras, plane" if detected.ground_plane is not None else "2 cameras, no plane"
         for label, b in (("without", None), ("with", bias)):
-            scene = with_bias(detected, b)
+            if label not in args.runs:
+                continue
+            scene = with_bias(detected, b, shape_sigma)
             runs = {"isam2": track_scene(scene, TrackOptions(), prior=model).frames,
                     "isam2, 1 s lag": track_scene(scene, TrackOptions(lag=1.0), prior=model).frames,
                     "batch": smooth_scene(scene, TrackOptions(), prior=model)}

@@ -17,7 +17,13 @@ import pytest
 
 from vfactor.errors import SceneError
 from vfactor.evaluation import NOISE_LEVELS, noise_variant
-from vfactor.graph import observations_from_detections
+from vfactor.graph import (
+    SHAPE_SIGMA_REFERENCE_VOLUME,
+    GraphConfig,
+    detector_offset_prior,
+    observations_from_detections,
+    shape_sigma_at_size,
+)
 from vfactor.scene import load_scene, save_scene
 from vfactor.sim import load_scenario, simulate
 from vfactor.schema import validate
@@ -154,14 +160,38 @@ def test_a_detector_shape_error_round_trips_and_widens_only_the_shape(tmp_path):
     assert detector_shape_variance(observations_from_detections(frame.detections_of(vid), sim.scene.cameras,
                                                                 config)) == 0.0
     seen_by = [s for d, s in zip(dets, sigmas) if d.vehicle == vid and np.any(d.confidence > 0)]
-    variance = 1.0 / sum(s ** -2 for s in seen_by)
-    assert detector_shape_variance(obs) == pytest.approx(variance)
+    assert detector_shape_variance(obs) == pytest.approx(1.0 / sum(s ** -2 for s in seen_by))  # as given
+    points, exponent = widened.wireframe.vehicle_p_keypoints, config.shape_sigma_size_exponent
+    size = shape_sigma_at_size(1.0, points, exponent)  # each sigma at the vehicle's size
+    assert size != pytest.approx(1.0, abs=0.01) and exponent > 0
+    variance = 1.0 / sum((size * s) ** -2 for s in seen_by)
+    assert detector_shape_variance(obs, points, exponent) == pytest.approx(variance)
     assert widened.extras["detector_shape_sigma"] == pytest.approx(np.sqrt(variance))
     np.testing.assert_allclose(widened.keypoints_world, plain.keypoints_world, atol=1e-9)
     np.testing.assert_allclose(widened.pose_covariance, plain.pose_covariance, rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(widened.keypoint_covariances_world,
                                plain.keypoint_covariances_world + variance * np.eye(3), rtol=1e-9, atol=1e-12)
     assert np.all(widened.box.size_sigma > plain.box.size_sigma)
+
+
+def test_a_detector_shape_error_is_taken_at_the_vehicles_size():
+    """shape_sigma_at_size: as given at the reference volume of the keypoints' box or with exponent 0, times
+    (V / V0) ** exponent otherwise; a degenerate shape is held to a hundredth .. a hundred times V0."""
+    box = np.array([[x, y, z] for x in (0.0, 4.5) for y in (0.0, 1.6) for z in (0.0, 1.25)] * 2)[:12]
+    assert np.prod(np.ptp(box, axis=0)) == pytest.approx(SHAPE_SIGMA_REFERENCE_VOLUME)
+    assert shape_sigma_at_size(0.05, box, 1.5) == pytest.approx(0.05)
+    assert shape_sigma_at_size(0.05, box * 2.0, 0.0) == 0.05
+    assert shape_sigma_at_size(0.05, box * 2.0, 1.5) == pytest.approx(0.05 * 8.0 ** 1.5)
+    assert shape_sigma_at_size(0.05, box * [1.0, 1.0, 0.5], 1.0) == pytest.approx(0.025)
+    assert shape_sigma_at_size(0.05, np.zeros((12, 3)), 1.5) == pytest.approx(0.05 * 0.01 ** 1.5)
+    assert shape_sigma_at_size(0.05, np.full((12, 3), np.nan), 1.5) == pytest.approx(0.05)
+    # the tracks' offset prior takes its sigma at the size too: a car twice as large in every direction has the
+    # translation information of a sigma 8 ** 1.5 times larger
+    small, large = (detector_offset_prior(1, 0.05, p, size_exponent=1.5) for p in (box, box * 2.0))
+    info = lambda f: np.linalg.inv(f.noiseModel().covariance())  # noqa: E731
+    assert info(small)[3, 3] == pytest.approx(8.0 ** 3 * info(large)[3, 3])
+    with pytest.raises(ValueError, match="shape_sigma_size_exponent"):
+        GraphConfig(shape_sigma_size_exponent=-1.0)
 
 
 def test_each_keypoint_takes_its_own_covariance_or_the_confidence_sigma():

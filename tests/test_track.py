@@ -281,14 +281,14 @@ def test_a_segment_ended_by_a_jump_keeps_its_smoothed_estimates(sim):
 
 def _with_detector_offsets(sim, sigma: float, seed: int):
     """``sim``'s scene whose detections carry ``shape_sigma = sigma`` and err as the pose offsets model: each
-    camera sees the vehicle moved by its own fixed rigid motion (drawn from the offsets' prior, about sigma / 3.5
-    of shift and sigma / 5 m radians of turn) in every frame, on top of the simulator's independent pixel noise:
+    camera sees the vehicle moved by its own fixed rigid motion (drawn from the offsets' prior at the vehicle's
+    size, about sigma / 3.5 of shift and sigma / 5 m radians of turn at 9 m^3) in every frame, on top of the simulator's independent pixel noise:
     errors that repeat from frame to frame."""
-    from vfactor.graph import detector_offset_prior
+    from vfactor.graph import GraphConfig, detector_offset_prior
 
     rng = np.random.default_rng(seed)
     prior = detector_offset_prior(0, sigma, sim.truth[0][sim.scene.frames[0].detections[0].vehicle].wireframe
-                                  .vehicle_p_keypoints)
+                                  .vehicle_p_keypoints, size_exponent=GraphConfig().shape_sigma_size_exponent)
     R = prior.noiseModel().R()  # the prior's square-root information
     offsets = {name: gtsam.Pose3.Expmap(np.linalg.solve(R, rng.normal(size=6))) for name in sim.scene.cameras}
     return _seen_moved(sim, lambda d: offsets[d.camera], shape_sigma=sigma)

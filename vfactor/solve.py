@@ -377,7 +377,8 @@ def solve_observations(
             if options.estimate_noise and options.graph.covariance_sandwich_weight > 0:
                 joint = _widened_by_residuals(joint, inflation, linear, options.graph.covariance_sandwich_weight,
                                               result.extras)
-            shape_variance = detector_shape_variance(obs)
+            shape_variance = detector_shape_variance(obs, wireframe.vehicle_p_keypoints,
+                                                     options.graph.shape_sigma_size_exponent)
             if shape_variance > 0:  # the detectors' shape-like error, which no residual shows (item 6)
                 joint = joint + np.diag(np.r_[np.zeros(6), np.full(36, shape_variance)])
                 result.extras["detector_shape_sigma"] = float(np.sqrt(shape_variance))
@@ -471,15 +472,19 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
     return out, inflation
 
 
-def detector_shape_variance(obs: KeypointObservations) -> float:
+def detector_shape_variance(obs: KeypointObservations, vehicle_p_keypoints: np.ndarray | None = None,
+                            size_exponent: float = 0.0) -> float:
     """Variance (m^2, per axis of each body-frame keypoint) of a vehicle's shape from its detectors' errors shaped
     like a change of shape (``Detection.shape_sigma``; docs/factors.md, "Covariances", item 6).
 
     Each camera's detection errs by its own such error, and the fit averages the cameras' errors as it averages
     their views: ``1 / sum_c sigma_c^-2`` over the cameras whose detection has a ``shape_sigma`` (a camera's
-    largest, if its observations differ); 0 where none has.
+    largest, if its observations differ), each at the size of the vehicle whose keypoints are
+    ``vehicle_p_keypoints`` where given (:func:`vfactor.graph.shape_sigma_at_size` with ``size_exponent``); 0
+    where none has.
     """
-    precision = sum(sigma ** -2 for sigma in detector_shape_sigmas(obs).values())
+    sigmas = detector_shape_sigmas(obs, vehicle_p_keypoints, size_exponent)
+    precision = sum(sigma ** -2 for sigma in sigmas.values())
     return 1.0 / precision if precision > 0 else 0.0
 
 

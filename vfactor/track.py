@@ -583,7 +583,7 @@ class Tracker:
             if key is None or not (estimate.exists(key) or values.exists(key)):
                 shape = estimate if estimate.exists(self.keys.layer_keys(track.index)[0]) else values
                 key, prior = _new_offset(self.keys, track.index, len(track.offset_priors), sigma, shape, values,
-                                         common)
+                                         common, self.options.solve.graph)
                 track.offsets[name], track.offset_priors[key] = key, prior
                 if graph is not None:
                     graph.add(prior)
@@ -1376,16 +1376,16 @@ def smooth_scene(scene: Scene, options: TrackOptions = TrackOptions(), prior: Sh
 
 
 def _new_offset(keys: KeyScheme, index: int, number: int, sigma: float, shape: gtsam.Values,
-                values: gtsam.Values, common: int | None = None) -> tuple[int, gtsam.NonlinearFactor]:
+                values: gtsam.Values, common: int | None, config: GraphConfig) -> tuple[int, gtsam.NonlinearFactor]:
     """A new detector pose offset of one camera of track ``index`` (docs/factors.md, "The detector's pose offset
     in tracks"): its key (offset ``number``), the identity inserted in ``values``, and its prior made at the
-    track's keypoints in ``shape`` with the detections' ``shape_sigma`` ``sigma``: about the identity, or, where
-    the track has a common offset (its key ``common``), about that offset
-    (:func:`vfactor.graph.detector_offset_prior`)."""
+    track's keypoints in ``shape`` with the detections' ``shape_sigma`` ``sigma`` (taken at that shape's size,
+    ``config.shape_sigma_size_exponent``): about the identity, or, where the track has a common offset (its key
+    ``common``), about that offset (:func:`vfactor.graph.detector_offset_prior`)."""
     key = keys.offset_key(index, number)
     values.insert(key, gtsam.Pose3())
     return key, detector_offset_prior(key, sigma, wireframe_from_values(shape, keys, index).vehicle_p_keypoints,
-                                      common)
+                                      common, config.shape_sigma_size_exponent)
 
 
 def _new_common_offset(keys: KeyScheme, index: int, number: int, bias_sigma, values: gtsam.Values
@@ -1466,7 +1466,7 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         for name, sigma in detector_shape_sigmas(obs).items() if options.uses_detector_offsets else ():
             if name not in offsets:
                 offsets[name], offset_prior = _new_offset(keys, index, len(offsets), sigma, values, values,
-                                                          offsets.get(COMMON_OFFSET))
+                                                          offsets.get(COMMON_OFFSET), options.solve.graph)
                 graph.add(offset_prior)
         frame_offsets = _through_common(dict(offsets), obs, biased)
         first_factor = graph.size()
@@ -1569,7 +1569,8 @@ def _covariance_graph(factors: list, projections: list, estimate: gtsam.Values, 
                 if values is estimate:
                     values = gtsam.Values(estimate)
                 values.insert(considered[name], gtsam.Pose3())
-                out.add(detector_offset_prior(considered[name], sigma, points, common))
+                out.add(detector_offset_prior(considered[name], sigma, points, common,
+                                              config.shape_sigma_size_exponent))
             offsets[name] = considered[name]
         world_T_vehicle = estimate.atPose3(keys.pose_key(index, frame))
         residuals = whitened_residuals(obs, world_T_vehicle, points)

@@ -42,6 +42,30 @@ def test_the_fit_recovers_a_known_shape_error():
         fit_shape_sigma(synthetic_vehicles(0.05), upper=0.001)
 
 
+def test_the_fit_recovers_a_shape_error_that_grows_with_the_vehicle():
+    """Vehicles of three sizes whose shape error is ``sigma (V / V0) ** 1.5``: fitted with that law, ``sigma``
+    comes back and every size is consistent; one size for all leaves the small ones wide, the large ones narrow."""
+    from vfactor.graph import shape_sigma_at_size
+
+    box = np.array([[x, y, z] for x in (0.0, 4.5) for y in (0.0, 1.6) for z in (0.0, 1.25)] * 2)[:12]  # 9 m^3
+    rng = np.random.default_rng(1)
+    vehicles = []
+    for i, v in enumerate(synthetic_vehicles(0.0, n=600, seed=2)):
+        points = box * (0.8, 1.0, 1.3)[i % 3]
+        sigma = shape_sigma_at_size(0.04, points, 1.5)
+        true = v.covariance + sigma ** 2 / v.cameras * np.eye(3)
+        error = np.einsum("kij,kj->ki", np.linalg.cholesky(true), rng.normal(size=(12, 3)))
+        vehicles.append(VehicleErrors(error, v.covariance, v.cameras, "sedan", points))
+    assert fit_shape_sigma(vehicles, size_exponent=1.5) == pytest.approx(0.04, rel=0.1)
+    fitted = fit_shape_sigma(vehicles, size_exponent=1.5)
+    for scale in range(3):
+        group = [v for i, v in enumerate(vehicles) if i % 3 == scale]
+        assert np.mean(keypoint_nees_at(group, fitted, 1.5)) == pytest.approx(3.0, rel=0.15)
+    one_size = fit_shape_sigma(vehicles)  # the law ignored
+    small, large = ([v for i, v in enumerate(vehicles) if i % 3 == k] for k in (0, 2))
+    assert np.mean(keypoint_nees_at(small, one_size)) < 2.5 < 3.5 < np.mean(keypoint_nees_at(large, one_size))
+
+
 def test_calibrate_shape_command_fits_and_writes_and_the_pipeline_uses_it(tmp_path, capsys):
     weights = tmp_path / "keypoints.pt"
     shutil.copy(default_weights_path(), weights)

@@ -115,7 +115,8 @@ def measure_track_bias(sim, detected, config: GraphConfig = GraphConfig(),
                     values.insert(key, gtsam.Pose3())
                     if d.shape_sigma:  # the camera's own part, as a track's offsets have it
                         graph.add(detector_offset_prior(key, float(d.shape_sigma),
-                                                        truth.wireframe.vehicle_p_keypoints, common))
+                                                        truth.wireframe.vehicle_p_keypoints, common,
+                                                        config.shape_sigma_size_exponent))
                     else:
                         graph.add(gtsam.BetweenFactorPose3(common, key, gtsam.Pose3(), _HELD))
             obs = observations_from_detections(detections, detected.cameras, config)

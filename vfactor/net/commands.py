@@ -539,21 +539,27 @@ def run_calibrate_shape(args: argparse.Namespace) -> int:
 
     from vfactor.errors import ScenarioError  # noqa: PLC0415
     from vfactor.net.calibrate import METADATA_KEY, write_calibration  # noqa: PLC0415
+    from vfactor.graph import SHAPE_SIGMA_REFERENCE_VOLUME  # noqa: PLC0415
     from vfactor.net.shape_error import fit_shape_sigma, keypoint_nees_at, measure_vehicles  # noqa: PLC0415
+    from vfactor.solve import SolveOptions  # noqa: PLC0415
     from vfactor.vehicle_library import BODY_TYPES  # noqa: PLC0415
 
     weights, detector, seeds = _calibrated_detector(args)
+    options = SolveOptions()
+    exponent = options.graph.shape_sigma_size_exponent  # the error at the reference size, taken at each vehicle's
     try:
-        vehicles = measure_vehicles(args.scenario, seeds, detector, frames=args.frames)
+        vehicles = measure_vehicles(args.scenario, seeds, detector, options, frames=args.frames)
     except ScenarioError as exc:
         raise InputError("--scenario", str(exc)) from None
     try:
-        sigma = fit_shape_sigma(vehicles)
+        sigma = fit_shape_sigma(vehicles, size_exponent=exponent)
     except ValueError as exc:
         raise InputError("--scenario", str(exc)) from None
     print(f"{args.scenario} seeds {seeds[0]}-{seeds[-1]}: {len(vehicles)} vehicles solved from the network's "
-          f"keypoints; shape_sigma {sigma:.4f} m per detection (keypoint NEES: consistent 3, 95 % under 7.81)\n")
-    before, after = keypoint_nees_at(vehicles, 0.0), keypoint_nees_at(vehicles, sigma)
+          f"keypoints; shape_sigma {sigma:.4f} m per detection at a keypoint box of {SHAPE_SIGMA_REFERENCE_VOLUME:g} "
+          f"m^3, times (volume / {SHAPE_SIGMA_REFERENCE_VOLUME:g} m^3) ** {exponent:g} (keypoint NEES: consistent 3, "
+          "95 % under 7.81)\n")
+    before, after = keypoint_nees_at(vehicles, 0.0), keypoint_nees_at(vehicles, sigma, exponent)
     classes = [c for c in (*BODY_TYPES, "pascal3d") if any(v.body_type == c for v in vehicles)]
     rows = []
     for name in classes + ["all"]:

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vfactor.evaluation import body_type_of, solve_held_out
-from vfactor.graph import observations_from_detections
+from vfactor.graph import observations_from_detections, shape_sigma_at_size
 from vfactor.net.end_to_end import render_and_detect
 from vfactor.solve import SolveOptions
 
@@ -45,12 +45,15 @@ class VehicleErrors:
         covariance: (12, 3, 3) the result's world keypoint covariances without a shape error, m^2.
         cameras: how many cameras saw the vehicle.
         body_type: the truth's body type (or ``"pascal3d"``).
+        vehicle_p_keypoints: (12, 3) the solution's keypoints (body frame, metres): the size the detector's error
+            is taken at (:func:`vfactor.graph.shape_sigma_at_size`); None: the reference size.
     """
 
     error: np.ndarray
     covariance: np.ndarray
     cameras: int
     body_type: str
+    vehicle_p_keypoints: np.ndarray | None = None
 
 
 def measure_vehicles(scenario: str, seeds, detector=None, options: SolveOptions = SolveOptions(),
@@ -84,23 +87,29 @@ def measure_vehicles(scenario: str, seeds, detector=None, options: SolveOptions 
                     continue
                 out.append(VehicleErrors(np.asarray(result.keypoints_world) - np.asarray(truth.keypoints_world),
                                          np.asarray(result.keypoint_covariances_world),
-                                         len({d.camera for d in detections}), body_type_of(truth.preset)))
+                                         len({d.camera for d in detections}), body_type_of(truth.preset),
+                                         np.asarray(result.wireframe.vehicle_p_keypoints)))
     return out
 
 
-def keypoint_nees_at(vehicles: list[VehicleErrors], shape_sigma: float) -> np.ndarray:
+def keypoint_nees_at(vehicles: list[VehicleErrors], shape_sigma: float, size_exponent: float = 0.0) -> np.ndarray:
     """(N, 12) keypoint NEES of each vehicle with its covariances widened by a detector shape error of
-    ``shape_sigma`` metres per camera (``shape_sigma^2 / cameras`` per axis)."""
+    ``shape_sigma`` metres per camera at the reference size, taken at each vehicle's size with ``size_exponent``
+    (:func:`vfactor.graph.shape_sigma_at_size`; ``sigma^2 / cameras`` per axis)."""
     if not vehicles:
         return np.zeros((0, 12))
     error = np.stack([v.error for v in vehicles])
     cameras = np.array([max(v.cameras, 1) for v in vehicles], dtype=float)
-    widened = np.stack([v.covariance for v in vehicles]) + (shape_sigma ** 2 / cameras)[:, None, None, None] * np.eye(3)
+    sigma = np.array([shape_sigma if v.vehicle_p_keypoints is None
+                      else shape_sigma_at_size(shape_sigma, v.vehicle_p_keypoints, size_exponent) for v in vehicles])
+    widened = np.stack([v.covariance for v in vehicles]) + (sigma ** 2 / cameras)[:, None, None, None] * np.eye(3)
     return np.einsum("nki,nki->nk", error, np.linalg.solve(widened, error[..., None])[..., 0])
 
 
-def fit_shape_sigma(vehicles: list[VehicleErrors], target: float = 3.0, upper: float = 1.0) -> float:
-    """The detector shape error (metres) that gives the vehicles' keypoints a mean NEES of ``target``.
+def fit_shape_sigma(vehicles: list[VehicleErrors], target: float = 3.0, upper: float = 1.0,
+                    size_exponent: float = 0.0) -> float:
+    """The detector shape error (metres, at the reference size; each vehicle's taken at its size with
+    ``size_exponent``, :func:`keypoint_nees_at`) that gives the vehicles' keypoints a mean NEES of ``target``.
 
     The mean NEES falls as the shape error grows, so the root is found by bisection in ``[0, upper]``; 0 where the
     keypoints are already consistent or too wide (mean NEES at most ``target`` without a shape error).
@@ -110,7 +119,7 @@ def fit_shape_sigma(vehicles: list[VehicleErrors], target: float = 3.0, upper: f
     """
     if not vehicles:
         raise ValueError("fit_shape_sigma: no solved vehicles to fit on")
-    mean = lambda s: float(np.mean(keypoint_nees_at(vehicles, s)))  # noqa: E731
+    mean = lambda s: float(np.mean(keypoint_nees_at(vehicles, s, size_exponent)))  # noqa: E731
     if mean(0.0) <= target:
         return 0.0
     if mean(upper) > target:

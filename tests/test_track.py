@@ -282,8 +282,8 @@ def test_a_segment_ended_by_a_jump_keeps_its_smoothed_estimates(sim):
 def _with_detector_offsets(sim, sigma: float, seed: int):
     """``sim``'s scene whose detections carry ``shape_sigma = sigma`` and err as the pose offsets model: each
     camera sees the vehicle moved by its own fixed rigid motion (drawn from the offsets' prior at the vehicle's
-    size, about sigma / 3.5 of shift and sigma / 5 m radians of turn at 9 m^3) in every frame, on top of the simulator's independent pixel noise:
-    errors that repeat from frame to frame."""
+    size, about sigma / 3.5 of shift and sigma / 5 m radians of turn at 9 m^3) in every frame, on top of the
+    simulator's independent pixel noise: errors that repeat from frame to frame."""
     from vfactor.graph import GraphConfig, detector_offset_prior
 
     rng = np.random.default_rng(seed)

@@ -176,20 +176,21 @@ def test_a_detector_shape_error_round_trips_and_widens_only_the_shape(tmp_path):
 
 def test_a_detector_shape_error_is_taken_at_the_vehicles_size():
     """shape_sigma_at_size: as given at the reference volume of the keypoints' box or with exponent 0, times
-    (V / V0) ** exponent otherwise; a degenerate shape is held to a hundredth .. a hundred times V0."""
+    (V / V0) ** exponent otherwise; a degenerate shape is held to a quarter .. four times V0."""
     box = np.array([[x, y, z] for x in (0.0, 4.5) for y in (0.0, 1.6) for z in (0.0, 1.25)] * 2)[:12]
     assert np.prod(np.ptp(box, axis=0)) == pytest.approx(SHAPE_SIGMA_REFERENCE_VOLUME)
     assert shape_sigma_at_size(0.05, box, 1.5) == pytest.approx(0.05)
     assert shape_sigma_at_size(0.05, box * 2.0, 0.0) == 0.05
-    assert shape_sigma_at_size(0.05, box * 2.0, 1.5) == pytest.approx(0.05 * 8.0 ** 1.5)
+    assert shape_sigma_at_size(0.05, box * 1.5, 1.5) == pytest.approx(0.05 * 3.375 ** 1.5)
     assert shape_sigma_at_size(0.05, box * [1.0, 1.0, 0.5], 1.0) == pytest.approx(0.025)
-    assert shape_sigma_at_size(0.05, np.zeros((12, 3)), 1.5) == pytest.approx(0.05 * 0.01 ** 1.5)
+    assert shape_sigma_at_size(0.05, np.zeros((12, 3)), 1.5) == pytest.approx(0.05 * 0.25 ** 1.5)
+    assert shape_sigma_at_size(0.05, box * 3.0, 1.5) == pytest.approx(0.05 * 4.0 ** 1.5)
     assert shape_sigma_at_size(0.05, np.full((12, 3), np.nan), 1.5) == pytest.approx(0.05)
-    # the tracks' offset prior takes its sigma at the size too: a car twice as large in every direction has the
-    # translation information of a sigma 8 ** 1.5 times larger
-    small, large = (detector_offset_prior(1, 0.05, p, size_exponent=1.5) for p in (box, box * 2.0))
+    # the tracks' offset prior takes its sigma at the size too: a car 1.5 times as large in every direction has the
+    # translation information of a sigma 3.375 ** 1.5 times larger
+    small, large = (detector_offset_prior(1, 0.05, p, size_exponent=1.5) for p in (box, box * 1.5))
     info = lambda f: np.linalg.inv(f.noiseModel().covariance())  # noqa: E731
-    assert info(small)[3, 3] == pytest.approx(8.0 ** 3 * info(large)[3, 3])
+    assert info(small)[3, 3] == pytest.approx(3.375 ** 3 * info(large)[3, 3])
     with pytest.raises(ValueError, match="shape_sigma_size_exponent"):
         GraphConfig(shape_sigma_size_exponent=-1.0)
 

@@ -499,17 +499,21 @@ def detector_shape_sigmas(observations: KeypointObservations, vehicle_p_keypoint
 SHAPE_SIGMA_REFERENCE_VOLUME = 9.0
 
 
+_SIZE_RATIO_RANGE = (0.25, 4.0)  # of the keypoints' box volume to SHAPE_SIGMA_REFERENCE_VOLUME
+
+
 def shape_sigma_at_size(sigma: float, vehicle_p_keypoints: np.ndarray, exponent: float) -> float:
     """A detection's ``shape_sigma`` (metres) for the vehicle whose keypoints are ``vehicle_p_keypoints``
     ((12, 3), body frame, metres): ``sigma (V / V0) ** exponent``, ``V`` the volume of the box the keypoints span
     and ``V0`` :data:`SHAPE_SIGMA_REFERENCE_VOLUME`. A learnt detector errs on a vehicle it knows less well by
     more: the shipped network's error of the shape on vans and pickups is two to three times that on hatchbacks
-    and sedans (``GraphConfig.shape_sigma_size_exponent``). ``V`` is held within a hundredth and a hundred times
-    ``V0`` (a degenerate shape neither zeroes nor explodes the error)."""
+    and sedans (``GraphConfig.shape_sigma_size_exponent``). ``V`` is held within a quarter and four times ``V0``
+    (2.25-36 m^3: the library's vehicles span 5.4-20.4 m^3), so that a degenerate shape neither zeroes nor
+    explodes the error; one that is not finite is taken at ``V0``."""
     if not exponent:
         return float(sigma)
     extent = np.ptp(np.asarray(vehicle_p_keypoints, dtype=float).reshape(12, 3), axis=0)
-    ratio = float(np.clip(np.prod(extent) / SHAPE_SIGMA_REFERENCE_VOLUME, 0.01, 100.0)) if np.all(
+    ratio = float(np.clip(np.prod(extent) / SHAPE_SIGMA_REFERENCE_VOLUME, *_SIZE_RATIO_RANGE)) if np.all(
         np.isfinite(extent)) else 1.0
     return float(sigma) * ratio ** float(exponent)
 

@@ -538,8 +538,8 @@ def run_calibrate_shape(args: argparse.Namespace) -> int:
     from dataclasses import replace  # noqa: PLC0415
 
     from vfactor.errors import ScenarioError  # noqa: PLC0415
-    from vfactor.net.calibrate import METADATA_KEY, write_calibration  # noqa: PLC0415
     from vfactor.graph import SHAPE_SIGMA_REFERENCE_VOLUME  # noqa: PLC0415
+    from vfactor.net.calibrate import METADATA_KEY, write_calibration  # noqa: PLC0415
     from vfactor.net.shape_error import fit_shape_sigma, keypoint_nees_at, measure_vehicles  # noqa: PLC0415
     from vfactor.solve import SolveOptions  # noqa: PLC0415
     from vfactor.vehicle_library import BODY_TYPES  # noqa: PLC0415

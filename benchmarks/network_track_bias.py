@@ -7,8 +7,8 @@ they are and once with their ``bias_sigma`` removed, and prints per method and p
 road plane, two without) the mean rotation and translation errors, the pose NEES (x 6) and the share of poses
 under the chi-square 95 % bound, and per body type the pose NEES.
 
-Run: ``python benchmarks/network_track_bias.py [--cache DIR] [--bias R P Y X Y Z] SCENARIO:SEED ...
-[--runs without with]`` (about two minutes a scene to render and detect on two CPU cores; ``--cache`` keeps the detected
+Run: ``python benchmarks/network_track_bias.py [--cache DIR] [--bias R P Y X Y Z] [--runs with] SCENARIO:SEED
+...`` (about two minutes a scene to render and detect on two CPU cores; ``--cache`` keeps the detected
 scenes, which are given the shipped calibration's ``shape_sigma`` when read back; ``--bias`` replaces the shipped
 calibration's bias_sigma, radians and metres; ``--runs with`` tracks with the bias only). Needs torch and
 moderngl.
@@ -63,7 +63,7 @@ def main(argv=None) -> None:
     parser.add_argument("scenes", nargs="+", metavar="SCENARIO:SEED")
     parser.add_argument("--cache", type=Path, help="folder that keeps the detected scenes")
     parser.add_argument("--bias", type=float, nargs=6, metavar="S", help="bias_sigma to use (default: the shipped)")
-    parser.add_argument("--runs", nargs="+", choices=("without", "with"), default=["without", "with"],
+    parser.add_argument("--runs", choices=("without", "with", "both"), default="both",
                         help="track without the bias, with it, or both (default)")
     args = parser.parse_args(argv)
     from vfactor.net.infer import KeypointDetector, default_weights_path
@@ -78,7 +78,7 @@ def main(argv=None) -> None:
         model = held_out_scene_model(sim)
         rig = "3 cameras, plane" if detected.ground_plane is not None else "2 cameras, no plane"
         for label, b in (("without", None), ("with", bias)):
-            if label not in args.runs:
+            if args.runs not in (label, "both"):
                 continue
             scene = with_bias(detected, b, shape_sigma)
             runs = {"isam2": track_scene(scene, TrackOptions(), prior=model).frames,

@@ -11,9 +11,9 @@ from vfactor.baselines import known_shape
 from vfactor.errors import SceneError
 from vfactor.evaluation import NOISE_LEVELS, held_out_model, noise_variant
 from vfactor.graph import observations_from_detections
-from vfactor.keypoints import LEFT_RIGHT_PAIRS, MIRROR_PERMUTATION
-from vfactor.label_swaps import (SWAP_MARGIN, SwapFinding, apply_swaps, merge_findings, relabel_swaps,
-                                 suspect_pairs, swapped_rows)
+from vfactor.keypoints import LEFT_RIGHT_PAIRS, MIRROR_PERMUTATION, TURN_PERMUTATION
+from vfactor.label_swaps import (SWAP_MARGIN, TURN_MIN_KEYPOINTS, SwapFinding, apply_swaps, merge_findings,
+                                 relabel_swaps, suspect_pairs, swapped_rows, turn_cameras, turned_cameras)
 from vfactor.metrics import pose_errors
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.result import FrameResult
@@ -75,6 +75,37 @@ def test_a_swapped_pair_is_found_at_the_true_pose_and_relabelled(sim):
     # the labels as given: nothing to swap, the observations themselves come back
     same, none = relabel_swaps(right, pose, points, SolveOptions().graph.loss)
     assert same is right and none == []
+
+
+def _turned(detection: Detection) -> Detection:
+    """The detection as a detector that read the vehicle's front as its back gives it: every keypoint under the label
+    of the one diagonally across."""
+    covariance = None if detection.covariance is None else detection.covariance[TURN_PERMUTATION].copy()
+    return dataclasses.replace(detection, keypoints=detection.keypoints[TURN_PERMUTATION].copy(),
+                               confidence=detection.confidence[TURN_PERMUTATION].copy(), covariance=covariance)
+
+
+def test_a_camera_turned_round_is_found_at_the_true_pose_and_relabelled(sim):
+    """turned_cameras names the camera whose keypoints are labelled as the vehicle turned by half a turn, at the true
+    pose; turn_cameras relabels its rows back (the pixels kept); labels as given, or too few keypoints, name none."""
+    loss = SolveOptions().graph.loss
+    for f in range(3):
+        frame, truth = sim.scene.frames[f], sim.truth[f]
+        vid = frame.vehicle_ids()[0]
+        detections = [d for d in frame.detections_of(vid) if np.count_nonzero(d.confidence > 0) >= TURN_MIN_KEYPOINTS]
+        pose, points = truth[vid].world_T_vehicle, truth[vid].wireframe.vehicle_p_keypoints
+        right = observations_from_detections(detections, sim.scene.cameras)
+        assert turned_cameras(right, pose, points, loss) == []
+        confused = observations_from_detections([_turned(detections[0]), *detections[1:]], sim.scene.cameras)
+        assert turned_cameras(confused, pose, points, loss) == [detections[0].camera]
+        back = turn_cameras(confused, [detections[0].camera])
+        order = np.lexsort((back.keypoint_index, back.camera_index))
+        expected = np.lexsort((right.keypoint_index, right.camera_index))
+        np.testing.assert_array_equal(back.uv[order], right.uv[expected])
+        assert turn_cameras(confused, []) is confused
+        first = np.flatnonzero(confused.camera_index == confused.camera_index[0])
+        few = confused.subset(first[:TURN_MIN_KEYPOINTS - 1])
+        assert turned_cameras(few, pose, points, loss) == []
 
 
 def test_a_lone_keypoint_under_its_partners_label_is_relabelled(sim):

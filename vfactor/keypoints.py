@@ -17,6 +17,7 @@ __all__ = [
     "LAYERS",
     "LEFT_RIGHT_PAIRS",
     "MIRROR_PERMUTATION",
+    "TURN_PERMUTATION",
     "WIREFRAME_EDGES",
     "layer_of",
 ]
@@ -56,6 +57,12 @@ LEFT_RIGHT_PAIRS: tuple[tuple[int, int], ...] = ((0, 1), (2, 3), (4, 5), (6, 7),
 #: ``points[MIRROR_PERMUTATION]`` swaps every left keypoint with its right partner.
 MIRROR_PERMUTATION: np.ndarray = np.array([1, 0, 3, 2, 5, 4, 7, 6, 9, 8, 11, 10])
 MIRROR_PERMUTATION.setflags(write=False)
+
+#: ``labels[TURN_PERMUTATION]`` relabels the keypoints of a vehicle turned by half a turn about its z axis: each
+#: keypoint takes the label of the one diagonally across (left front <-> right back), as a detector that reads the
+#: vehicle's front as its back labels them.
+TURN_PERMUTATION: np.ndarray = np.array([3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8])
+TURN_PERMUTATION.setflags(write=False)
 
 
 #: Edges drawn between keypoints: each layer's quadrilateral, then the struts

@@ -38,10 +38,10 @@ import numpy as np
 from vfactor.errors import SceneError
 from vfactor.factors.projection import KeypointObservations, whitened_residuals
 from vfactor.factors.robust import RobustLoss
-from vfactor.keypoints import LEFT_RIGHT_PAIRS, MIRROR_PERMUTATION
+from vfactor.keypoints import LEFT_RIGHT_PAIRS, MIRROR_PERMUTATION, TURN_PERMUTATION
 
 __all__ = ["SWAP_MARGIN", "SwapFinding", "relabel_swaps", "apply_swaps", "suspect_pairs", "swapped_rows",
-           "merge_findings"]
+           "merge_findings", "TURN_COST_RATIO", "TURN_MIN_KEYPOINTS", "turned_cameras", "turn_cameras"]
 
 #: A pair is swapped when its swapped labels' robust cost is at least this much lower (the units of the cost,
 #: ``rho`` of the whitened residuals: a negative log-likelihood), about the log odds of a 5 % swap rate.
@@ -198,3 +198,48 @@ def merge_findings(first: list[SwapFinding], then: list[SwapFinding]) -> list[Sw
         if merged.pop((finding.camera, finding.pair), None) is None:
             merged[(finding.camera, finding.pair)] = finding
     return list(merged.values())
+
+
+#: A camera's keypoints are taken as turned by half a turn (:func:`turned_cameras`) where, so relabelled, they cost at
+#: most this share of their cost as labelled (the tracker's test for a jump, ``vfactor.track._JUMP_COST_RATIO``)...
+TURN_COST_RATIO = 0.25
+#: ... and at least this many keypoints of the camera were seen: fewer, and a half turn of a few points is no sign.
+TURN_MIN_KEYPOINTS = 6
+
+
+def turned_cameras(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehicle_p_keypoints: np.ndarray,
+                   loss: RobustLoss, ratio: float = TURN_COST_RATIO) -> list[str]:
+    """The cameras whose keypoints ``world_T_vehicle`` and the shape say are labelled as a vehicle turned by half a
+    turn: a detector that read the vehicle's front as its back (and so its left as its right).
+
+    A learnt detector that sees a vehicle nearly end-on may take its back for its front: every keypoint then has the
+    label of the one diagonally across (:data:`~vfactor.keypoints.TURN_PERMUTATION`), and the pose of those labels
+    alone is the vehicle turned round in place. Given a pose known otherwise (a track's prediction), a camera whose
+    keypoints, so relabelled, cost at most ``ratio`` of their cost as labelled (robust cost, ``sum rho(|e|)``), and
+    at least :data:`SWAP_MARGIN` less, with at least :data:`TURN_MIN_KEYPOINTS` keypoints, is one.
+
+    Returns:
+        the names of those cameras, in the observations' camera order (empty where none is).
+    """
+    if len(obs) == 0:
+        return []
+    turned = obs.relabelled(TURN_PERMUTATION[obs.keypoint_index])
+    as_given = loss.rho(np.linalg.norm(whitened_residuals(obs, world_T_vehicle, vehicle_p_keypoints), axis=1))
+    as_turned = loss.rho(np.linalg.norm(whitened_residuals(turned, world_T_vehicle, vehicle_p_keypoints), axis=1))
+    out = []
+    for c in np.unique(obs.camera_index):
+        rows = obs.camera_index == c
+        given, turn = float(as_given[rows].sum()), float(as_turned[rows].sum())
+        if rows.sum() >= TURN_MIN_KEYPOINTS and turn <= ratio * given and given - turn >= SWAP_MARGIN:
+            out.append(obs.cameras[int(c)].name)
+    return out
+
+
+def turn_cameras(obs: KeypointObservations, cameras: list[str]) -> KeypointObservations:
+    """The observations with the keypoints of ``cameras`` (names) relabelled by half a turn (:func:`turned_cameras`);
+    every pixel, sigma and window kept with its row; ``obs`` itself where ``cameras`` is empty."""
+    if not cameras:
+        return obs
+    names = [camera.name for camera in obs.cameras]
+    rows = np.isin(obs.camera_index, [names.index(name) for name in cameras if name in names])
+    return obs.relabelled(np.where(rows, TURN_PERMUTATION[obs.keypoint_index], obs.keypoint_index))

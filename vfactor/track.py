@@ -58,7 +58,7 @@ from vfactor.graph import (
 )
 from vfactor.init import StartSearch, best_candidates, cross_projection_cost
 from vfactor.keys import KeyScheme
-from vfactor.label_swaps import apply_swaps, relabel_swaps
+from vfactor.label_swaps import apply_swaps, relabel_swaps, turn_cameras, turned_cameras
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.parallel import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
@@ -213,6 +213,10 @@ _START_COST_RATIO = 0.5
 _REJOIN_COST_RATIO = 2.0
 #: ... and only a track of at least this many poses (Tracker._rejoined).
 _REJOIN_POSES = 5
+#: A frame's keypoints that say the vehicle faces the other way are relabelled by half a turn (Tracker._turned) only
+#: where the track drives forwards at least this fast, m/s (a vehicle in traffic does not reverse at walking pace):
+#: slower, its heading is not its direction of travel, and the track's own heading may be the turned one.
+_TURN_MIN_SPEED = 2.0
 #: A frame after a jump resumes the segment the jump ended (Tracker._resume) where that segment's prediction
 #: explains it at under this share of the cost at the new segment's.
 _RESUME_COST_RATIO = 0.5
@@ -938,11 +942,18 @@ class Tracker:
         estimate = track.smoother.calculateEstimate()
         wireframe = self._wireframe(estimate, track)
         guess = self._predict(track.poses, estimate, t)
+        loss = options.graph.loss
+        key = self.keys.pose_key(track.index, frame_index)
+        # a camera whose detector read the vehicle's front as its back: its keypoints relabelled by half a turn before
+        # the prediction is judged, where the track drives forwards (a vehicle does not turn round in one frame)
+        turned = self._turned(track, obs, guess, estimate, wireframe)
+        if turned:
+            raw, obs = turn_cameras(raw, turned), turn_cameras(obs, turned)
+            track.notes[key] = (f"the keypoints of camera(s) {', '.join(repr(n) for n in turned)} are those of the "
+                                "vehicle turned round (the detector read its front as its back): relabelled")
         # a poor prediction (a long gap, a sharp manoeuvre) is replaced by the best PnP/triangulation start, one beyond
         # the jump gate only where it explains the keypoints clearly better (_START_COST_RATIO) and they are enough
         # for a frame alone
-        loss = options.graph.loss
-        key = self.keys.pose_key(track.index, frame_index)
         kept = None
         few = fixed_by_motion and len(obs) < options.min_observations  # fewer keypoints than a frame needs alone
         if few:
@@ -991,7 +1002,7 @@ class Tracker:
                 if not jump or (not few and starts[0].cost < _START_COST_RATIO * predicted_cost):
                     guess = starts[0].world_T_vehicle
         # the keypoints the track takes (those the gate kept): their sigmas sized by the vehicle where it is taken to be
-        raw = sized_observations(detections, self.cameras, options.graph, guess, wireframe)
+        raw = turn_cameras(sized_observations(detections, self.cameras, options.graph, guess, wireframe), turned)
         if kept is not None:
             raw = raw.subset(kept)
         obs = raw.scaled_above_calibrated(track.noise_scale)
@@ -1024,6 +1035,21 @@ class Tracker:
                 # can no longer be re-solved whole (and a stream's memory stays bounded)
                 track.young, track.young_frames = False, []
         return self._finish(track, key, t)
+
+    def _turned(self, track: _TrackState, obs: KeypointObservations, guess: gtsam.Pose3, estimate: gtsam.Values,
+                wireframe: Wireframe) -> list[str]:
+        """The cameras whose keypoints are those of the vehicle turned round at the prediction ``guess``
+        (:func:`vfactor.label_swaps.turned_cameras`), asked only where the track's last two poses drive forwards at
+        :data:`_TURN_MIN_SPEED` or faster: there the track's heading is its direction of travel, and a frame whose
+        keypoints say the vehicle faces the other way is the detector's error."""
+        if len(track.poses) < 2:
+            return []
+        (_, t0, k0), (_, t1, k1) = track.poses[-2:]
+        world_T_vehicle = estimate.atPose3(k1)
+        moved = world_T_vehicle.translation() - estimate.atPose3(k0).translation()
+        if not t1 > t0 or world_T_vehicle.rotation().unrotate(moved)[0] / (t1 - t0) < _TURN_MIN_SPEED:
+            return []
+        return turned_cameras(obs, guess, wireframe.vehicle_p_keypoints, self.options.solve.graph.loss)
 
     def _gated(self, track: _TrackState, key: int, obs: KeypointObservations, guess: gtsam.Pose3,
                wireframe: Wireframe) -> np.ndarray | None:

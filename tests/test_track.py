@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from vfactor.errors import InputError
+from vfactor.graph import observations_from_detections
 from vfactor.metrics import pose_errors
 from vfactor.observations import Detection, Frame, Scene
 from vfactor.result import Status
@@ -333,9 +334,13 @@ def test_detector_offsets_model_errors_that_repeat_from_frame_to_frame(sim):
     plain = track_scene(unaware, TrackOptions(detector_offsets=False))
     assert _mean_nees(truth, plain.frames) > 3 * 6  # the repeated errors counted as new in every frame
     (rotation_plain, _), _ = mean_errors(truth, plain.frames)
-    considered = track_scene(scene, TrackOptions(detector_offsets=False)).frames
+    considered_run = track_scene(scene, TrackOptions(detector_offsets=False))
+    considered = considered_run.frames
     for frames in (considered, smooth_scene(scene, TrackOptions(detector_offsets=False))):
         assert 0.4 * 6 < _mean_nees(truth, frames) < 1.5 * 6
+    # the online (filtered) covariances consider them too, frame by frame (track._considered_offsets)
+    assert _mean_nees(truth, plain.online) > 3 * 6
+    assert 0.4 * 6 < _mean_nees(truth, considered_run.online) < 1.5 * 6
     for a, b in zip(plain.frames, considered):  # the estimate is the unaware track's
         for u, v in zip(a.vehicles, b.vehicles):
             np.testing.assert_allclose(u.world_T_vehicle.matrix(), v.world_T_vehicle.matrix(), atol=1e-9)
@@ -347,6 +352,33 @@ def test_detector_offsets_model_errors_that_repeat_from_frame_to_frame(sim):
         assert 0.4 * 6 < _mean_nees(truth, frames) < 1.5 * 6
         (rotation, translation), _ = mean_errors(truth, frames)
         assert rotation < rotation_plain and translation < 5.0
+
+
+def test_the_online_covariance_adds_each_unestimated_offset_through_its_cameras_share(sim):
+    """track._considered_offsets: one camera alone moves the pose by its whole offset (the term is the offset
+    prior's covariance); with two, each by its share of the frame's pose information, the terms adding up; a
+    camera whose offset the track estimates, or without a shape_sigma, adds nothing."""
+    from vfactor.graph import GraphConfig, detector_offset_prior
+    from vfactor.track import _considered_offsets
+
+    config = GraphConfig()
+    frame, truth = sim.scene.frames[0], sim.truth[0]
+    vid = frame.vehicle_ids()[0]
+    detections = [dataclasses.replace(d, shape_sigma=0.04) for d in frame.detections_of(vid)]
+    assert len(detections) == 2
+    pose, wireframe = truth[vid].world_T_vehicle, truth[vid].wireframe
+    obs = observations_from_detections(detections, sim.scene.cameras, config)
+    prior = detector_offset_prior(0, 0.04, wireframe.vehicle_p_keypoints,
+                                  size_exponent=config.shape_sigma_size_exponent).noiseModel().covariance()
+    alone = observations_from_detections(detections[:1], sim.scene.cameras, config)
+    np.testing.assert_allclose(_considered_offsets(alone, {}, pose, wireframe, config), prior, rtol=1e-5, atol=1e-12)
+    both = _considered_offsets(obs, {}, pose, wireframe, config)
+    assert np.all(np.linalg.eigvalsh(both) > 0) and not np.allclose(both, 2 * prior, rtol=0.05)
+    own = {detections[0].camera: 7}  # the track estimates that camera's offset: only the other one is considered
+    one = _considered_offsets(obs, own, pose, wireframe, config)
+    assert np.all(np.linalg.eigvalsh(both - one) > -1e-15) and np.trace(one) < np.trace(both)
+    plain = observations_from_detections(frame.detections_of(vid), sim.scene.cameras, config)
+    assert not np.any(_considered_offsets(plain, {}, pose, wireframe, config))
 
 
 def _with_detector_bias(sim, bias_sigma, seed: int, shape_sigma: float | None = None):

@@ -54,6 +54,7 @@ __all__ = [
     "SHAPE_SIGMA_REFERENCE_VOLUME",
     "SHAPE_SIGMA_RANGE",
     "detector_offset_prior",
+    "detector_offset_information",
     "detector_bias_sigma",
     "detector_bias_prior",
     "COMMON_OFFSET",
@@ -548,6 +549,17 @@ def detector_offset_prior(offset_key: int, sigma: float, vehicle_p_keypoints: np
         size_exponent: ``sigma`` is taken at the vehicle's size (:func:`shape_sigma_at_size`;
             ``GraphConfig.shape_sigma_size_exponent``); 0: as given.
     """
+    noise = gtsam.noiseModel.Gaussian.Information(
+        detector_offset_information(sigma, vehicle_p_keypoints, size_exponent))
+    if common_key is not None:
+        return gtsam.BetweenFactorPose3(common_key, offset_key, gtsam.Pose3(), noise)
+    return gtsam.PriorFactorPose3(offset_key, gtsam.Pose3(), noise)
+
+
+def detector_offset_information(sigma: float, vehicle_p_keypoints: np.ndarray, size_exponent: float = 0.0
+                                ) -> np.ndarray:
+    """(6, 6) the information of :func:`detector_offset_prior` (rotation, then translation; its arguments'
+    meaning): ``J^T J / sigma^2`` over the keypoints and their half turn about z (the doubled points count once)."""
     sigma = float(np.clip(shape_sigma_at_size(sigma, vehicle_p_keypoints, size_exponent), *SHAPE_SIGMA_RANGE))
     p = np.asarray(vehicle_p_keypoints, dtype=float).reshape(12, 3)
     p = np.concatenate([p, p * [-1.0, -1.0, 1.0]])
@@ -556,11 +568,7 @@ def detector_offset_prior(offset_key: int, sigma: float, vehicle_p_keypoints: np
         J[:, :, axis] = cross(np.broadcast_to(np.eye(3)[axis], p.shape), p)
     J[:, :, 3:] = np.eye(3)
     J = J.reshape(-1, 6)
-    information = J.T @ J / (2.0 * sigma**2)  # the doubled points count once
-    noise = gtsam.noiseModel.Gaussian.Information(information)
-    if common_key is not None:
-        return gtsam.BetweenFactorPose3(common_key, offset_key, gtsam.Pose3(), noise)
-    return gtsam.PriorFactorPose3(offset_key, gtsam.Pose3(), noise)
+    return J.T @ J / (2.0 * sigma**2)
 
 
 #: The name, in a track's camera name -> detector offset key mappings, of the offset all its cameras share (the

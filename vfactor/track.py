@@ -43,6 +43,7 @@ from vfactor.graph import (
     add_shape_factors,
     detector_bias_prior,
     detector_bias_sigma,
+    detector_offset_information,
     detector_offset_prior,
     detector_shape_sigmas,
     ground_factor,
@@ -1138,8 +1139,57 @@ class Tracker:
             estimate = smoother.calculateEstimate()
             wireframe = self._wireframe(estimate, track)
         covariance = smoother.marginalCovariance(key) if self.options.covariance else None
+        if covariance is not None and key in track.observed:  # the cameras' offsets the track does not estimate
+            _, obs, offsets = track.observed[key]
+            covariance = covariance + _considered_offsets(obs, offsets, estimate.atPose3(key), wireframe, config)
         message = "" if track.frames_seen > 1 else "first frame of the track: no motion factors yet"
         return self._result(track, estimate, key, wireframe, covariance, message)
+
+
+def _considered_offsets(obs: KeypointObservations, offsets: dict[str, int], world_T_vehicle: gtsam.Pose3,
+                        wireframe: Wireframe, config: GraphConfig) -> np.ndarray:
+    """(6, 6) what the online (filtered) covariance of a pose adds for the cameras' detector offsets the track does
+    not estimate (docs/factors.md, "Covariances of tracks"): their first-order effect on the frame's pose.
+
+    Camera ``c``'s repeated error moves the pose it sees by a rigid offset ``xi_c`` (covariance ``Sigma_c``, the
+    offset prior's: :func:`vfactor.graph.detector_offset_prior` at the detections' ``shape_sigma`` and the track's
+    shape); the frame's keypoints then put the pose at ``sum_c S_c xi_c`` from where they would, ``S_c = H^-1 H_c``
+    with ``H_c = A_c^T A_c`` camera ``c``'s information on the pose (its inliers' whitened Jacobian, taken
+    numerically) and ``H`` all cameras'. As the offset is the same in every frame, the motion model that joins
+    the frames does not average it away: the term is ``sum_c S_c Sigma_c S_c^T``, whatever the track's length
+    (the smoothed covariances consider the offsets in the track's graph instead). Zero where no camera has such an
+    offset or the frame's pose information is singular.
+    """
+    points = wireframe.vehicle_p_keypoints
+    common = offsets.get(COMMON_OFFSET)
+    sigmas = {name: sigma for name, sigma in detector_shape_sigmas(obs).items() if offsets.get(name, common) == common}
+    if not sigmas:
+        return np.zeros((6, 6))
+    residuals = whitened_residuals(obs, world_T_vehicle, points)
+    inlier = np.sum(residuals ** 2, axis=1) < INLIER_BOUND
+    jacobian = np.empty((len(obs), 2, 6))
+    step = 1e-7
+    for i in range(6):  # the whitened residuals under a small right perturbation of the pose (forward differences)
+        delta = np.zeros(6)
+        delta[i] = step
+        moved = whitened_residuals(obs, world_T_vehicle.compose(gtsam.Pose3.Expmap(delta)), points)
+        jacobian[:, :, i] = (moved - residuals) / step
+    A = jacobian[inlier].reshape(-1, 6)
+    H = A.T @ A
+    try:
+        H_inv = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        return np.zeros((6, 6))
+    names = [camera.name for camera in obs.cameras]
+    out = np.zeros((6, 6))
+    priors: dict[float, np.ndarray] = {}  # sigma -> the offset prior's covariance (cameras of one detector share it)
+    for name, sigma in sigmas.items():
+        if sigma not in priors:
+            priors[sigma] = np.linalg.inv(detector_offset_information(sigma, points, config.shape_sigma_size_exponent))
+        A_c = jacobian[inlier & (obs.camera_index == names.index(name))].reshape(-1, 6)
+        S = H_inv @ (A_c.T @ A_c)
+        out += S @ priors[sigma] @ S.T
+    return out if np.all(np.isfinite(out)) else np.zeros((6, 6))
 
 
 def _hub_key(keys: KeyScheme, index: int, options: TrackOptions) -> int | None:

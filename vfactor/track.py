@@ -34,7 +34,7 @@ from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.body_frame import canonical_gauge
 from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomic_factor
-from vfactor.factors.projection import KeypointObservations, whitened_residuals
+from vfactor.factors.projection import KeypointObservations, whitened_pose_jacobian, whitened_residuals
 from vfactor.factors.robust import RobustLoss
 from vfactor.graph import (
     COMMON_OFFSET,
@@ -1154,26 +1154,18 @@ def _considered_offsets(obs: KeypointObservations, offsets: dict[str, int], worl
     Camera ``c``'s repeated error moves the pose it sees by a rigid offset ``xi_c`` (covariance ``Sigma_c``, the
     offset prior's: :func:`vfactor.graph.detector_offset_prior` at the detections' ``shape_sigma`` and the track's
     shape); the frame's keypoints then put the pose at ``sum_c S_c xi_c`` from where they would, ``S_c = H^-1 H_c``
-    with ``H_c = A_c^T A_c`` camera ``c``'s information on the pose (its inliers' whitened Jacobian, taken
-    numerically) and ``H`` all cameras'. As the offset is the same in every frame, the motion model that joins
+    with ``H_c = A_c^T A_c`` camera ``c``'s information on the pose (its inliers' whitened Jacobian) and ``H``
+    all cameras'. As the offset is the same in every frame, the motion model that joins
     the frames does not average it away: the term is ``sum_c S_c Sigma_c S_c^T``, whatever the track's length
     (the smoothed covariances consider the offsets in the track's graph instead). Zero where no camera has such an
     offset or the frame's pose information is singular.
     """
     points = wireframe.vehicle_p_keypoints
-    common = offsets.get(COMMON_OFFSET)
-    sigmas = {name: sigma for name, sigma in detector_shape_sigmas(obs).items() if offsets.get(name, common) == common}
+    sigmas = _unestimated_offsets(obs, offsets)
     if not sigmas:
         return np.zeros((6, 6))
-    residuals = whitened_residuals(obs, world_T_vehicle, points)
+    residuals, jacobian = whitened_pose_jacobian(obs, world_T_vehicle, points)
     inlier = np.sum(residuals ** 2, axis=1) < INLIER_BOUND
-    jacobian = np.empty((len(obs), 2, 6))
-    step = 1e-7
-    for i in range(6):  # the whitened residuals under a small right perturbation of the pose (forward differences)
-        delta = np.zeros(6)
-        delta[i] = step
-        moved = whitened_residuals(obs, world_T_vehicle.compose(gtsam.Pose3.Expmap(delta)), points)
-        jacobian[:, :, i] = (moved - residuals) / step
     A = jacobian[inlier].reshape(-1, 6)
     H = A.T @ A
     try:
@@ -1190,6 +1182,14 @@ def _considered_offsets(obs: KeypointObservations, offsets: dict[str, int], worl
         S = H_inv @ (A_c.T @ A_c)
         out += S @ priors[sigma] @ S.T
     return out if np.all(np.isfinite(out)) else np.zeros((6, 6))
+
+
+def _unestimated_offsets(obs: KeypointObservations, offsets: dict[str, int]) -> dict[str, float]:
+    """Camera name -> ``shape_sigma`` of the cameras of a frame (``obs``, seen through ``offsets``, camera name ->
+    detector offset key) whose detections carry a ``shape_sigma`` but that have no detector offset of their own in
+    the track: the offsets the track's covariances consider (:func:`_covariance_graph`, :func:`_considered_offsets`)."""
+    common = offsets.get(COMMON_OFFSET)
+    return {name: sigma for name, sigma in detector_shape_sigmas(obs).items() if offsets.get(name, common) == common}
 
 
 def _hub_key(keys: KeyScheme, index: int, options: TrackOptions) -> int | None:
@@ -1637,9 +1637,7 @@ def _covariance_graph(factors: list, projections: list, estimate: gtsam.Values, 
     for frame, obs, offsets in projections:
         offsets = dict(offsets)
         common = offsets.get(COMMON_OFFSET)
-        for name, sigma in detector_shape_sigmas(obs).items():
-            if offsets.get(name, common) != common:
-                continue  # the track estimates this camera's offset
+        for name, sigma in _unestimated_offsets(obs, offsets).items():
             if name not in considered:  # numbered from the top: the track numbers its own offsets from 0
                 considered[name] = keys.offset_key(index, keys.frame_stride - 1 - len(considered))
                 if values is estimate:

@@ -184,6 +184,27 @@ def test_kernel_matches_numpy_projection_for_every_lens():
         assert np.allclose(whitened_residuals(obs, values.atPose3(KEYS.pose_key()), points), e, rtol=1e-12, atol=1e-12)
 
 
+def test_whitened_pose_jacobian_is_the_residuals_numerical_derivative():
+    """whitened_pose_jacobian: the residuals of whitened_residuals and their derivative under GTSAM's right
+    perturbation of the pose, against central differences, for mixed lenses."""
+    from vfactor.factors.projection import whitened_pose_jacobian, whitened_residuals
+
+    obs = observations(2.0, np.random.default_rng(4), cameras=CAMERAS + LENS_CAMERAS[2:])
+    values = ProjectionContract().make_values(np.random.default_rng(9))
+    pose = values.atPose3(KEYS.pose_key())
+    points = np.concatenate([values.atVector(k) for k in KEYS.layer_keys()]).reshape(12, 3)
+    e, J = whitened_pose_jacobian(obs, pose, points)
+    np.testing.assert_array_equal(e, whitened_residuals(obs, pose, points))
+    numerical = np.empty_like(J)
+    for i in range(6):
+        d = np.zeros(6)
+        d[i] = 1e-6
+        plus = whitened_residuals(obs, pose.compose(gtsam.Pose3.Expmap(d)), points)
+        minus = whitened_residuals(obs, pose.compose(gtsam.Pose3.Expmap(-d)), points)
+        numerical[:, :, i] = (plus - minus) / 2e-6
+    np.testing.assert_allclose(J, numerical, rtol=1e-5, atol=1e-5 * np.abs(J).max())
+
+
 def test_every_lens_matches_opencv_in_the_factor():
     from tests.conftest import opencv_pixels
 

@@ -43,7 +43,7 @@ from vfactor.factors.shape_terms import cross
 from vfactor.factors.truncation import truncated_means
 
 __all__ = ["KeypointObservations", "projection_factor", "project_keypoints", "whitened_residuals",
-           "whitened_residuals_numpy", "robust_costs"]
+           "whitened_pose_jacobian", "whitened_residuals_numpy", "robust_costs"]
 
 _MIN_DEPTH = 0.05  # metres; points closer to (or behind) a camera are clamped to this depth
 _EMPTY = np.empty((0, 0))
@@ -287,6 +287,18 @@ def whitened_residuals(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, 
                       obs._t_cw, obs._intrinsics_table, obs._lens_table, obs._dist_table, obs.uv, obs.sqrt_information,
                       obs._window_table, obs._sigma_table, _NO_LOSS, 1.0, _MIN_DEPTH, False, r, _EMPTY, _EMPTY)
     return r.reshape(-1, 2)
+
+
+def whitened_pose_jacobian(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3,
+                           vehicle_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(residuals (n, 2), d residuals / d xi (n, 2, 6)): :func:`whitened_residuals` and their Jacobian with respect to
+    the pose (GTSAM's right perturbation, rotation first), from the projection factor's compiled kernel."""
+    T = world_T_vehicle.matrix()
+    r, H_pose, H_shape = np.empty(2 * len(obs)), np.empty((2 * len(obs), 6)), np.zeros((2 * len(obs), 36))
+    projection_kernel(T[:3, :3], T[:3, 3], np.ascontiguousarray(vehicle_p, dtype=float), obs.keypoint_index, obs._R_cw,
+                      obs._t_cw, obs._intrinsics_table, obs._lens_table, obs._dist_table, obs.uv, obs.sqrt_information,
+                      obs._window_table, obs._sigma_table, _NO_LOSS, 1.0, _MIN_DEPTH, True, r, H_pose, H_shape)
+    return r.reshape(-1, 2), H_pose.reshape(-1, 2, 6)
 
 
 def whitened_residuals_numpy(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehicle_p: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from vfactor.errors import SceneError
+from vfactor.factors.projection import KeypointObservations
 from vfactor.evaluation import NOISE_LEVELS, noise_variant
 from vfactor.graph import (
     SHAPE_SIGMA_REFERENCE_VOLUME,
@@ -27,7 +28,7 @@ from vfactor.graph import (
 from vfactor.scene import load_scene, save_scene
 from vfactor.sim import load_scenario, simulate
 from vfactor.schema import validate
-from vfactor.solve import SolveOptions, detector_shape_variance, solve_observations
+from vfactor.solve import SolveOptions, detector_shape_covariance, detector_shape_variance, solve_observations
 
 
 def _vehicles(seed: int = 7, frames: int = 6):
@@ -133,9 +134,11 @@ def test_a_detector_bias_round_trips_and_leaves_one_frame_solves_alone(tmp_path)
     np.testing.assert_array_equal(a.pose_covariance, b.pose_covariance)
 
 
-def test_a_detector_shape_error_round_trips_and_widens_only_the_shape(tmp_path):
-    """``Detection.shape_sigma``: written and read back (and valid under the schema); the solve is unchanged, the
-    shape and world keypoint covariances grow by ``1 / sum_c sigma_c^-2`` per axis, the pose covariance not."""
+def test_a_detector_shape_error_round_trips_and_widens_the_covariances(tmp_path):
+    """``Detection.shape_sigma``: written and read back (and valid under the schema); the solve is unchanged; with
+    the error on the shape block alone (``shape_error_through_fit=0``) the shape and world keypoint covariances grow
+    by ``1 / sum_c sigma_c^-2`` per axis and the pose covariance not; by default the error through the fit widens
+    the pose too, and the keypoints by more."""
     sim, f, vid = _vehicles(frames=1)[0]
     frame = sim.scene.frames[0]
     sigmas = [0.04, 0.08, 0.06][: len(frame.detections)]
@@ -156,7 +159,8 @@ def test_a_detector_shape_error_round_trips_and_widens_only_the_shape(tmp_path):
     plain = solve_observations(observations_from_detections(frame.detections_of(vid), sim.scene.cameras, config),
                                SolveOptions(), vid)
     obs = observations_from_detections([d for d in dets if d.vehicle == vid], sim.scene.cameras, config)
-    widened = solve_observations(obs, SolveOptions(), vid)
+    block = SolveOptions(graph=dataclasses.replace(config, shape_error_through_fit=0.0))
+    widened = solve_observations(obs, block, vid)
     assert detector_shape_variance(observations_from_detections(frame.detections_of(vid), sim.scene.cameras,
                                                                 config)) == 0.0
     seen_by = [s for d, s in zip(dets, sigmas) if d.vehicle == vid and np.any(d.confidence > 0)]
@@ -172,6 +176,44 @@ def test_a_detector_shape_error_round_trips_and_widens_only_the_shape(tmp_path):
     np.testing.assert_allclose(widened.keypoint_covariances_world,
                                plain.keypoint_covariances_world + variance * np.eye(3), rtol=1e-9, atol=1e-12)
     assert np.all(widened.box.size_sigma > plain.box.size_sigma)
+
+    through = solve_observations(obs, SolveOptions(), vid)  # the default: the error through the fit as well
+    np.testing.assert_allclose(through.keypoints_world, plain.keypoints_world, atol=1e-9)
+    extra = through.pose_covariance - plain.pose_covariance
+    assert np.linalg.eigvalsh(0.5 * (extra + extra.T)).min() > -1e-12 and np.trace(extra) > 0.05 * np.trace(
+        plain.pose_covariance)
+    for wider, narrower in zip(through.keypoint_covariances_world, widened.keypoint_covariances_world):
+        assert np.linalg.eigvalsh(wider - narrower).min() > -1e-12 and np.trace(wider - narrower) > 0
+
+
+def test_the_detectors_error_through_the_fit_is_what_a_least_squares_solution_passes_on():
+    """detector_shape_covariance on a linear least-squares problem (pose 6 + shape 36 unknowns, a prior on the shape,
+    two cameras' rows): its ``sum_c sigma_c^2 G_c G_c^T`` equals the covariance of the solutions that re-solving
+    with each camera's right-hand side moved by ``A_c,s d_c`` gives, ``G_c`` built column by column from re-solves."""
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=(40, 42))
+    camera_index = np.repeat([0, 1], 10)  # 20 observations, two rows each
+    prior = np.diag(np.r_[np.zeros(6), np.full(36, 4.0)])
+    H = A.T @ A + prior
+    b = rng.normal(size=40)
+    solve = lambda rhs: np.linalg.solve(H, A.T @ rhs)  # noqa: E731
+    cameras = tuple(dataclasses.replace(next(iter(load_scenario("intersection_2cam").cameras.values())), name=n)
+                    for n in "ab")
+    obs = KeypointObservations(cameras, camera_index, np.arange(20) % 12, np.zeros((20, 2)),
+                               np.tile(np.eye(2), (20, 1, 1)))
+    sigmas = {"a": 0.05, "b": 0.02}
+    expected = np.zeros((42, 42))
+    rows = np.repeat(camera_index, 2)
+    for c, name in enumerate("ab"):
+        G = np.empty((42, 36))
+        for j in range(36):
+            moved = b.copy()
+            moved[rows == c] += A[rows == c, 6 + j]  # the camera's rows as if its keypoints moved by e_j
+            G[:, j] = solve(moved) - solve(b)
+        expected += sigmas[name] ** 2 * G @ G.T
+    np.testing.assert_allclose(detector_shape_covariance(np.linalg.inv(H), A, obs, sigmas), expected,
+                               rtol=1e-9, atol=1e-14)
+    assert np.allclose(detector_shape_covariance(np.linalg.inv(H), A, obs, {}), 0.0)
 
 
 def test_a_detector_shape_error_is_taken_at_the_vehicles_size():

@@ -135,6 +135,10 @@ class GraphConfig:
             ``accuracy_2cam`` 0 and 6 (the network's error on vans and pickups is two to three times its
             error on hatchbacks and sedans: docs/results.md, "The network's error of the shape grows with the
             vehicle").
+        shape_error_through_fit: a detection's ``shape_sigma`` (at the vehicle's size) times this is also
+            propagated through the fit (:func:`vfactor.solve.detector_shape_covariance`): each camera's error of the
+            shape moves the pose as well as the shape, as the least squares passes it on (docs/factors.md,
+            "Covariances", item 6); 0: the shape block alone.
         shape_prior_loss: robust loss on the shape prior's Mahalanobis norm:
             ``"none"`` (default) is the native Gaussian; a heavy tail (tracking
             uses ``RobustLoss("cauchy", 6.0)``) lets many frames overrule the
@@ -164,6 +168,7 @@ class GraphConfig:
     truncation: bool = True
     shape_prior_loss: RobustLoss = field(default_factory=lambda: RobustLoss("none"))
     shape_sigma_size_exponent: float = 1.5
+    shape_error_through_fit: float = 1.0
 
     def __post_init__(self):
         check_numbers("GraphConfig", self, (
@@ -174,7 +179,8 @@ class GraphConfig:
         if self.ground_sigma_road >= self.ground_sigma_height:
             raise ValueError(f"GraphConfig.ground_sigma_road: expected less than ground_sigma_height "
                              f"({self.ground_sigma_height:g} m), got {self.ground_sigma_road!r}")
-        check_numbers("GraphConfig", self, ("covariance_sandwich_weight", "shape_sigma_size_exponent"), strict=False)
+        check_numbers("GraphConfig", self, ("covariance_sandwich_weight", "shape_sigma_size_exponent",
+                                             "shape_error_through_fit"), strict=False)
         if self.hwc not in ("always", "lazy", "off"):
             raise ValueError(f"GraphConfig.hwc: expected 'always', 'lazy' or 'off', got {self.hwc!r}")
         if not isinstance(self.truncation, bool):

@@ -57,7 +57,8 @@ log = logging.getLogger(__name__)
 
 __all__ = ["SolveOptions", "solve_vehicle", "solve_observations", "solve_frame", "solve_scene", "iter_solve_scene",
            "POOR_FIT_SCALE",
-           "pose_shape_covariance", "keypoint_covariances", "detector_shape_variance"]
+           "pose_shape_covariance", "keypoint_covariances", "detector_shape_variance",
+           "detector_shape_covariance"]
 
 
 @dataclass(frozen=True)
@@ -369,10 +370,12 @@ def solve_observations(
     joint = None
     if options.covariance:
         try:
-            covariance_graph, inflation = _covariance_graph(graph, obs, nominal, float(extras.get("noise_scale", 1.0)),
-                                                            estimate, keys, options)
+            covariance_graph, inflation, inliers = _covariance_graph(graph, obs, nominal,
+                                                                     float(extras.get("noise_scale", 1.0)),
+                                                                     estimate, keys, options)
             linear = covariance_graph.linearize(estimate)  # once: the marginals and the sandwich's residuals
-            joint = inflation * pose_shape_covariance(gtsam.Marginals(linear, estimate), keys)
+            model = pose_shape_covariance(gtsam.Marginals(linear, estimate), keys)
+            joint = inflation * model
             result.extras["covariance_inflation"] = inflation
             if options.estimate_noise and options.graph.covariance_sandwich_weight > 0:
                 joint = _widened_by_residuals(joint, inflation, linear, options.graph.covariance_sandwich_weight,
@@ -382,6 +385,12 @@ def solve_observations(
             if shape_variance > 0:  # the detectors' shape-like error, which no residual shows (item 6)
                 joint = joint + np.diag(np.r_[np.zeros(6), np.full(36, shape_variance)])
                 result.extras["detector_shape_sigma"] = float(np.sqrt(shape_variance))
+                share = options.graph.shape_error_through_fit
+                if share > 0:
+                    sigmas = detector_shape_sigmas(obs, wireframe.vehicle_p_keypoints,
+                                                   options.graph.shape_sigma_size_exponent)
+                    joint = joint + share ** 2 * detector_shape_covariance(model, linear.at(0).jacobian()[0],
+                                                                           inliers, sigmas)
             result.pose_covariance = joint[:6, :6].copy()
             result.keypoint_covariances_world = keypoint_covariances(joint, keys, world_T_vehicle, wireframe)
         except (RuntimeError, np.linalg.LinAlgError) as exc:
@@ -469,7 +478,7 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
     inlier = np.sum(whitened_residuals(obs, world_T_vehicle, points) ** 2, axis=1) < INLIER_BOUND
     out = copy_graph(graph)
     out.replace(0, projection_factor(pose_key, layer_keys, obs.subset(inlier), RobustLoss("none")))
-    return out, inflation
+    return out, inflation, obs.subset(inlier)
 
 
 def detector_shape_variance(obs: KeypointObservations, vehicle_p_keypoints: np.ndarray | None = None,
@@ -486,6 +495,39 @@ def detector_shape_variance(obs: KeypointObservations, vehicle_p_keypoints: np.n
     sigmas = detector_shape_sigmas(obs, vehicle_p_keypoints, size_exponent)
     precision = sum(sigma ** -2 for sigma in sigmas.values())
     return 1.0 / precision if precision > 0 else 0.0
+
+
+def detector_shape_covariance(covariance: np.ndarray, jacobian: np.ndarray, observations: KeypointObservations,
+                              sigmas: dict[str, float]) -> np.ndarray:
+    """(42, 42) covariance of the pose and shape that the detectors' errors shaped like a change of shape give the
+    solution, through the fit.
+
+    Camera ``c``'s detection errs as if it saw the vehicle's keypoints moved by ``d_c`` (36-vector, body frame,
+    ``sigma_c`` metres per axis, a draw per detection); its whitened residuals then move by ``A_c,s d_c`` and the
+    least-squares solution by ``G_c d_c``, ``G_c = P A_c^T A_c,s``, so that
+
+    ``C_shape = sum_c sigma_c^2 G_c G_c^T``
+
+    (``P = H^-1`` the covariance graph's, ``A_c`` that camera's rows of its projection factor's whitened Jacobian,
+    ``A_c,s`` their 36 shape columns). The pose takes its share: an error the shape prior resists goes partly into it.
+
+    Args:
+        covariance: (42, 42) ``P``, the covariance graph's covariance of pose and shape (no factor).
+        jacobian: (2n, 42) the covariance graph's projection factor's whitened Jacobian, two rows per observation.
+        observations: the n observations of those rows (their cameras).
+        sigmas: camera name -> ``sigma_c`` (metres; :func:`vfactor.graph.detector_shape_sigmas`).
+    """
+    A = np.asarray(jacobian, dtype=float)
+    out = np.zeros((A.shape[1], A.shape[1]))
+    rows = np.repeat(observations.camera_index, 2)
+    for c, camera in enumerate(observations.cameras):
+        sigma = sigmas.get(camera.name)
+        if not sigma or not np.any(rows == c):
+            continue
+        A_c = A[rows == c]
+        G = covariance @ (A_c.T @ A_c[:, 6:])  # (42, 36)
+        out += sigma ** 2 * (G @ G.T)
+    return 0.5 * (out + out.T)
 
 
 def _widened_by_residuals(joint: np.ndarray, inflation: float, linear: gtsam.GaussianFactorGraph, weight: float,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 
 import numpy as np
@@ -12,7 +13,7 @@ torch = pytest.importorskip("torch")
 from vfactor.net.calibrate import CovarianceCalibration, write_calibration  # noqa: E402
 from vfactor.net.commands import main  # noqa: E402
 from vfactor.net.infer import KeypointDetector, default_weights_path  # noqa: E402
-from vfactor.net.shape_error import VehicleErrors, fit_shape_sigma, keypoint_nees_at  # noqa: E402
+from vfactor.net.shape_error import VehicleErrors, fit_shape_sigma, keypoint_nees_at, pose_nees_at  # noqa: E402
 
 
 def synthetic_vehicles(shape_sigma: float, n: int = 400, seed: int = 0) -> list[VehicleErrors]:
@@ -64,6 +65,30 @@ def test_the_fit_recovers_a_shape_error_that_grows_with_the_vehicle():
     one_size = fit_shape_sigma(vehicles)  # the law ignored
     small, large = ([v for i, v in enumerate(vehicles) if i % 3 == k] for k in (0, 2))
     assert np.mean(keypoint_nees_at(small, one_size)) < 2.5 < 3.5 < np.mean(keypoint_nees_at(large, one_size))
+
+
+def test_the_fit_takes_each_vehicles_own_widening_through_the_fit_and_the_pose_with_it():
+    """Vehicles whose keypoint and pose errors are drawn from their covariances plus ``sigma^2`` times their own
+    ``unit_covariance`` and ``pose_unit_covariance`` (the error through the fit: not ``I / cameras``): the fit
+    recovers ``sigma`` and the poses come out consistent at it; ``I / cameras`` in place of each vehicle's own
+    widening fits another sigma."""
+    rng = np.random.default_rng(3)
+    vehicles = []
+    for v in synthetic_vehicles(0.0, n=500, seed=4):
+        B = rng.normal(0.0, 1.0, (12, 3, 3))
+        unit = B @ np.swapaxes(B, 1, 2) + 0.2 * np.eye(3)  # per m^2 of sigma^2
+        error = np.einsum("kij,kj->ki", np.linalg.cholesky(v.covariance + 0.03 ** 2 * unit), rng.normal(size=(12, 3)))
+        Q = rng.normal(0.0, 0.01, (6, 6))
+        pose_cov, pose_unit = Q @ Q.T + 1e-6 * np.eye(6), np.diag(rng.uniform(0.5, 2.0, 6))
+        pose_error = np.linalg.cholesky(pose_cov + 0.03 ** 2 * pose_unit) @ rng.normal(size=6)
+        vehicles.append(dataclasses.replace(v, error=error, unit_covariance=unit, pose_error=pose_error,
+                                            pose_covariance=pose_cov, pose_unit_covariance=pose_unit))
+    sigma = fit_shape_sigma(vehicles)
+    assert sigma == pytest.approx(0.03, rel=0.1)
+    assert np.mean(pose_nees_at(vehicles, sigma)) == pytest.approx(6.0, rel=0.1)
+    assert np.mean(pose_nees_at(vehicles, 0.0)) > 9.0
+    block = [dataclasses.replace(v, unit_covariance=None) for v in vehicles]
+    assert fit_shape_sigma(block) > 1.5 * sigma  # I / cameras is narrower than these vehicles' own widening
 
 
 def test_calibrate_shape_command_fits_and_writes_and_the_pipeline_uses_it(tmp_path, capsys):

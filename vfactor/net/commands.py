@@ -540,7 +540,12 @@ def run_calibrate_shape(args: argparse.Namespace) -> int:
     from vfactor.errors import ScenarioError  # noqa: PLC0415
     from vfactor.graph import SHAPE_SIGMA_REFERENCE_VOLUME  # noqa: PLC0415
     from vfactor.net.calibrate import METADATA_KEY, write_calibration  # noqa: PLC0415
-    from vfactor.net.shape_error import fit_shape_sigma, keypoint_nees_at, measure_vehicles  # noqa: PLC0415
+    from vfactor.net.shape_error import (  # noqa: PLC0415
+        fit_shape_sigma,
+        keypoint_nees_at,
+        measure_vehicles,
+        pose_nees_at,
+    )
     from vfactor.solve import SolveOptions  # noqa: PLC0415
     from vfactor.vehicle_library import BODY_TYPES  # noqa: PLC0415
 
@@ -560,13 +565,16 @@ def run_calibrate_shape(args: argparse.Namespace) -> int:
           f"m^3, times (volume / {SHAPE_SIGMA_REFERENCE_VOLUME:g} m^3) ** {exponent:g} (keypoint NEES: consistent 3, "
           "95 % under 7.81)\n")
     before, after = keypoint_nees_at(vehicles, 0.0), keypoint_nees_at(vehicles, sigma, exponent)
+    poses = pose_nees_at(vehicles, 0.0), pose_nees_at(vehicles, sigma, exponent)
     classes = [c for c in (*BODY_TYPES, "pascal3d") if any(v.body_type == c for v in vehicles)]
     rows = []
     for name in classes + ["all"]:
         mask = np.array([name == "all" or v.body_type == name for v in vehicles])
         rows.append([name, str(int(mask.sum()))] + [f"{n[mask].mean() / 3:.2f}x / {100 * np.mean(n[mask] < 7.815):.1f} %"
-                                                    for n in (before, after)])
-    _table(["body type", "vehicles", "keypoint NEES (x 3) / under the bound, without", "with shape_sigma"], rows)
+                                                    for n in (before, after)] +
+                    [f"{np.nanmean(n[mask]) / 6:.2f}x / {100 * np.nanmean(n[mask] < 12.59):.1f} %" for n in poses])
+    _table(["body type", "vehicles", "keypoint NEES (x 3) / under the bound, without", "with shape_sigma",
+            "pose NEES (x 6) / under, without", "with"], rows)
     if args.write:
         with _file_of("--weights"):
             write_calibration(weights, replace(detector.calibration, shape_sigma=sigma), {

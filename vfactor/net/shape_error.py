@@ -12,10 +12,13 @@ The model: each detection's keypoints are those of the vehicle's shape plus an
 error of the shape, isotropic with ``shape_sigma`` metres per axis and keypoint,
 drawn anew per detection. Averaged over a vehicle's ``n`` cameras it adds
 ``shape_sigma^2 / n`` to the variance of every body-frame keypoint
-(:func:`vfactor.solve.detector_shape_variance`). :func:`fit_shape_sigma` finds
-the ``shape_sigma`` whose widened keypoint covariances give the keypoints' mean
-NEES its consistent value, 3 (three degrees of freedom), on the vehicles of
-rendered scenes solved from the network's keypoints (:func:`measure_vehicles`).
+(:func:`vfactor.solve.detector_shape_variance`), and passed through the fit it
+moves the pose as well (:func:`vfactor.solve.detector_shape_covariance`,
+``GraphConfig.shape_error_through_fit``; docs/factors.md, "Covariances", item
+6). :func:`fit_shape_sigma` finds the ``shape_sigma`` whose widened keypoint
+covariances give the keypoints' mean NEES its consistent value, 3 (three
+degrees of freedom), on the vehicles of rendered scenes solved from the
+network's keypoints (:func:`measure_vehicles`).
 ``python -m vfactor.net calibrate-shape`` runs both and, with ``--write``,
 stores the result in the weights' calibration
 (:attr:`vfactor.net.calibrate.CovarianceCalibration.shape_sigma`).
@@ -26,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+import gtsam
 import numpy as np
 
 from vfactor.evaluation import body_type_of, solve_held_out
@@ -33,7 +37,7 @@ from vfactor.graph import observations_from_detections, shape_sigma_at_size
 from vfactor.net.end_to_end import render_and_detect
 from vfactor.solve import SolveOptions
 
-__all__ = ["VehicleErrors", "measure_vehicles", "fit_shape_sigma", "keypoint_nees_at"]
+__all__ = ["VehicleErrors", "measure_vehicles", "vehicle_errors", "fit_shape_sigma", "keypoint_nees_at", "pose_nees_at"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +51,12 @@ class VehicleErrors:
         body_type: the truth's body type (or ``"pascal3d"``).
         vehicle_p_keypoints: (12, 3) the solution's keypoints (body frame, metres): the size the detector's error
             is taken at (:func:`vfactor.graph.shape_sigma_at_size`); None: the reference size.
+        unit_covariance: (12, 3, 3) what a shape error of 1 m per camera (at the vehicle's size) adds to
+            ``covariance`` (m^2 per m^2 of ``shape_sigma``^2), as the solve adds it; None: ``I / cameras`` (the shape
+            block alone).
+        pose_error: (6,) ``Logmap(estimate^-1 truth)`` (rad, m; :func:`vfactor.metrics.pose_nees`), or None.
+        pose_covariance: (6, 6) the result's pose covariance without a shape error, or None.
+        pose_unit_covariance: (6, 6) what a shape error of 1 m per camera adds to it, or None (nothing).
     """
 
     error: np.ndarray
@@ -54,13 +64,19 @@ class VehicleErrors:
     cameras: int
     body_type: str
     vehicle_p_keypoints: np.ndarray | None = None
+    unit_covariance: np.ndarray | None = None
+    pose_error: np.ndarray | None = None
+    pose_covariance: np.ndarray | None = None
+    pose_unit_covariance: np.ndarray | None = None
 
 
 def measure_vehicles(scenario: str, seeds, detector=None, options: SolveOptions = SolveOptions(),
                      frames: int | None = None, progress=None) -> list[VehicleErrors]:
     """Renders the scenes of ``scenario`` for each seed, finds the keypoints with the network and solves every
     vehicle (each with the shape model learnt without it, :func:`vfactor.evaluation.solve_held_out`), without any
-    shape error of the detector.
+    shape error of the detector and again with one of 1 m per camera taken as given (:func:`vehicle_errors`: the
+    same solution; the covariances' difference is what the detector's error adds per m^2 of its sigma^2, which
+    :func:`keypoint_nees_at` and :func:`pose_nees_at` scale by each vehicle's sigma at its size).
 
     Args:
         scenario: packaged scenario name or file (cameras need ``image_size``).
@@ -76,34 +92,78 @@ def measure_vehicles(scenario: str, seeds, detector=None, options: SolveOptions 
     out = []
     for seed in seeds:
         sim, _, detected, detector = render_and_detect(scenario, int(seed), frames, detector, progress=progress)
-        for f, frame in enumerate(detected.frames):
-            for vid in frame.vehicle_ids():
-                truth = sim.truth[f][vid]
-                detections = [dataclasses.replace(d, shape_sigma=None) for d in frame.detections_of(vid)]
-                obs = observations_from_detections(detections, detected.cameras, options.graph)
-                result = solve_held_out(obs, truth.preset, options, vid,
-                                        tuple(d.vehicle_class for d in detections if d.vehicle_class))
-                if not result.ok or result.keypoint_covariances_world is None:
-                    continue
-                out.append(VehicleErrors(np.asarray(result.keypoints_world) - np.asarray(truth.keypoints_world),
-                                         np.asarray(result.keypoint_covariances_world),
-                                         len({d.camera for d in detections}), body_type_of(truth.preset),
-                                         np.asarray(result.wireframe.vehicle_p_keypoints)))
+        out += vehicle_errors(sim, detected, options)
     return out
+
+
+def vehicle_errors(sim, detected, options: SolveOptions = SolveOptions()) -> list[VehicleErrors]:
+    """Every vehicle of a detected scene solved (each with the shape model learnt without it) without any shape
+    error of the detector and with one of 1 m per camera taken as given, against the simulation's truth
+    (:func:`measure_vehicles`).
+
+    Args:
+        sim: the :class:`~vfactor.sim.Simulation` the scene was rendered from (its truth).
+        detected: the scene with the detector's keypoints (``sim``'s frames and vehicle ids).
+        options: the factor graph's options.
+    """
+    unit_options = dataclasses.replace(options, graph=dataclasses.replace(options.graph, shape_sigma_size_exponent=0.0))
+    out = []
+    for f, frame in enumerate(detected.frames):
+        for vid in frame.vehicle_ids():
+            truth = sim.truth[f][vid]
+            hints = tuple(d.vehicle_class for d in frame.detections_of(vid) if d.vehicle_class)
+            results = []
+            for sigma, opts in ((None, options), (1.0, unit_options)):  # the same solution, two covariances
+                detections = [dataclasses.replace(d, shape_sigma=sigma) for d in frame.detections_of(vid)]
+                obs = observations_from_detections(detections, detected.cameras, opts.graph)
+                results.append(solve_held_out(obs, truth.preset, opts, vid, hints))
+            result, unit = results
+            if not (result.ok and unit.ok) or result.keypoint_covariances_world is None or \
+                    unit.keypoint_covariances_world is None:
+                continue
+            out.append(VehicleErrors(
+                np.asarray(result.keypoints_world) - np.asarray(truth.keypoints_world),
+                np.asarray(result.keypoint_covariances_world), len({d.camera for d in detections}),
+                body_type_of(truth.preset), np.asarray(result.wireframe.vehicle_p_keypoints),
+                unit_covariance=np.asarray(unit.keypoint_covariances_world) -
+                np.asarray(result.keypoint_covariances_world),
+                pose_error=gtsam.Pose3.Logmap(result.world_T_vehicle.between(truth.world_T_vehicle)),
+                pose_covariance=np.asarray(result.pose_covariance),
+                pose_unit_covariance=np.asarray(unit.pose_covariance) - np.asarray(result.pose_covariance)))
+    return out
+
+
+def _sigmas_at_size(vehicles: list[VehicleErrors], shape_sigma: float, size_exponent: float) -> np.ndarray:
+    return np.array([shape_sigma if v.vehicle_p_keypoints is None
+                     else shape_sigma_at_size(shape_sigma, v.vehicle_p_keypoints, size_exponent) for v in vehicles])
 
 
 def keypoint_nees_at(vehicles: list[VehicleErrors], shape_sigma: float, size_exponent: float = 0.0) -> np.ndarray:
     """(N, 12) keypoint NEES of each vehicle with its covariances widened by a detector shape error of
     ``shape_sigma`` metres per camera at the reference size, taken at each vehicle's size with ``size_exponent``
-    (:func:`vfactor.graph.shape_sigma_at_size`; ``sigma^2 / cameras`` per axis)."""
+    (:func:`vfactor.graph.shape_sigma_at_size`): ``sigma^2`` times the vehicle's ``unit_covariance``, or
+    ``sigma^2 / cameras`` per axis where it has none."""
     if not vehicles:
         return np.zeros((0, 12))
     error = np.stack([v.error for v in vehicles])
-    cameras = np.array([max(v.cameras, 1) for v in vehicles], dtype=float)
-    sigma = np.array([shape_sigma if v.vehicle_p_keypoints is None
-                      else shape_sigma_at_size(shape_sigma, v.vehicle_p_keypoints, size_exponent) for v in vehicles])
-    widened = np.stack([v.covariance for v in vehicles]) + (sigma ** 2 / cameras)[:, None, None, None] * np.eye(3)
+    unit = np.stack([v.unit_covariance if v.unit_covariance is not None else np.eye(3) / max(v.cameras, 1)
+                     * np.ones((12, 1, 1)) for v in vehicles])
+    sigma = _sigmas_at_size(vehicles, shape_sigma, size_exponent)
+    widened = np.stack([v.covariance for v in vehicles]) + sigma[:, None, None, None] ** 2 * unit
     return np.einsum("nki,nki->nk", error, np.linalg.solve(widened, error[..., None])[..., 0])
+
+
+def pose_nees_at(vehicles: list[VehicleErrors], shape_sigma: float, size_exponent: float = 0.0) -> np.ndarray:
+    """(N,) pose NEES of each vehicle with its pose covariance widened as :func:`keypoint_nees_at` widens the
+    keypoints' (``sigma^2`` times its ``pose_unit_covariance``); NaN for a vehicle without a pose error."""
+    out = np.full(len(vehicles), np.nan)
+    for i, (v, sigma) in enumerate(zip(vehicles, _sigmas_at_size(vehicles, shape_sigma, size_exponent))):
+        if v.pose_error is None or v.pose_covariance is None:
+            continue
+        widened = v.pose_covariance + (sigma ** 2 * v.pose_unit_covariance if v.pose_unit_covariance is not None
+                                       else 0.0)
+        out[i] = float(v.pose_error @ np.linalg.solve(widened, v.pose_error))
+    return out
 
 
 def fit_shape_sigma(vehicles: list[VehicleErrors], target: float = 3.0, upper: float = 1.0,

@@ -18,32 +18,15 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import pickle
 from pathlib import Path
 
 import numpy as np
 
 from vfactor.evaluation import class_rows, held_out_scene_model, pose_rows
+from vfactor.net.end_to_end import detected_scene
 from vfactor.track import TrackOptions, smooth_scene, track_scene
 
 CHI2_6_95 = 12.592
-
-
-def detected_scene(spec: str, cache: Path | None):
-    """(simulation, detected scene) of ``scenario:seed``, from ``cache`` where it was kept."""
-    scenario, seed = spec.rsplit(":", 1)
-    path = cache / f"{scenario}_{seed}.pkl" if cache else None
-    if path is not None and path.exists():
-        with open(path, "rb") as f:
-            return pickle.load(f)
-    from vfactor.net.end_to_end import render_and_detect
-
-    sim, _, detected, _ = render_and_detect(scenario, int(seed), None, None)
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(path, "wb") as f:
-            pickle.dump((sim, detected), f)
-    return sim, detected
 
 
 def with_bias(scene, bias, shape_sigma=None):

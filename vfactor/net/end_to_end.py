@@ -33,7 +33,7 @@ from vfactor.sim import load_scenario, simulate
 from vfactor.vehicle_library import BODY_TYPES
 from vfactor.solve import SolveOptions, solve_scene
 
-__all__ = ["evaluate_images", "render_and_detect", "keypoint_accuracy", "calibration_table", "images_report",
+__all__ = ["evaluate_images", "render_and_detect", "detected_scene", "keypoint_accuracy", "calibration_table", "images_report",
            "network_saw"]
 
 
@@ -185,6 +185,26 @@ def render_and_detect(scenario: str, seed: int, frames: int | None = None, detec
                                      real_roofs=real_roofs)
         detected = detect_scene(rendered.scene, detector, heatmaps_dir=folder / "heatmaps" if work_dir else None)
     return sim, rendered, detected, detector
+
+
+def detected_scene(spec: str, cache: str | Path | None = None):
+    """``(simulation, detected scene)`` of ``"scenario:seed"`` (:func:`render_and_detect` with the shipped network,
+    the scenario's frames), read from the folder ``cache`` where it was kept there (``scenario_seed.pkl``) and kept
+    there when rendered; None: rendered every time. For benchmarks that run on the same detections again: a kept
+    scene keeps the calibration it was detected with (``shape_sigma``, ``bias_sigma``)."""
+    import pickle
+
+    scenario, seed = spec.rsplit(":", 1)
+    path = Path(cache) / f"{scenario}_{seed}.pkl" if cache is not None else None
+    if path is not None and path.exists():
+        with open(path, "rb") as f:
+            return pickle.load(f)
+    sim, _, detected, _ = render_and_detect(scenario, int(seed))
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "wb") as f:
+            pickle.dump((sim, detected), f)
+    return sim, detected
 
 
 def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, seed: int = 0, detector=None,

@@ -33,7 +33,8 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenes", nargs="+", metavar="SCENARIO:SEED")
     parser.add_argument("--cache", type=Path, help="folder that keeps the detected scenes")
-    parser.add_argument("--shape-sigma", type=float, help="shape_sigma (m at 9 m^3; default: the shipped calibration's)")
+    parser.add_argument("--shape-sigma", type=float,
+                        help="shape_sigma (m at 9 m^3; default: the shipped calibration's)")
     parser.add_argument("--through-fit", type=float, nargs="+", default=[GraphConfig().shape_error_through_fit],
                         help="GraphConfig.shape_error_through_fit factors to compare (default: the default)")
     args = parser.parse_args(argv)
@@ -51,15 +52,16 @@ def main(argv=None) -> None:
         pose = pose_nees_at(vehicles, args.shape_sigma, graph.shape_sigma_size_exponent)
         keypoints = keypoint_nees_at(vehicles, args.shape_sigma, graph.shape_sigma_size_exponent)
         groups = {c: [v.body_type == c for v in vehicles] for c in (*BODY_TYPES, "pascal3d")}
-        groups.update({f"{n} cameras": [v.cameras == n for v in vehicles] for n in sorted({v.cameras for v in vehicles})})
+        counts = sorted({v.cameras for v in vehicles})
+        groups.update({f"{n} cameras": [v.cameras == n for v in vehicles] for n in counts})
         groups["all"] = [True] * len(vehicles)
         for name, mask in groups.items():
             mask = np.asarray(mask, dtype=bool)
             if not mask.any():
                 continue
             p, k = pose[mask], keypoints[mask]
-            print(f"| {factor:g} | {name} | {mask.sum()} | {p.mean() / 6:.2f}x | {100 * np.mean(p < CHI2_6_95):.1f} % | "
-                  f"{k.mean() / 3:.2f}x | {100 * np.mean(k < CHI2_3_95):.1f} % |")
+            print(f"| {factor:g} | {name} | {mask.sum()} | {p.mean() / 6:.2f}x | {100 * np.mean(p < CHI2_6_95):.1f} % "
+                  f"| {k.mean() / 3:.2f}x | {100 * np.mean(k < CHI2_3_95):.1f} % |")
 
 
 if __name__ == "__main__":

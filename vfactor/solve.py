@@ -423,7 +423,8 @@ INLIER_BOUND = 2.0 * np.log(100.0)
 def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservations, nominal: KeypointObservations,
                       scale: float, estimate: gtsam.Values, keys: KeyScheme,
                       options: SolveOptions) -> tuple[gtsam.NonlinearFactorGraph, float]:
-    """The graph whose marginals, times the returned factor, are the result's covariances.
+    """The graph whose marginals, times the returned factor, are the result's covariances, with that factor and the
+    observations of its projection factor (the inliers, at the covariances' sigmas).
 
     * **Inliers at full weight.** The Gauss-Newton information of a robust
       loss down-weights every observation by its residual, good ones too (the
@@ -512,7 +513,8 @@ def detector_shape_covariance(covariance: np.ndarray, jacobian: np.ndarray, obse
     ``A_c,s`` their 36 shape columns). The pose takes its share: an error the shape prior resists goes partly into it.
 
     Args:
-        covariance: (42, 42) ``P``, the covariance graph's covariance of pose and shape (no factor).
+        covariance: (42, 42) ``P``, the covariance graph's covariance of pose and shape (before the Student t's factor
+            and the sandwich).
         jacobian: (2n, 42) the covariance graph's projection factor's whitened Jacobian, two rows per observation.
         observations: the n observations of those rows (their cameras).
         sigmas: camera name -> ``sigma_c`` (metres; :func:`vfactor.graph.detector_shape_sigmas`).

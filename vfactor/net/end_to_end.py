@@ -33,8 +33,8 @@ from vfactor.sim import load_scenario, simulate
 from vfactor.vehicle_library import BODY_TYPES
 from vfactor.solve import SolveOptions, solve_scene
 
-__all__ = ["evaluate_images", "render_and_detect", "detected_scene", "keypoint_accuracy", "calibration_table", "images_report",
-           "network_saw"]
+__all__ = ["evaluate_images", "render_and_detect", "detected_scene", "keypoint_accuracy", "calibration_table",
+           "images_report", "network_saw"]
 
 
 def network_saw(model: str) -> bool:

@@ -37,7 +37,8 @@ from vfactor.graph import observations_from_detections, shape_sigma_at_size
 from vfactor.net.end_to_end import render_and_detect
 from vfactor.solve import SolveOptions
 
-__all__ = ["VehicleErrors", "measure_vehicles", "vehicle_errors", "fit_shape_sigma", "keypoint_nees_at", "pose_nees_at"]
+__all__ = ["VehicleErrors", "measure_vehicles", "vehicle_errors", "fit_shape_sigma", "keypoint_nees_at",
+           "pose_nees_at"]
 
 
 @dataclass(frozen=True)
@@ -51,12 +52,12 @@ class VehicleErrors:
         body_type: the truth's body type (or ``"pascal3d"``).
         vehicle_p_keypoints: (12, 3) the solution's keypoints (body frame, metres): the size the detector's error
             is taken at (:func:`vfactor.graph.shape_sigma_at_size`); None: the reference size.
-        unit_covariance: (12, 3, 3) what a shape error of 1 m per camera (at the vehicle's size) adds to
-            ``covariance`` (m^2 per m^2 of ``shape_sigma``^2), as the solve adds it; None: ``I / cameras`` (the shape
-            block alone).
+        unit_covariance: (12, 3, 3) what a detector's error of the shape whose sigma at the vehicle's size is 1 m
+            per camera adds to ``covariance``, as the solve adds it (both parts; m^2 per m^2 of that sigma squared);
+            None: ``I / cameras`` (the shape block alone).
         pose_error: (6,) ``Logmap(estimate^-1 truth)`` (rad, m; :func:`vfactor.metrics.pose_nees`), or None.
         pose_covariance: (6, 6) the result's pose covariance without a shape error, or None.
-        pose_unit_covariance: (6, 6) what a shape error of 1 m per camera adds to it, or None (nothing).
+        pose_unit_covariance: (6, 6) what that error adds to it, or None (nothing).
     """
 
     error: np.ndarray
@@ -106,7 +107,8 @@ def vehicle_errors(sim, detected, options: SolveOptions = SolveOptions()) -> lis
         detected: the scene with the detector's keypoints (``sim``'s frames and vehicle ids).
         options: the factor graph's options.
     """
-    unit_options = dataclasses.replace(options, graph=dataclasses.replace(options.graph, shape_sigma_size_exponent=0.0))
+    as_given = dataclasses.replace(options.graph, shape_sigma_size_exponent=0.0)  # the unit error's sigma is 1 m
+    unit_options = dataclasses.replace(options, graph=as_given)
     out = []
     for f, frame in enumerate(detected.frames):
         for vid in frame.vehicle_ids():

@@ -261,3 +261,32 @@ def test_each_keypoint_takes_its_own_covariance_or_the_confidence_sigma():
                 np.eye(2) * (det.confidence[k] / base)
             np.testing.assert_array_equal(L, expected)
             assert calibrated == own
+
+
+def test_calibrated_keypoints_of_a_vehicle_only_cut_views_show_are_taken_wider():
+    """GraphConfig.cut_view_sigma_factor: where every detection's box reaches beyond its image, the calibrated
+    keypoints' square-root information is divided by the factor; a whole view among them, keypoints without a
+    calibrated covariance or a factor of 1 leave every sigma as it is."""
+    sim, f, vid = _vehicles(frames=1)[0]
+    dets = sim.scene.frames[f].detections_of(vid)
+    assert len(dets) == 2
+    beyond = [-40.0, 10.0, 300.0, 200.0]  # reaches beyond the left edge of every camera's image
+    inside = [20.0, 10.0, 300.0, 200.0]
+
+    def observed(rois, calibrated=True, factor=None):
+        config = SolveOptions().graph if factor is None else dataclasses.replace(SolveOptions().graph,
+                                                                               cut_view_sigma_factor=factor)
+        given = [dataclasses.replace(d, covariance=np.tile(np.eye(2) * 4.0, (12, 1, 1)), roi=roi,
+                                     covariance_calibrated=calibrated) for d, roi in zip(dets, rois)]
+        return observations_from_detections(given, sim.scene.cameras, config).sqrt_information
+
+    whole = observed([inside, inside])
+    factor = SolveOptions().graph.cut_view_sigma_factor
+    assert factor > 1.0
+    np.testing.assert_allclose(observed([beyond, beyond]), whole / factor)
+    np.testing.assert_allclose(observed([beyond, inside]), whole)  # a whole view anchors the vehicle
+    np.testing.assert_allclose(observed([beyond, beyond], calibrated=False), whole)
+    np.testing.assert_allclose(observed([beyond, beyond], factor=1.0), whole)
+    np.testing.assert_allclose(observed([beyond, beyond], factor=2.0), whole / 2.0)
+    with pytest.raises(ValueError, match="cut_view_sigma_factor"):
+        GraphConfig(cut_view_sigma_factor=0.0)

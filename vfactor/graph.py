@@ -139,6 +139,12 @@ class GraphConfig:
             propagated through the fit (:func:`vfactor.solve.detector_shape_covariance`): each camera's error of the
             shape moves the pose as well as the shape, as the least squares passes it on (docs/factors.md,
             "Covariances", item 6); 0: the shape block alone.
+        cut_view_sigma_factor: where every detection of a vehicle is cut by its image's border (its ``roi``
+            reaches beyond the image or stops at its border), the sigmas of the keypoints whose covariance is
+            calibrated (``Detection.covariance_calibrated``: the keypoint network's) are taken times this. A
+            learnt detector draws the part of a vehicle it cannot see, and its errors there are larger than its
+            calibration says and alike from frame to frame; where no whole view anchors the vehicle they moved
+            tracks of high-roof vans by 0.5-0.7 m (docs/factors.md, "Cut views alone"). 1: as calibrated.
         shape_prior_loss: robust loss on the shape prior's Mahalanobis norm:
             ``"none"`` (default) is the native Gaussian; a heavy tail (tracking
             uses ``RobustLoss("cauchy", 6.0)``) lets many frames overrule the
@@ -169,12 +175,14 @@ class GraphConfig:
     shape_prior_loss: RobustLoss = field(default_factory=lambda: RobustLoss("none"))
     shape_sigma_size_exponent: float = 1.5
     shape_error_through_fit: float = 1.0
+    cut_view_sigma_factor: float = 3.0
 
     def __post_init__(self):
         check_numbers("GraphConfig", self, (
             "relative_pixel_sigma", "min_pixel_sigma", "covariance_min_pixel_sigma", "symmetry_sigma", "body_frame_sigma", "shape_prior_weight",
             "plane_sigma_m", "plane_sigma_rad", "rectangle_sigma", "trapezoid_sigma_rad", "width_ratio_sigma",
             "hinge_sigma", "hwc_tolerance", "hub_height", "ground_sigma_height", "ground_sigma_road", "ground_sigma_tilt",
+            "cut_view_sigma_factor",
         ))
         if self.ground_sigma_road >= self.ground_sigma_height:
             raise ValueError(f"GraphConfig.ground_sigma_road: expected less than ground_sigma_height "
@@ -203,7 +211,8 @@ def observations_from_detections(
     size) / confidence``: ``size`` the diagonal of the detection's ``roi`` where it has one, else of the box
     around its seen keypoints, or the vehicle's size in that camera's image (``vehicle_sizes``) where that is
     larger; each observation keeps its detection's ``shape_sigma``, and is marked ``cut``
-    where its detection's ``roi`` reaches beyond its camera's image (``image_size``). With
+    where its detection's ``roi`` reaches beyond its camera's image (``image_size``). Where every observation is
+    cut, those with a calibrated covariance get their sigmas times ``config.cut_view_sigma_factor``. With
     ``config.truncation``, a detection whose camera has an ``image_size`` and whose seen keypoints all lie in
     the image gets the image as its truncation window.
 
@@ -243,12 +252,15 @@ def observations_from_detections(
     calibrated = _stacked(calibrated, (0,), bool)
     shape_sigma = _stacked(shape_sigma, (0,), float)
     cut = _stacked(cut, (0,), bool)
+    sqrt_info = _stacked(sqrt_info, (0, 2, 2), float)
+    if cut.all() and calibrated.any() and config.cut_view_sigma_factor != 1.0:  # no whole view: docs/factors.md
+        sqrt_info[calibrated] /= config.cut_view_sigma_factor
     return KeypointObservations(
         cameras=tuple(cameras.values()),
         camera_index=_stacked(cam_idx, (0,), int),
         keypoint_index=_stacked(kp_idx, (0,), int),
         uv=_stacked(uv, (0, 2), float),
-        sqrt_information=_stacked(sqrt_info, (0, 2, 2), float),
+        sqrt_information=sqrt_info,
         window=_stacked(window, (0, 4), float),
         min_sigma=config.min_pixel_sigma,
         calibrated=calibrated if calibrated.any() else None,

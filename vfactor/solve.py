@@ -389,8 +389,9 @@ def solve_observations(
                 if share > 0:
                     sigmas = detector_shape_sigmas(obs, wireframe.vehicle_p_keypoints,
                                                    options.graph.shape_sigma_size_exponent)
-                    joint = joint + share ** 2 * detector_shape_covariance(model, linear.at(0).jacobian()[0],
-                                                                           inliers, sigmas)
+                    through = detector_shape_covariance(model, linear.at(0).jacobian()[0], inliers, sigmas)
+                    if np.all(np.isfinite(through)):  # else the shape block alone, as where the sandwich is not
+                        joint = joint + share ** 2 * through
             result.pose_covariance = joint[:6, :6].copy()
             result.keypoint_covariances_world = keypoint_covariances(joint, keys, world_T_vehicle, wireframe)
         except (RuntimeError, np.linalg.LinAlgError) as exc:

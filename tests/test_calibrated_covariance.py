@@ -214,6 +214,8 @@ def test_the_detectors_error_through_the_fit_is_what_a_least_squares_solution_pa
     np.testing.assert_allclose(detector_shape_covariance(np.linalg.inv(H), A, obs, sigmas), expected,
                                rtol=1e-9, atol=1e-14)
     assert np.allclose(detector_shape_covariance(np.linalg.inv(H), A, obs, {}), 0.0)
+    with pytest.raises(ValueError, match="shape_error_through_fit"):
+        GraphConfig(shape_error_through_fit=-1.0)
 
 
 def test_a_detector_shape_error_is_taken_at_the_vehicles_size():

@@ -116,3 +116,31 @@ def test_calibrate_shape_command_fits_and_writes_and_the_pipeline_uses_it(tmp_pa
     assert {d.shape_sigma for d in detected.frames[0].detections} == {0.05}
     bias = KeypointDetector(weights).calibration.bias_sigma  # calibrate-bias's, kept by calibrate-shape --write
     assert bias is not None and {d.bias_sigma for d in detected.frames[0].detections} == {bias}
+
+
+def test_vehicle_errors_unit_covariances_are_what_the_solve_adds_at_any_sigma():
+    """vehicle_errors' decomposition, which calibrate-shape fits on: the solve's covariances with a detector shape
+    error of sigma (taken at the vehicle's size) are the ones without it plus sigma^2 times the unit covariances,
+    for the pose and every keypoint; the part through the fit widens the pose."""
+    from vfactor.evaluation import solve_held_out
+    from vfactor.graph import observations_from_detections, shape_sigma_at_size
+    from vfactor.net.shape_error import vehicle_errors
+    from vfactor.sim import simulate
+    from vfactor.solve import SolveOptions
+
+    sim = simulate("library_2cam", seed=7, num_frames=2)
+    options = SolveOptions()
+    vehicles = vehicle_errors(sim, sim.scene, options)
+    seen = [(f, vid) for f, frame in enumerate(sim.scene.frames) for vid in frame.vehicle_ids()]
+    assert len(vehicles) == len(seen) >= 2
+    for (f, vid), v in zip(seen, vehicles):
+        detections = [dataclasses.replace(d, shape_sigma=0.05) for d in sim.scene.frames[f].detections_of(vid)]
+        result = solve_held_out(observations_from_detections(detections, sim.scene.cameras, options.graph),
+                                sim.truth[f][vid].preset, options, vid)
+        sigma = shape_sigma_at_size(0.05, v.vehicle_p_keypoints, options.graph.shape_sigma_size_exponent)
+        np.testing.assert_allclose(result.keypoint_covariances_world, v.covariance + sigma ** 2 * v.unit_covariance,
+                                   rtol=1e-6, atol=1e-12)
+        np.testing.assert_allclose(result.pose_covariance, v.pose_covariance + sigma ** 2 * v.pose_unit_covariance,
+                                   rtol=1e-6, atol=1e-14)
+        assert np.trace(v.pose_unit_covariance) > 0
+        assert pose_nees_at([v], 0.05, options.graph.shape_sigma_size_exponent)[0] < pose_nees_at([v], 0.0)[0]

@@ -1,7 +1,7 @@
 """Tracks from the keypoint network's keypoints, with and without the detector's bias (``Detection.bias_sigma``).
 
 Renders each scene (``scenario:seed``), finds the keypoints with the shipped network (its calibration sets each
-detection's ``shape_sigma`` and ``bias_sigma``), tracks the vehicles (iSAM2 final, iSAM2 with a 1 s fixed lag,
+detection's ``shape_sigma`` and ``bias_sigma``), tracks the vehicles (iSAM2 final and online, iSAM2 with a 1 s fixed lag,
 batch smoothing; each with the shape model learnt without the scene's vehicle models) once with the detections as
 they are and once with their ``bias_sigma`` removed, and prints per method and per rig (three cameras with the
 road plane, two without) the mean rotation and translation errors, the pose NEES (x 6) and the share of poses
@@ -64,7 +64,8 @@ def main(argv=None) -> None:
             if args.runs not in (label, "both"):
                 continue
             scene = with_bias(detected, b, shape_sigma)
-            runs = {"isam2": track_scene(scene, TrackOptions(), prior=model).frames,
+            run = track_scene(scene, TrackOptions(), prior=model)
+            runs = {"isam2": run.frames, "isam2, online": run.online,
                     "isam2, 1 s lag": track_scene(scene, TrackOptions(lag=1.0), prior=model).frames,
                     "batch": smooth_scene(scene, TrackOptions(), prior=model)}
             for method, frames in runs.items():

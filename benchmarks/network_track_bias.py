@@ -2,9 +2,9 @@
 
 Renders each scene (``scenario:seed``), finds the keypoints with the shipped network (its calibration sets each
 detection's ``shape_sigma`` and ``bias_sigma``), tracks the vehicles (iSAM2 final and online, iSAM2 with a 1 s
-fixed lag, batch smoothing; each with the shape model learnt without the scene's vehicle models) once with the detections as
-they are and once with their ``bias_sigma`` removed, and prints per method and per rig (three cameras with the
-road plane, two without) the mean rotation and translation errors, the pose NEES (x 6) and the share of poses
+fixed lag, batch smoothing; each with the shape model learnt without the scene's vehicle models) once with the
+detections as they are and once with their ``bias_sigma`` removed, and prints per method and per rig (three cameras
+with the road plane, two without) the mean rotation and translation errors, the pose NEES (x 6) and the share of poses
 under the chi-square 95 % bound, and per body type the pose NEES.
 
 Run: ``python benchmarks/network_track_bias.py [--cache DIR] [--bias R P Y X Y Z] [--runs with] SCENARIO:SEED

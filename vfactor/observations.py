@@ -73,7 +73,7 @@ class Detection:
             (the keypoint network's, calibrated with ``python -m vfactor.net calibrate-shape``; the scene's
             ``"shape_sigma"``), for a vehicle whose keypoints span a box of 9 m^3: the solver takes it at the
             vehicle's size (:func:`vfactor.graph.shape_sigma_at_size`, ``GraphConfig.shape_sigma_size_exponent``).
-            The one-frame result's shape and keypoint covariances are widened by it (docs/factors.md,
+            The one-frame result's pose, shape and keypoint covariances are widened by it (docs/factors.md,
             "Covariances", item 6); None or 0: no such error.
         bias_sigma: optional standard deviations of the detector's error that repeats over a vehicle's frames and
             cameras, as a rigid motion of the vehicle in its body frame: ``(roll, pitch, yaw)`` radians about its

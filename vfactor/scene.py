@@ -33,7 +33,7 @@ detector's true errors (the keypoint network's, as ``vfactor.net`` writes them),
 so the result's covariances are computed at no less than them; ``shape_sigma``
 (metres, default none) is the detector's error shaped like a change of the
 vehicle's shape (for a vehicle whose keypoints span 9 m^3; the solver takes it
-at the vehicle's size), which widens the result's shape and keypoint covariances;
+at the vehicle's size), which widens the result's pose, shape and keypoint covariances;
 ``bias_sigma`` (default none) the sigmas of the detector's error that repeats
 over a vehicle's frames and cameras, a rigid motion of the vehicle (``[roll,
 pitch, yaw]`` radians, ``[x, y, z]`` metres, body frame), which tracks take into

@@ -380,18 +380,15 @@ def solve_observations(
             if options.estimate_noise and options.graph.covariance_sandwich_weight > 0:
                 joint = _widened_by_residuals(joint, inflation, linear, options.graph.covariance_sandwich_weight,
                                               result.extras)
-            shape_variance = detector_shape_variance(obs, wireframe.vehicle_p_keypoints,
-                                                     options.graph.shape_sigma_size_exponent)
-            if shape_variance > 0:  # the detectors' shape-like error, which no residual shows (item 6)
+            sigmas = detector_shape_sigmas(obs, wireframe.vehicle_p_keypoints, options.graph.shape_sigma_size_exponent)
+            if sigmas:  # the detectors' shape-like error, which no residual shows (item 6): on the shape ...
+                shape_variance = _averaged_variance(sigmas)
                 joint = joint + np.diag(np.r_[np.zeros(6), np.full(36, shape_variance)])
                 result.extras["detector_shape_sigma"] = float(np.sqrt(shape_variance))
-                share = options.graph.shape_error_through_fit
-                if share > 0:
-                    sigmas = detector_shape_sigmas(obs, wireframe.vehicle_p_keypoints,
-                                                   options.graph.shape_sigma_size_exponent)
-                    through = detector_shape_covariance(model, linear.at(0).jacobian()[0], inliers, sigmas)
-                    if np.all(np.isfinite(through)):  # else the shape block alone, as where the sandwich is not
-                        joint = joint + share ** 2 * through
+                through = options.graph.shape_error_through_fit ** 2 * detector_shape_covariance(
+                    model, linear.at(0).jacobian()[0], inliers, sigmas)  # ... and through the fit
+                if np.all(np.isfinite(through)):  # else the shape block alone, as where the sandwich is not
+                    joint = joint + through
             result.pose_covariance = joint[:6, :6].copy()
             result.keypoint_covariances_world = keypoint_covariances(joint, keys, world_T_vehicle, wireframe)
         except (RuntimeError, np.linalg.LinAlgError) as exc:
@@ -494,7 +491,11 @@ def detector_shape_variance(obs: KeypointObservations, vehicle_p_keypoints: np.n
     ``vehicle_p_keypoints`` where given (:func:`vfactor.graph.shape_sigma_at_size` with ``size_exponent``); 0
     where none has.
     """
-    sigmas = detector_shape_sigmas(obs, vehicle_p_keypoints, size_exponent)
+    return _averaged_variance(detector_shape_sigmas(obs, vehicle_p_keypoints, size_exponent))
+
+
+def _averaged_variance(sigmas: dict[str, float]) -> float:
+    """``1 / sum_c sigma_c^-2`` of camera name -> sigma (metres); 0 for none."""
     precision = sum(sigma ** -2 for sigma in sigmas.values())
     return 1.0 / precision if precision > 0 else 0.0
 
@@ -523,9 +524,9 @@ def detector_shape_covariance(covariance: np.ndarray, jacobian: np.ndarray, obse
     A = np.asarray(jacobian, dtype=float)
     out = np.zeros((A.shape[1], A.shape[1]))
     rows = np.repeat(observations.camera_index, 2)
-    for c, camera in enumerate(observations.cameras):
-        sigma = sigmas.get(camera.name)
-        if not sigma or not np.any(rows == c):
+    for c in np.unique(observations.camera_index):  # the cameras that see the vehicle, not the scene's
+        sigma = sigmas.get(observations.cameras[c].name)
+        if not sigma:
             continue
         A_c = A[rows == c]
         G = covariance @ (A_c.T @ A_c[:, 6:])  # (42, 36)

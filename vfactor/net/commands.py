@@ -572,7 +572,8 @@ def run_calibrate_shape(args: argparse.Namespace) -> int:
         mask = np.array([name == "all" or v.body_type == name for v in vehicles])
         rows.append([name, str(int(mask.sum()))] + [f"{n[mask].mean() / 3:.2f}x / {100 * np.mean(n[mask] < 7.815):.1f} %"
                                                     for n in (before, after)] +
-                    [f"{np.nanmean(n[mask]) / 6:.2f}x / {100 * np.nanmean(n[mask] < 12.59):.1f} %" for n in poses])
+                    [f"{np.mean(n) / 6:.2f}x / {100 * np.mean(n < 12.59):.1f} %"
+                     for n in (p[mask & np.isfinite(p)] for p in poses)])
     _table(["body type", "vehicles", "keypoint NEES (x 3) / under the bound, without", "with shape_sigma",
             "pose NEES (x 6) / under, without", "with"], rows)
     if args.write:

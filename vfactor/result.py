@@ -79,7 +79,9 @@ class VehicleResult:
             ``"detections"``: the indices, in the frame's ``detections``, of the detections the vehicle was
             solved from (the result file's ``detections``);
             ``"covariance_inflation"``: the factor the one-frame covariances carry
-            for an estimated noise scale (docs/factors.md); ``"covariance_widening"``: how much
+            for an estimated noise scale (docs/factors.md); ``"covariance_noise_scale"``: the inliers' noise
+            scale the one-frame covariances are computed at (times the nominal sigmas; calibrated sigmas are
+            not narrowed by it); ``"covariance_widening"``: how much
             wider, at most, the residuals' own (sandwich) covariance made them than that model
             (1: not at all; docs/factors.md); for tracks,
             ``"covariance"``: which covariance ``pose_covariance`` is,

@@ -75,8 +75,7 @@ class Linearisation:
 
 
 def linearise(graph: gtsam.NonlinearFactorGraph, projection: gtsam.NonlinearFactor, prior: gtsam.NonlinearFactor | None,
-              values: gtsam.Values, keys: KeyScheme = KeyScheme(), vehicle: int = 0, frame: int = 0,
-              raw_projection: gtsam.NonlinearFactor | None = None) -> Linearisation:
+              values: gtsam.Values, keys: KeyScheme = KeyScheme(), vehicle: int = 0, frame: int = 0) -> Linearisation:
     """The graph's, the projection factor's and the shape prior's dense Hessians at ``values``.
 
     Args:
@@ -84,9 +83,6 @@ def linearise(graph: gtsam.NonlinearFactorGraph, projection: gtsam.NonlinearFact
         projection: its keypoint projection factor.
         prior: its shape prior factor (or an identical one); None: ``prior`` and ``prior_eta`` are zero.
         values: the solution.
-        raw_projection: the projection factor without its robust loss (``RobustLoss("none")``),
-            whose whitened system becomes ``jacobian`` and ``rhs`` (:func:`inlier_noise_scale`
-            needs it); None: that of ``projection``.
     """
     layer_keys = keys.layer_keys(vehicle)
 
@@ -106,8 +102,7 @@ def linearise(graph: gtsam.NonlinearFactorGraph, projection: gtsam.NonlinearFact
     H, eta = hessian(graph.linearize(values), variables)
     projection_linear = projection.linearize(values)  # once: its Hessian and its whitened system
     Hp, eta_p = hessian(alone(projection_linear), variables)
-    system = projection_linear if raw_projection is None else raw_projection.linearize(values)
-    A, b = system.jacobian()  # keys [pose, wheel, light, roof], as ``variables``
+    A, b = projection_linear.jacobian()  # keys [pose, wheel, light, roof], as ``variables``
     Hs, eta_s = np.zeros((42, 42)), np.zeros(42)
     if prior is not None:
         Hs[6:, 6:], eta_s[6:] = hessian(alone(prior.linearize(values)), layer_keys)
@@ -196,8 +191,10 @@ def inlier_noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int
     Args:
         whitened: (n, 2) whitened residuals of the keypoints at the solution, current sigmas,
             before the robust loss.
-        lin: the linearisation at the solution (current sigmas); its ``jacobian`` and ``rhs``
-            must be those of the projection factor without the robust loss.
+        lin: the linearisation at the solution (current sigmas) of the graph with its projection factor
+            without the robust loss (least squares, as the covariances are; its ``jacobian`` and ``rhs``
+            that factor's): a Hessian with the loss's down-weighting mispredicts the residuals at
+            another scale.
         iterations: at most this many fixed-point iterations (they stop when ``s`` moves by
             less than 0.1 %).
 

@@ -370,13 +370,13 @@ def solve_observations(
     joint = None
     if options.covariance:
         try:
-            covariance_graph, inflation, inliers = _covariance_graph(graph, obs, nominal,
-                                                                     float(extras.get("noise_scale", 1.0)),
-                                                                     estimate, keys, options)
+            covariance_graph, inflation, inliers, covariance_scale = _covariance_graph(
+                graph, obs, nominal, float(extras.get("noise_scale", 1.0)), estimate, keys, options)
             linear = covariance_graph.linearize(estimate)  # once: the marginals and the sandwich's residuals
             model = pose_shape_covariance(gtsam.Marginals(linear, estimate), keys)
             joint = inflation * model
             result.extras["covariance_inflation"] = inflation
+            result.extras["covariance_noise_scale"] = covariance_scale
             if options.estimate_noise and options.graph.covariance_sandwich_weight > 0:
                 joint = _widened_by_residuals(joint, inflation, linear, options.graph.covariance_sandwich_weight,
                                               result.extras)
@@ -416,13 +416,21 @@ def _inlier_share(obs: KeypointObservations, estimate: gtsam.Values, keys: KeySc
 #: An observation whose whitened residual's square is beyond this (the 99 % point of chi2(2)) is an outlier to the
 #: covariance.
 INLIER_BOUND = 2.0 * np.log(100.0)
+#: The covariances' noise scale is estimated by least squares on the observations whose whitened residual's square
+#: at the solve's sigmas is within this (four times :data:`INLIER_BOUND`: about six sigmas; the solve's median scale
+#: can be low, and a candidate beyond the inliers is still left out of the scale's mean square) ...
+SCALE_CANDIDATE_BOUND = 4.0 * INLIER_BOUND
+#: ... where at least this many are; else on all of them.
+MIN_SCALE_CANDIDATES = 6
 
 
 def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservations, nominal: KeypointObservations,
                       scale: float, estimate: gtsam.Values, keys: KeyScheme,
-                      options: SolveOptions) -> tuple[gtsam.NonlinearFactorGraph, float]:
-    """The graph whose marginals, times the returned factor, are the result's covariances, with that factor and the
-    observations of its projection factor (the inliers, at the covariances' sigmas).
+                      options: SolveOptions) -> tuple[gtsam.NonlinearFactorGraph, float, KeypointObservations, float]:
+    """The graph whose marginals, times the returned factor, are the result's covariances, with that factor, the
+    observations of its projection factor (the inliers, at the covariances' sigmas) and their noise scale (what
+    the nominal sigmas are multiplied by; calibrated ones are not narrowed by it: ``scale`` without
+    ``options.estimate_noise``).
 
     * **Inliers at full weight.** The Gauss-Newton information of a robust
       loss down-weights every observation by its residual, good ones too (the
@@ -433,7 +441,9 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
       :data:`INLIER_BOUND`, the others left out.
     * **The inliers' noise.** With ``options.estimate_noise``, their sigmas are
       the nominal ones times the solve's ``scale`` times
-      :func:`~vfactor.shape_evidence.inlier_noise_scale`, held above
+      :func:`~vfactor.shape_evidence.inlier_noise_scale` (read off least squares
+      on the observations within :data:`SCALE_CANDIDATE_BOUND`, without the
+      robust loss: the model the covariances are of), held above
       ``GraphConfig.covariance_min_pixel_sigma`` rather than the solve's
       ``min_pixel_sigma`` (clean keypoints are sharper than the solve's floor),
       and the factor is :func:`~vfactor.shape_evidence.covariance_inflation` of
@@ -458,16 +468,23 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
     pose_key, layer_keys = keys.pose_key(), keys.layer_keys(0)
     world_T_vehicle = estimate.atPose3(pose_key)
     points = wireframe_from_values(estimate, keys).vehicle_p_keypoints
-    inflation = 1.0
+    inflation, noise = 1.0, scale
     if options.estimate_noise:
         floored = nominal.with_min_sigma(options.graph.covariance_min_pixel_sigma)
         obs = floored.scaled(scale)
+        # the scale is read off least squares on the candidate inliers, the model the covariances are of: the robust
+        # loss's down-weighting in the Hessian mispredicted the step to the covariance's sigmas (docs/factors.md)
+        whitened = whitened_residuals(obs, world_T_vehicle, points)
+        candidates = np.sum(whitened ** 2, axis=1) < SCALE_CANDIDATE_BOUND
+        fitted = obs.subset(candidates) if candidates.sum() >= MIN_SCALE_CANDIDATES else obs
+        if fitted is not obs:
+            whitened = whitened[candidates]
         at_scale = copy_graph(graph)
-        at_scale.replace(0, projection_factor(pose_key, layer_keys, obs, options.graph.loss))
-        raw = projection_factor(pose_key, layer_keys, obs, RobustLoss("none"))
-        lin = linearise(at_scale, at_scale.at(0), None, estimate, keys, raw_projection=raw)
-        relative, _, dof = inlier_noise_scale(whitened_residuals(obs, world_T_vehicle, points), lin)
-        inflation = covariance_inflation(dof)
+        raw = projection_factor(pose_key, layer_keys, fitted, RobustLoss("none"))
+        at_scale.replace(0, raw)
+        lin = linearise(at_scale, raw, None, estimate, keys)
+        relative, _, dof = inlier_noise_scale(whitened, lin)
+        inflation, noise = covariance_inflation(dof), scale * relative
         calibrated = nominal.calibrated
         if calibrated is not None and scale * relative < 1.0:  # calibrated sigmas are not narrowed
             obs = floored.scaled_above_calibrated(scale * relative)
@@ -477,7 +494,7 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
     inlier = np.sum(whitened_residuals(obs, world_T_vehicle, points) ** 2, axis=1) < INLIER_BOUND
     out = copy_graph(graph)
     out.replace(0, projection_factor(pose_key, layer_keys, obs.subset(inlier), RobustLoss("none")))
-    return out, inflation, obs.subset(inlier)
+    return out, inflation, obs.subset(inlier), noise
 
 
 def detector_shape_variance(obs: KeypointObservations, vehicle_p_keypoints: np.ndarray | None = None,

@@ -476,9 +476,9 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
         # loss's down-weighting in the Hessian mispredicted the step to the covariance's sigmas (docs/factors.md)
         whitened = whitened_residuals(obs, world_T_vehicle, points)
         candidates = np.sum(whitened ** 2, axis=1) < SCALE_CANDIDATE_BOUND
-        fitted = obs.subset(candidates) if candidates.sum() >= MIN_SCALE_CANDIDATES else obs
-        if fitted is not obs:
-            whitened = whitened[candidates]
+        fitted = obs
+        if candidates.sum() >= MIN_SCALE_CANDIDATES:
+            fitted, whitened = obs.subset(candidates), whitened[candidates]
         at_scale = copy_graph(graph)
         raw = projection_factor(pose_key, layer_keys, fitted, RobustLoss("none"))
         at_scale.replace(0, raw)

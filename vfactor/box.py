@@ -82,7 +82,8 @@ class BoxModel:
 
     Attributes:
         mean: body type -> (5,) mean offsets; ``"any"``: over every library vehicle.
-        covariance: body type -> (5, 5) their covariance (the library's spread plus :data:`MODEL_SIGMA` squared).
+        covariance: body type -> (5, 5) their covariance for a vehicle not among those they are learnt from (the
+            library's sample covariance times :func:`predictive_factor`, plus :data:`MODEL_SIGMA` squared).
     """
 
     mean: dict = field(default_factory=dict)
@@ -154,7 +155,8 @@ def default_box_model(exclude: frozenset = frozenset()) -> BoxModel:
 
     Per body type and over all (``"any"``): the mean and covariance of each
     library vehicle's offsets (its published length, width, height, tyre
-    radius and overhangs against its keypoints' features), plus
+    radius and overhangs against its keypoints' features), the covariance
+    times :func:`predictive_factor` (a vehicle solved is not among them) plus
     :data:`MODEL_SIGMA` squared.
     """
     rows: dict[str, list] = {t: [] for t in BODY_TYPES}

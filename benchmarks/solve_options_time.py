@@ -22,17 +22,16 @@ Run: ``python benchmarks/solve_options_time.py [--level paper] [--seed 351] [--s
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import time
 from functools import partial
 
 import numpy as np
 
-from vfactor.evaluation import NOISE_LEVELS, held_out_box_model, held_out_model, noise_variant
+from vfactor.evaluation import NOISE_LEVELS, noise_variant, solve_held_out
 from vfactor.graph import observations_from_detections, resized_observations
 from vfactor.metrics import CHI2_95, pose_errors, pose_nees
 from vfactor.sim import load_scenario, simulate
-from vfactor.solve import SolveOptions, solve_observations
+from vfactor.solve import SolveOptions
 
 VARIANTS = {
     "default": {},
@@ -59,17 +58,15 @@ def main(argv=None) -> dict:
         for f, frame in enumerate(sim.scene.frames):
             for vid in frame.vehicle_ids():
                 truth, detections = sim.truth[f][vid], frame.detections_of(vid)
-                model, boxes = held_out_model(truth.preset), held_out_box_model(truth.preset)
-                # untimed: the held-out model's priors make their factors on first use, which the first variant
-                # would pay alone
-                solve_observations(observations_from_detections(detections, sim.scene.cameras), SolveOptions(), vid,
-                                   model)
+                # untimed: the held-out shape and box models are built (then cached), and their priors make their
+                # factors on first use, which the first variant would pay alone
+                solve_held_out(observations_from_detections(detections, sim.scene.cameras), truth.preset)
                 vehicles += 1
                 for name, changes in VARIANTS.items():
-                    options = dataclasses.replace(SolveOptions(**changes), box_model=boxes)
+                    options = SolveOptions(**changes)
                     t0 = time.perf_counter()  # the whole call as solve_vehicle makes it, the observations included
                     obs = observations_from_detections(detections, sim.scene.cameras, options.graph)
-                    result = solve_observations(obs, options, vid, model, resize=partial(
+                    result = solve_held_out(obs, truth.preset, options, vid, resize=partial(
                         resized_observations, detections, sim.scene.cameras, options.graph))
                     row = rows[name]
                     row["seconds"].append(time.perf_counter() - t0)

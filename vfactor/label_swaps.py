@@ -118,9 +118,8 @@ def relabel_swaps(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehic
     """
     if len(obs) == 0:
         return obs, []
-    mirrored = obs.relabelled(MIRROR_PERMUTATION[obs.keypoint_index])
-    as_given = loss.rho(np.linalg.norm(whitened_residuals(obs, world_T_vehicle, vehicle_p_keypoints), axis=1))
-    as_swapped = loss.rho(np.linalg.norm(whitened_residuals(mirrored, world_T_vehicle, vehicle_p_keypoints), axis=1))
+    mirrored, as_given, as_swapped = _relabelled_costs(obs, MIRROR_PERMUTATION, world_T_vehicle, vehicle_p_keypoints,
+                                                       loss)
     swap = np.zeros(len(obs), dtype=bool)
     findings = []
     for rows in _pairs(obs):
@@ -131,6 +130,17 @@ def relabel_swaps(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehic
     if not findings:
         return obs, []
     return obs.relabelled(np.where(swap, mirrored.keypoint_index, obs.keypoint_index)), findings
+
+
+def _relabelled_costs(obs: KeypointObservations, permutation: np.ndarray, world_T_vehicle: gtsam.Pose3,
+                      vehicle_p_keypoints: np.ndarray, loss: RobustLoss) -> tuple[KeypointObservations, np.ndarray,
+                                                                                  np.ndarray]:
+    """(every observation relabelled by ``permutation``, each observation's robust cost ``rho(|e|)`` as labelled,
+    and relabelled) at the pose and shape."""
+    relabelled = obs.relabelled(permutation[obs.keypoint_index])
+    costs = [loss.rho(np.linalg.norm(whitened_residuals(o, world_T_vehicle, vehicle_p_keypoints), axis=1))
+             for o in (obs, relabelled)]
+    return relabelled, costs[0], costs[1]
 
 
 def apply_swaps(obs: KeypointObservations, findings: list[SwapFinding]) -> KeypointObservations:
@@ -223,9 +233,7 @@ def turned_cameras(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehi
     """
     if len(obs) == 0:
         return []
-    turned = obs.relabelled(TURN_PERMUTATION[obs.keypoint_index])
-    as_given = loss.rho(np.linalg.norm(whitened_residuals(obs, world_T_vehicle, vehicle_p_keypoints), axis=1))
-    as_turned = loss.rho(np.linalg.norm(whitened_residuals(turned, world_T_vehicle, vehicle_p_keypoints), axis=1))
+    _, as_given, as_turned = _relabelled_costs(obs, TURN_PERMUTATION, world_T_vehicle, vehicle_p_keypoints, loss)
     out = []
     for c in np.unique(obs.camera_index):
         rows = obs.camera_index == c

@@ -486,15 +486,15 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
         relative, _, dof = inlier_noise_scale(whitened, lin)
         inflation, noise = covariance_inflation(dof), scale * relative
         calibrated = nominal.calibrated
-        if calibrated is not None and scale * relative < 1.0:  # calibrated sigmas are not narrowed
-            obs = floored.scaled_above_calibrated(scale * relative)
+        if calibrated is not None and noise < 1.0:  # calibrated sigmas are not narrowed
+            obs = floored.scaled_above_calibrated(noise)
             inflation = 1.0 if calibrated.all() else inflation
         else:
             obs = obs.scaled(relative)
-    inlier = np.sum(whitened_residuals(obs, world_T_vehicle, points) ** 2, axis=1) < INLIER_BOUND
+    inliers = obs.subset(np.sum(whitened_residuals(obs, world_T_vehicle, points) ** 2, axis=1) < INLIER_BOUND)
     out = copy_graph(graph)
-    out.replace(0, projection_factor(pose_key, layer_keys, obs.subset(inlier), RobustLoss("none")))
-    return out, inflation, obs.subset(inlier), noise
+    out.replace(0, projection_factor(pose_key, layer_keys, inliers, RobustLoss("none")))
+    return out, inflation, inliers, noise
 
 
 def detector_shape_variance(obs: KeypointObservations, vehicle_p_keypoints: np.ndarray | None = None,

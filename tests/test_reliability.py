@@ -622,6 +622,7 @@ def test_a_cut_view_that_the_joint_solve_followed_is_left_out():
             if plain[v.id].status == Status.FAILED and plain[v.id].extras["disagreeing_cameras"] == ["cam1"]:
                 assert v.status == Status.CONVERGED, v.message
                 assert v.extras["cut_cameras_left_out"] == ["cam0"]
+                assert v.body_type is not None and v.extras.get("body_type_posterior"), v.body_type
                 obs = observations_from_detections(cut.detections_of(v.id), cameras, options.graph)
                 cam0 = obs.camera_index == [c.name for c in obs.cameras].index("cam0")  # weights in this order
                 assert len(v.extras["inlier_weights"]) == len(obs) and not v.extras["inlier_weights"][cam0].any()

@@ -284,7 +284,7 @@ def solve_observations(
     nominal = obs
     if refining:
         try:  # at other sigmas than the first solution's: one LM at them first (_rerefined)
-            best, obs, extras, prior = (_refine if resized is None else _rerefined)(
+            best, obs, extras, refined_prior = (_refine if resized is None else _rerefined)(
                 best, nominal, options, model, first_prior, hints, keys, bounds, terms, hwc)
         except (RuntimeError, np.linalg.LinAlgError) as exc:
             extras = {"refinement": f"kept the first solve: {exc}"}
@@ -293,13 +293,13 @@ def solve_observations(
         else:
             if (options.relabel_swaps and extras["noise_scale"] > SWAP_SEARCH_SCALE
                     and len(np.unique(nominal.camera_index)) >= 2):
-                best, obs, nominal, extras, prior, found, hypotheses = _searched_swaps(
-                    best, obs, nominal, extras, prior, options, model, hints, keys, bounds, terms, hwc)
+                best, obs, nominal, extras, refined_prior, found, hypotheses = _searched_swaps(
+                    best, obs, nominal, extras, refined_prior, options, model, hints, keys, bounds, terms, hwc)
                 swaps = merge_findings(swaps, found)
             fit_scale = extras["noise_scale"]  # how well every keypoint fits (the refit below fits those left)
             if fit_scale > REFIT_SCALE and options.graph.loss.name != "none":  # least squares asked: as it is
-                best, obs, nominal, extras, prior, left_out = _refitted_without_gross_outliers(
-                    best, obs, nominal, extras, prior, options, model, hints, keys, bounds, terms, hwc)
+                best, obs, nominal, extras, refined_prior, left_out = _refitted_without_gross_outliers(
+                    best, obs, nominal, extras, refined_prior, options, model, hints, keys, bounds, terms, hwc)
     estimate, error, iterations, hit_limit, graph = best
     pose_key = keys.pose_key()
     world_T_vehicle = estimate.atPose3(pose_key)
@@ -373,8 +373,8 @@ def solve_observations(
             covariance_graph, inflation, inliers, covariance_scale = _covariance_graph(
                 graph, obs, nominal, float(extras.get("noise_scale", 1.0)), estimate, keys, options)
             linear = covariance_graph.linearize(estimate)  # once: the marginals and the sandwich's residuals
-            model = pose_shape_covariance(gtsam.Marginals(linear, estimate), keys)
-            joint = inflation * model
+            marginal = pose_shape_covariance(gtsam.Marginals(linear, estimate), keys)
+            joint = inflation * marginal
             result.extras["covariance_inflation"] = inflation
             result.extras["covariance_noise_scale"] = covariance_scale
             if options.estimate_noise and options.graph.covariance_sandwich_weight > 0:
@@ -386,7 +386,7 @@ def solve_observations(
                 joint = joint + np.diag(np.r_[np.zeros(6), np.full(36, shape_variance)])
                 result.extras["detector_shape_sigma"] = float(np.sqrt(shape_variance))
                 through = options.graph.shape_error_through_fit ** 2 * detector_shape_covariance(
-                    model, linear.at(0).jacobian()[0], inliers, sigmas)  # ... and through the fit
+                    marginal, linear.at(0).jacobian()[0], inliers, sigmas)  # ... and through the fit
                 if np.all(np.isfinite(through)):  # else the shape block alone, as where the sandwich is not
                     joint = joint + through
             result.pose_covariance = joint[:6, :6].copy()

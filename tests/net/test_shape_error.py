@@ -100,7 +100,8 @@ def test_calibrate_shape_command_fits_and_writes_and_the_pipeline_uses_it(tmp_pa
                  "--seeds", "1", "--frames", "3", "--write"])
     assert code == 0
     out = capsys.readouterr()
-    assert "| all | 3 |" in out.out and "written to" in out.err
+    assert "| all | 3 |" in out.out and "written to" in out.err and "fitted to the class alone" in out.out
+    assert " cm (" in out.out.split("| all | 3 |", 1)[1].splitlines()[0]  # the class-alone fit beside the pooled one
     printed = float(out.out.split("shape_sigma ", 1)[1].split(" m", 1)[0])
     calibration = KeypointDetector(weights).calibration
     assert calibration.shape_sigma == pytest.approx(printed, abs=1e-4) and 0.0 <= calibration.shape_sigma < 0.5

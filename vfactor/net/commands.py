@@ -573,15 +573,28 @@ def run_calibrate_shape(args: argparse.Namespace) -> int:
         rows.append([name, str(int(mask.sum()))] + [f"{n[mask].mean() / 3:.2f}x / {100 * np.mean(n[mask] < 7.815):.1f} %"
                                                     for n in (before, after)] +
                     [f"{np.mean(n) / 6:.2f}x / {100 * np.mean(n < 12.59):.1f} %"
-                     for n in (p[mask & np.isfinite(p)] for p in poses)])
+                     for n in (p[mask & np.isfinite(p)] for p in poses)] +
+                    [_own_shape_sigma([v for v, m in zip(vehicles, mask) if m], sigma, exponent)])
     _table(["body type", "vehicles", "keypoint NEES (x 3) / under the bound, without", "with shape_sigma",
-            "pose NEES (x 6) / under, without", "with"], rows)
+            "pose NEES (x 6) / under, without", "with", "shape_sigma fitted to the class alone"], rows)
     if args.write:
         with _file_of("--weights"):
             write_calibration(weights, replace(detector.calibration, shape_sigma=sigma), {
                 f"{METADATA_KEY}_shape": {"scenario": args.scenario, "seeds": seeds, "vehicles": len(vehicles)}})
         print(f"\nshape_sigma written to {weights} (metadata '{METADATA_KEY}'; weights unchanged)", file=sys.stderr)
     return EXIT_OK
+
+
+def _own_shape_sigma(vehicles, pooled: float, exponent: float) -> str:
+    """``calibrate-shape``'s column: the ``shape_sigma`` fitted to one class's vehicles alone, and its ratio to the
+    pooled fit (a class the network errs on more, or less, than on the others; docs/network.md)."""
+    from vfactor.net.shape_error import fit_shape_sigma  # noqa: PLC0415
+
+    try:
+        own = fit_shape_sigma(vehicles, size_exponent=exponent)
+    except ValueError:
+        return "-"
+    return f"{100 * own:.1f} cm ({own / pooled:.2f}x)" if pooled > 0 else f"{100 * own:.1f} cm"
 
 
 def run_calibrate_bias(args: argparse.Namespace) -> int:

@@ -170,6 +170,10 @@ def test_unknown_scenario_and_bad_counts_exit_2(tmp_path, capsys):
     assert main(["simulate", "no_such_rig", "--out", str(tmp_path / "s.json")]) == 2
     assert "packaged" in capsys.readouterr().err
     assert main(["demo", "--frames", "0", "--out", str(tmp_path / "d")]) == 2
+    capsys.readouterr()
+    assert main(["eval", "paper", "--seeds", "2"]) == 2  # one seed: not silently the first of two
+    err = capsys.readouterr().err
+    assert "--seeds" in err and "one seed" in err and len(err.strip().splitlines()) == 1
 
 
 def test_help_teaches_and_module_runs():

@@ -179,6 +179,11 @@ def test_cli_eval_images(rendered, tmp_path, capsys):
     assert main(["eval", "images", "--scenario", "library_2cam", "--frames", "1", "--seed", "4", "--no-real-roofs",
                  "--markdown", str(md)]) == 0
     assert "1 frames, seed 4, roofs at the window tops" in md.read_text()
+    assert main(["eval", "images", "--frames", "1", "--seed", "4", "--seeds", "2", "--markdown", str(md)]) == 0
+    text = md.read_text()  # each seed's report, then the seeds pooled per body type
+    assert "1 frames, seed 4" in text and "1 frames, seed 5" in text and "seeds 4-5 pooled" in text
+    pooled = text[text.index("seeds 4-5 pooled"):]
+    assert "| all | 2 |" in pooled.split("Consistency", 1)[1]  # two vehicles: one a seed
 
 
 def test_cli_eval_images_evaluates_the_given_weights(rendered, tmp_path, capsys):

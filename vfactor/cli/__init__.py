@@ -304,7 +304,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, help="number of scenes or frames (default: the scenario's)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     p.add_argument("--seeds", type=int, default=1,
-                   help="frames, tracks: how many seeds from --seed on (frames: pooled in one table; default: 1)")
+                   help="frames, tracks, images, association: how many seeds from --seed on (frames: pooled in one "
+                   "table; tracks and images: each seed, then pooled per body type; default: 1)")
     p.add_argument("--draws", type=int, default=0,
                    help="tracks: also batch-smooth each seed's tracks over this many new draws of the keypoint noise "
                    "and report each final shape's mean error, bias and spread (default: 0)")

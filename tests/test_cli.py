@@ -174,6 +174,14 @@ def test_unknown_scenario_and_bad_counts_exit_2(tmp_path, capsys):
     assert main(["eval", "paper", "--seeds", "2"]) == 2  # one seed: not silently the first of two
     err = capsys.readouterr().err
     assert "--seeds" in err and "one seed" in err and len(err.strip().splitlines()) == 1
+    for args, flag in ((["eval", "--draws", "3"], "--draws"), (["eval", "--lag", "1"], "--lag"),
+                       (["eval", "tracks", "--figures", str(tmp_path)], "--figures"),
+                       (["eval", "--sweep-frames", "5"], "--sweep-frames"),
+                       (["eval", "tracks", "--clipped-boxes"], "--clipped-boxes"),
+                       (["eval", "--no-detector-offsets"], "--detector-offsets")):
+        assert main(args) == 2, args  # another experiment's option: named, not silently dropped
+        err = capsys.readouterr().err
+        assert err.startswith(f"vfactor eval: error: {flag}: only eval ") and len(err.strip().splitlines()) == 1, err
 
 
 def test_help_teaches_and_module_runs():

@@ -294,7 +294,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="frames (one-frame accuracy), tracks (tracking), paper (the paper's tables), images "
                    "(rendered images -> keypoint network -> graph) or association (no ids); default: frames")
     p.add_argument("--figures", help="paper: folder for the plots (the Markdown links them as figures/NAME.png)")
-    p.add_argument("--sweep-frames", type=int, default=30, help="paper: vehicles per point of the plots (default: 30)")
+    p.add_argument("--sweep-frames", type=int, help="paper: vehicles per point of the plots (default: 30)")
     p.add_argument("--scenario", help="scenario (default: library_2cam for frames, tracks_3veh for tracks, "
                    "accuracy_2cam for images, association_4cam and association_3cam for association)")
     p.add_argument("--levels",
@@ -309,8 +309,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--draws", type=int, default=0,
                    help="tracks: also batch-smooth each seed's tracks over this many new draws of the keypoint noise "
                    "and report each final shape's mean error, bias and spread (default: 0)")
-    p.add_argument("--lag", type=float, default=0.5,
-                   help="tracks: the fixed lag of the isam2_lag row, seconds (default: 0.5)")
+    p.add_argument("--lag", type=float, help="tracks: the fixed lag of the isam2_lag row, seconds (default: 0.5)")
     p.add_argument("--body-motion", metavar="ROLL,PITCH",
                    help="tracks: the simulated bodies roll and pitch on their suspension, ROLL and PITCH degrees per g "
                    "of lateral and longitudinal acceleration (vfactor.sim.BodyMotion; default: rigid vehicles)")

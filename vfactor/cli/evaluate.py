@@ -11,7 +11,12 @@ from vfactor.cli.common import EXIT_OK, check_out_file, check_positive, missing_
 from vfactor.errors import InputError
 from vfactor.jsonio import write_text_atomic
 
-__all__ = ["evaluate"]
+__all__ = ["evaluate", "DEFAULT_LAG", "DEFAULT_SWEEP_FRAMES"]
+
+#: ``eval tracks``' fixed lag of its isam2_lag row (seconds) and ``eval paper``'s vehicles per point of its plots,
+#: where not given.
+DEFAULT_LAG = 0.5
+DEFAULT_SWEEP_FRAMES = 30
 
 
 def evaluate(args) -> int:
@@ -22,7 +27,7 @@ def evaluate(args) -> int:
     check_positive(args.seeds, "--seeds")
     if args.draws < 0:
         raise InputError("--draws", f"expected an integer >= 0, got {args.draws}")
-    if not (np.isfinite(args.lag) and args.lag > 0):
+    if args.lag is not None and not (np.isfinite(args.lag) and args.lag > 0):
         raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
     body_motion = _body_motion(args.body_motion) if args.body_motion is not None else None
     if body_motion is not None and args.experiment != "tracks":
@@ -34,6 +39,13 @@ def evaluate(args) -> int:
     if args.real_roofs is not None and args.experiment != "images":
         flag = "--real-roofs" if args.real_roofs else "--no-real-roofs"
         raise InputError(flag, f"eval {args.experiment} renders no images (eval images does)")
+    for flag, experiment, given in (  # options of one experiment: never silently dropped by another
+            ("--draws", "tracks", args.draws != 0), ("--lag", "tracks", args.lag is not None),
+            ("--figures", "paper", args.figures is not None), ("--sweep-frames", "paper", args.sweep_frames is not None),
+            ("--clipped-boxes", "images", args.clipped_boxes), ("--detector-offsets", "images",
+                                                                 args.detector_offsets is not None)):
+        if given and args.experiment != experiment:
+            raise InputError(flag, f"only eval {experiment} takes it, not eval {args.experiment}")
     if args.amodal_pass and not (args.experiment == "images" and args.clipped_boxes):
         raise InputError("--amodal-pass", "only with eval images --clipped-boxes (whole boxes stop at no image border)")
     if args.experiment in ("images", "paper") and (args.workers is not None or args.scheduler is not None):
@@ -48,7 +60,7 @@ def evaluate(args) -> int:
                                         _levels(args.levels or "clean,paper,hard"), args.seeds, engine)
             elif args.experiment == "tracks":
                 sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws,
-                                        args.lag, engine, body_motion)
+                                        DEFAULT_LAG if args.lag is None else args.lag, engine, body_motion)
             else:
                 sections = _eval_association(args.scenario, frames, args.seed, args.seeds, engine,
                                              _levels(args.levels) if args.levels else (None,))
@@ -64,19 +76,25 @@ def evaluate(args) -> int:
                              "take several")
         from vfactor.paper_comparison import paper_report
 
-        sections = [paper_report(frames, args.seed, args.figures, check_positive(args.sweep_frames, "--sweep-frames"))]
+        sweep = DEFAULT_SWEEP_FRAMES if args.sweep_frames is None else check_positive(args.sweep_frames,
+                                                                                        "--sweep-frames")
+        sections = [paper_report(frames, args.seed, args.figures, sweep)]
     default = {"frames": "library_2cam", "tracks": "tracks_3veh", "paper": None, "images": "accuracy_2cam",
                "association": None}[args.experiment]
     command = "vfactor eval" + (f" {args.experiment}" if args.experiment != "frames" else "") + \
         (f" --scenario {args.scenario}" if args.scenario and args.scenario != default else "") + \
         (f" --frames {args.frames}" if args.frames else "") + (f" --seed {args.seed}" if args.seed else "") + \
         (f" --seeds {args.seeds}" if args.seeds != 1 else "") + (f" --draws {args.draws}" if args.draws else "") + \
-        (f" --lag {args.lag:g}" if args.experiment == "tracks" and args.lag != 0.5 else "") + \
+        (f" --lag {args.lag:g}" if args.lag is not None else "") + \
         (f" --body-motion {args.body_motion}" if body_motion is not None else "") + \
         (f" --levels {args.levels}" if args.levels and not (args.experiment == "frames" and
                                                              args.levels == "clean,paper,hard") else "") + \
         (f" --figures {args.figures}" if args.figures else "") + \
-        (f" --sweep-frames {args.sweep_frames}" if args.experiment == "paper" and args.sweep_frames != 30 else "")
+        (f" --sweep-frames {args.sweep_frames}" if args.sweep_frames is not None else "") + \
+        (f" --weights {args.weights}" if args.weights else "") + (" --clipped-boxes" if args.clipped_boxes else "") + \
+        (" --amodal-pass" if args.amodal_pass else "") + \
+        {True: " --real-roofs", False: " --no-real-roofs"}.get(args.real_roofs, "") + \
+        {True: " --detector-offsets", False: " --no-detector-offsets"}.get(args.detector_offsets, "")
     echo = output(args)
     for section in sections:
         echo(section)

@@ -41,9 +41,10 @@ def evaluate(args) -> int:
         raise InputError(flag, f"eval {args.experiment} renders no images (eval images does)")
     for flag, experiment, given in (  # options of one experiment: never silently dropped by another
             ("--draws", "tracks", args.draws != 0), ("--lag", "tracks", args.lag is not None),
-            ("--figures", "paper", args.figures is not None), ("--sweep-frames", "paper", args.sweep_frames is not None),
-            ("--clipped-boxes", "images", args.clipped_boxes), ("--detector-offsets", "images",
-                                                                 args.detector_offsets is not None)):
+            ("--figures", "paper", args.figures is not None),
+            ("--sweep-frames", "paper", args.sweep_frames is not None),
+            ("--clipped-boxes", "images", args.clipped_boxes),
+            ("--detector-offsets", "images", args.detector_offsets is not None)):
         if given and args.experiment != experiment:
             raise InputError(flag, f"only eval {experiment} takes it, not eval {args.experiment}")
     if args.amodal_pass and not (args.experiment == "images" and args.clipped_boxes):

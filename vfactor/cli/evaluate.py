@@ -11,7 +11,7 @@ from vfactor.cli.common import EXIT_OK, check_out_file, check_positive, missing_
 from vfactor.errors import InputError
 from vfactor.jsonio import write_text_atomic
 
-__all__ = ["evaluate", "DEFAULT_LAG", "DEFAULT_SWEEP_FRAMES"]
+__all__ = ["evaluate"]
 
 #: ``eval tracks``' fixed lag of its isam2_lag row (seconds) and ``eval paper``'s vehicles per point of its plots,
 #: where not given.

@@ -34,6 +34,7 @@ __all__ = [
     "summarise",
     "evaluate",
     "CHI2_95",
+    "pose_tangent_error",
     "pose_nees",
     "pose_nees_components",
     "keypoint_nees",
@@ -179,6 +180,12 @@ def evaluate(frame_results, truth) -> list[dict]:
     return rows
 
 
+def pose_tangent_error(world_T_vehicle_est: gtsam.Pose3, world_T_vehicle_true: gtsam.Pose3) -> np.ndarray:
+    """(6,) ``xi = Logmap(est^-1 true)``: rotation (rad) then translation (m) in the estimate's body frame, the
+    tangent convention of :attr:`vfactor.result.VehicleResult.pose_covariance` (``true = est exp(xi)``)."""
+    return gtsam.Pose3.Logmap(world_T_vehicle_est.between(world_T_vehicle_true))
+
+
 def pose_nees(world_T_vehicle_est: gtsam.Pose3, pose_covariance, world_T_vehicle_true: gtsam.Pose3) -> float:
     """Squared Mahalanobis norm of a pose error under the estimate's (6, 6) covariance.
 
@@ -189,7 +196,7 @@ def pose_nees(world_T_vehicle_est: gtsam.Pose3, pose_covariance, world_T_vehicle
     P = np.asarray(pose_covariance, dtype=float)
     if P.shape != (6, 6):
         raise ValueError(f"pose_covariance: expected shape (6, 6), got {P.shape}")
-    xi = gtsam.Pose3.Logmap(world_T_vehicle_est.between(world_T_vehicle_true))
+    xi = pose_tangent_error(world_T_vehicle_est, world_T_vehicle_true)
     return float(xi @ np.linalg.solve(P, xi))
 
 
@@ -202,7 +209,7 @@ def pose_nees_components(world_T_vehicle_est: gtsam.Pose3, pose_covariance, worl
     P = np.asarray(pose_covariance, dtype=float)
     if P.shape != (6, 6):
         raise ValueError(f"pose_covariance: expected shape (6, 6), got {P.shape}")
-    xi = gtsam.Pose3.Logmap(world_T_vehicle_est.between(world_T_vehicle_true))
+    xi = pose_tangent_error(world_T_vehicle_est, world_T_vehicle_true)
     return xi**2 / np.diag(P)
 
 
@@ -241,7 +248,7 @@ def ray_nees(world_T_vehicle_est: gtsam.Pose3, pose_covariance, world_T_vehicle_
     if not distance > 0:
         raise ValueError("world_p_camera: the camera centre is at the vehicle origin")
     ray = world_T_vehicle_est.rotation().matrix().T @ (ray_world / distance)
-    error = gtsam.Pose3.Logmap(world_T_vehicle_est.between(world_T_vehicle_true))[3:]
+    error = pose_tangent_error(world_T_vehicle_est, world_T_vehicle_true)[3:]
     P = P[3:, 3:]
     along = float(error @ ray)
     across = np.linalg.svd(np.eye(3) - np.outer(ray, ray))[0][:, :2]  # an orthonormal basis of the plane across

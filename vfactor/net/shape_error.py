@@ -29,11 +29,11 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-import gtsam
 import numpy as np
 
 from vfactor.evaluation import body_type_of, solve_held_out
 from vfactor.graph import observations_from_detections, shape_sigma_at_size
+from vfactor.metrics import pose_tangent_error
 from vfactor.net.end_to_end import render_and_detect
 from vfactor.solve import SolveOptions
 
@@ -55,7 +55,7 @@ class VehicleErrors:
         unit_covariance: (12, 3, 3) what a detector's error of the shape whose sigma at the vehicle's size is 1 m
             per camera adds to ``covariance``, as the solve adds it (both parts; m^2 per m^2 of that sigma squared);
             None: ``I / cameras`` (the shape block alone).
-        pose_error: (6,) ``Logmap(estimate^-1 truth)`` (rad, m; :func:`vfactor.metrics.pose_nees`), or None.
+        pose_error: (6,) ``Logmap(estimate^-1 truth)`` (rad, m; :func:`vfactor.metrics.pose_tangent_error`), or None.
         pose_covariance: (6, 6) the result's pose covariance without a shape error, or None.
         pose_unit_covariance: (6, 6) what that error adds to it, or None (nothing).
     """
@@ -129,7 +129,7 @@ def vehicle_errors(sim, detected, options: SolveOptions = SolveOptions()) -> lis
                 body_type_of(truth.preset), np.asarray(result.wireframe.vehicle_p_keypoints),
                 unit_covariance=np.asarray(unit.keypoint_covariances_world) -
                 np.asarray(result.keypoint_covariances_world),
-                pose_error=gtsam.Pose3.Logmap(result.world_T_vehicle.between(truth.world_T_vehicle)),
+                pose_error=pose_tangent_error(result.world_T_vehicle, truth.world_T_vehicle),
                 pose_covariance=np.asarray(result.pose_covariance),
                 pose_unit_covariance=np.asarray(unit.pose_covariance) - np.asarray(result.pose_covariance)))
     return out

@@ -21,12 +21,11 @@ from pathlib import Path
 import numpy as np
 
 from vfactor.graph import GraphConfig
+from vfactor.metrics import nees_summary
 from vfactor.net.end_to_end import detected_scene
 from vfactor.net.shape_error import keypoint_nees_at, pose_nees_at, vehicle_errors
 from vfactor.solve import SolveOptions
 from vfactor.vehicle_library import BODY_TYPES
-
-CHI2_6_95, CHI2_3_95 = 12.592, 7.815
 
 
 def main(argv=None) -> None:
@@ -59,9 +58,9 @@ def main(argv=None) -> None:
             mask = np.asarray(mask, dtype=bool)
             if not mask.any():
                 continue
-            p, k = pose[mask], keypoints[mask]
-            print(f"| {factor:g} | {name} | {mask.sum()} | {p.mean() / 6:.2f}x | {100 * np.mean(p < CHI2_6_95):.1f} % "
-                  f"| {k.mean() / 3:.2f}x | {100 * np.mean(k < CHI2_3_95):.1f} % |")
+            p, k = nees_summary(pose[mask], 6), nees_summary(keypoints[mask], 3)
+            print(f"| {factor:g} | {name} | {mask.sum()} | {p['ratio']:.2f}x | {100 * p['under_95']:.1f} % "
+                  f"| {k['ratio']:.2f}x | {100 * k['under_95']:.1f} % |")
 
 
 if __name__ == "__main__":

@@ -23,10 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from vfactor.evaluation import class_rows, held_out_scene_model, pose_rows
+from vfactor.metrics import CHI2_95
 from vfactor.net.end_to_end import detected_scene
 from vfactor.track import TrackOptions, smooth_scene, track_scene
-
-CHI2_6_95 = 12.592
 
 
 def with_bias(scene, bias, shape_sigma=None):
@@ -79,7 +78,7 @@ def main(argv=None) -> None:
         types = np.array([x[0] for x in rs])
         per_type = ", ".join(f"{t} {np.nanmean(r[types == t, 2]) / 6:.2f}x" for t in sorted(set(types)))
         print(f"| {method} | {rig} | {label} | {len(r)} | {r[:, 0].mean():.2f} | {r[:, 1].mean():.2f} | "
-              f"{np.nanmean(r[:, 2]) / 6:.2f}x | {100 * np.nanmean(r[:, 2] < CHI2_6_95):.0f} % | {per_type} |")
+              f"{np.nanmean(r[:, 2]) / 6:.2f}x | {100 * np.nanmean(r[:, 2] < CHI2_95[6]):.0f} % | {per_type} |")
 
 
 if __name__ == "__main__":

@@ -29,7 +29,7 @@ import numpy as np
 
 from vfactor.evaluation import NOISE_LEVELS, noise_variant, solve_held_out
 from vfactor.graph import observations_from_detections, resized_observations
-from vfactor.metrics import CHI2_95, pose_errors, pose_nees
+from vfactor.metrics import nees_summary, pose_errors, pose_nees
 from vfactor.sim import load_scenario, simulate
 from vfactor.solve import SolveOptions
 
@@ -89,8 +89,8 @@ def main(argv=None) -> dict:
         median = float(np.median(row["seconds"]))
         mean = {key: float(np.mean([e[key] for e in row["errors"]]))
                 for key in ("rotation_deg", "translation_cm", "mean_keypoint_cm")}
-        nees = np.array(row["nees"])
-        consistency = f"{nees.mean() / 6:.2f}x / {100 * np.mean(nees < CHI2_95[6]):.1f} %" if len(nees) else "-"
+        nees = nees_summary(row["nees"], 6)
+        consistency = f"{nees['ratio']:.2f}x / {100 * nees['under_95']:.1f} %" if nees["count"] else "-"
         print(f"| {name} | {1e3 * median:.2f} | {median / reference:.2f}x | {mean['rotation_deg']:.2f} | "
               f"{mean['translation_cm']:.2f} | {mean['mean_keypoint_cm']:.2f} | {row['failed']} | {consistency} |")
         out[name] = {"median_s": median, "ratio": median / reference, **mean, "failed": row["failed"]}

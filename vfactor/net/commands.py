@@ -539,6 +539,7 @@ def run_calibrate_shape(args: argparse.Namespace) -> int:
 
     from vfactor.errors import ScenarioError  # noqa: PLC0415
     from vfactor.graph import SHAPE_SIGMA_REFERENCE_VOLUME  # noqa: PLC0415
+    from vfactor.metrics import CHI2_95  # noqa: PLC0415
     from vfactor.net.calibrate import METADATA_KEY, write_calibration  # noqa: PLC0415
     from vfactor.net.shape_error import (  # noqa: PLC0415
         fit_shape_sigma,
@@ -563,17 +564,15 @@ def run_calibrate_shape(args: argparse.Namespace) -> int:
     print(f"{args.scenario} seeds {seeds[0]}-{seeds[-1]}: {len(vehicles)} vehicles solved from the network's "
           f"keypoints; shape_sigma {sigma:.4f} m per detection at a keypoint box of {SHAPE_SIGMA_REFERENCE_VOLUME:g} "
           f"m^3, times (volume / {SHAPE_SIGMA_REFERENCE_VOLUME:g} m^3) ** {exponent:g} (keypoint NEES: consistent 3, "
-          "95 % under 7.81)\n")
+          f"95 % under {CHI2_95[3]:.2f})\n")
     before, after = keypoint_nees_at(vehicles, 0.0), keypoint_nees_at(vehicles, sigma, exponent)
     poses = pose_nees_at(vehicles, 0.0), pose_nees_at(vehicles, sigma, exponent)
     classes = [c for c in (*BODY_TYPES, "pascal3d") if any(v.body_type == c for v in vehicles)]
     rows = []
     for name in classes + ["all"]:
         mask = np.array([name == "all" or v.body_type == name for v in vehicles])
-        rows.append([name, str(int(mask.sum()))] + [f"{n[mask].mean() / 3:.2f}x / {100 * np.mean(n[mask] < 7.815):.1f} %"
-                                                    for n in (before, after)] +
-                    [f"{np.mean(n) / 6:.2f}x / {100 * np.mean(n < 12.59):.1f} %"
-                     for n in (p[mask & np.isfinite(p)] for p in poses)] +
+        rows.append([name, str(int(mask.sum()))] + [_nees_cell(n[mask], 3) for n in (before, after)] +
+                    [_nees_cell(p[mask], 6) for p in poses] +
                     [_own_shape_sigma([v for v, m in zip(vehicles, mask) if m], sigma, exponent)])
     _table(["body type", "vehicles", "keypoint NEES (x 3) / under the bound, without", "with shape_sigma",
             "pose NEES (x 6) / under, without", "with", "shape_sigma fitted to the class alone"], rows)
@@ -583,6 +582,15 @@ def run_calibrate_shape(args: argparse.Namespace) -> int:
                 f"{METADATA_KEY}_shape": {"scenario": args.scenario, "seeds": seeds, "vehicles": len(vehicles)}})
         print(f"\nshape_sigma written to {weights} (metadata '{METADATA_KEY}'; weights unchanged)", file=sys.stderr)
     return EXIT_OK
+
+
+def _nees_cell(values, dim: int) -> str:
+    """``calibrate-shape``'s cell: the mean NEES over ``dim`` and the share under the chi2 95 % bound
+    (:func:`vfactor.metrics.nees_summary`; NaN left out)."""
+    from vfactor.metrics import nees_summary  # noqa: PLC0415
+
+    summary = nees_summary(values, dim)
+    return f"{summary['ratio']:.2f}x / {100 * summary['under_95']:.1f} %"
 
 
 def _own_shape_sigma(vehicles, pooled: float, exponent: float) -> str:

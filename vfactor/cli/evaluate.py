@@ -30,28 +30,30 @@ def evaluate(args) -> int:
     if args.lag is not None and not (np.isfinite(args.lag) and args.lag > 0):
         raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
     body_motion = _body_motion(args.body_motion) if args.body_motion is not None else None
-    if body_motion is not None and args.experiment != "tracks":
-        raise InputError("--body-motion", f"eval {args.experiment} simulates no accelerations (eval tracks does)")
-    if args.levels is not None and args.experiment not in ("frames", "association"):
-        raise InputError("--levels", f"eval {args.experiment} has no noise levels (frames and association have)")
-    if args.weights is not None and args.experiment != "images":
-        raise InputError("--weights", f"eval {args.experiment} uses no keypoint network (eval images does)")
-    if args.real_roofs is not None and args.experiment != "images":
-        flag = "--real-roofs" if args.real_roofs else "--no-real-roofs"
-        raise InputError(flag, f"eval {args.experiment} renders no images (eval images does)")
-    for flag, experiment, given in (  # options of one experiment: never silently dropped by another
-            ("--draws", "tracks", args.draws != 0), ("--lag", "tracks", args.lag is not None),
-            ("--figures", "paper", args.figures is not None),
-            ("--sweep-frames", "paper", args.sweep_frames is not None),
-            ("--clipped-boxes", "images", args.clipped_boxes),
-            ("--detector-offsets", "images", args.detector_offsets is not None)):
-        if given and args.experiment != experiment:
-            raise InputError(flag, f"only eval {experiment} takes it, not eval {args.experiment}")
+    roofs = "--real-roofs" if args.real_roofs else "--no-real-roofs"
+    cluster = "--workers" if args.workers is not None else "--scheduler"
+    for flag, given, takers, why in (  # an option another experiment takes is bad input here, never dropped
+            ("--body-motion", body_motion is not None, ("tracks",), "simulates no accelerations (eval tracks does)"),
+            ("--levels", args.levels is not None, ("frames", "association"),
+             "has no noise levels (frames and association have)"),
+            ("--weights", args.weights is not None, ("images",), "uses no keypoint network (eval images does)"),
+            (roofs, args.real_roofs is not None, ("images",), "renders no images (eval images does)"),
+            (cluster, args.workers is not None or args.scheduler is not None, ("frames", "tracks", "association"),
+             "runs in this process (frames, tracks and association take a cluster)"),
+            ("--seeds", args.seeds != 1, ("frames", "tracks", "images", "association"),
+             "runs one seed (--seed); frames, tracks, images and association take several"),
+            ("--scenario", args.scenario is not None, ("frames", "tracks", "images", "association"),
+             "uses its own scenario (paper_webots)"),
+            ("--draws", args.draws != 0, ("tracks",), None), ("--lag", args.lag is not None, ("tracks",), None),
+            ("--figures", args.figures is not None, ("paper",), None),
+            ("--sweep-frames", args.sweep_frames is not None, ("paper",), None),
+            ("--clipped-boxes", args.clipped_boxes, ("images",), None),
+            ("--detector-offsets", args.detector_offsets is not None, ("images",), None)):
+        if given and args.experiment not in takers:
+            raise InputError(flag, f"eval {args.experiment} {why}" if why else
+                             f"only eval {' and '.join(takers)} takes it, not eval {args.experiment}")
     if args.amodal_pass and not (args.experiment == "images" and args.clipped_boxes):
         raise InputError("--amodal-pass", "only with eval images --clipped-boxes (whole boxes stop at no image border)")
-    if args.experiment in ("images", "paper") and (args.workers is not None or args.scheduler is not None):
-        raise InputError("--workers" if args.workers is not None else "--scheduler",
-                         f"eval {args.experiment} runs in this process (frames, tracks and association take a cluster)")
     if args.experiment in ("frames", "tracks", "association"):
         from vfactor.parallel import open_engine
 
@@ -70,11 +72,6 @@ def evaluate(args) -> int:
                                 args.detector_offsets, args.clipped_boxes, args.amodal_pass,
                                 args.real_roofs is not False, args.seeds)
     else:
-        if args.scenario:
-            raise InputError("--scenario", "the paper comparison uses its own scenario (paper_webots)")
-        if args.seeds != 1:
-            raise InputError("--seeds", "eval paper runs one seed (--seed); frames, tracks, images and association "
-                             "take several")
         from vfactor.paper_comparison import paper_report
 
         sweep = DEFAULT_SWEEP_FRAMES if args.sweep_frames is None else check_positive(args.sweep_frames,

@@ -139,7 +139,7 @@ def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = No
     """``vfactor eval images``: one report per seed from ``seed`` on, then (several seeds) the factor graph's
     errors and covariances per body type with the seeds pooled."""
     try:
-        from vfactor.net.end_to_end import evaluate_images, images_report
+        from vfactor.net.end_to_end import evaluate_images, images_report, network_class_tables
         from vfactor.net.infer import KeypointDetector
     except ImportError as exc:
         raise missing_extra("images", exc, "net,render") from None
@@ -147,7 +147,6 @@ def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = No
         detector = KeypointDetector(weights)
     except Exception as exc:  # noqa: BLE001 - any failure to read the weights file is bad input
         raise InputError("--weights", str(exc)) from None
-    from vfactor.evaluation import body_type_table, consistency_table
     from vfactor.track import TrackOptions
 
     track_options = TrackOptions(detector_offsets=detector_offsets)
@@ -158,14 +157,10 @@ def _eval_images(scenario_name: str, frames, seed: int, weights: str | None = No
                                      amodal_pass=amodal_pass, real_roofs=real_roofs)
         sections.append(images_report(evaluation))
         for method, rows in evaluation["rows"].items():
-            if method != "factor_graph_simulated_noise":
-                pooled[method] += rows
+            pooled[method] += rows
     if seeds > 1:
         sections.append(f"### {evaluation['scenario']}, seeds {seed}-{seed + seeds - 1} pooled: rendered images -> "
-                        f"keypoint network -> factor graph\n\nPer body type (each vehicle solved with a shape model "
-                        f"learnt without it):\n\n{body_type_table(pooled)}\n\nConsistency of the factor graph's "
-                        f"covariances from the network's keypoints (NEES; consistent: 1.00x and 95 %):\n\n"
-                        f"{consistency_table(pooled)}\n")
+                        f"keypoint network -> factor graph\n\n{network_class_tables(pooled)}")
     return sections
 
 

@@ -34,7 +34,7 @@ from vfactor.vehicle_library import BODY_TYPES
 from vfactor.solve import SolveOptions, solve_scene
 
 __all__ = ["evaluate_images", "render_and_detect", "detected_scene", "keypoint_accuracy", "calibration_table",
-           "images_report", "network_saw"]
+           "images_report", "network_class_tables", "network_saw"]
 
 
 def network_saw(model: str) -> bool:
@@ -274,6 +274,17 @@ def evaluate_images(scenario: str = "accuracy_2cam", frames: int | None = None, 
             "summary": summarise_methods(rows), "rows": rows, "tracking": tracking}
 
 
+def network_class_tables(rows: dict[str, list[dict]]) -> str:
+    """Markdown: the factor graph's errors per body type from the network's keypoints, its covariances'
+    consistency, and the same from the simulator's keypoints (``rows``: :func:`evaluate_images`'s, or several
+    seeds' pooled)."""
+    return (f"Per body type, from the network's keypoints (each vehicle solved with a shape model learnt without "
+            f"it):\n\n{body_type_table(rows)}\n\nConsistency of the factor graph's covariances from the network's "
+            f"keypoints and their heatmap covariances (NEES; consistent: 1.00x and 95 %):\n\n"
+            f"{consistency_table(rows)}\n\nThe same from the simulator's keypoints:\n\n"
+            f"{consistency_table(rows, 'factor_graph_simulated_noise')}\n")
+
+
 def images_report(evaluation: dict) -> str:
     """Markdown of :func:`evaluate_images`: keypoint accuracy and the methods' pose and shape errors."""
     k = evaluation["keypoints"]
@@ -294,11 +305,7 @@ def images_report(evaluation: dict) -> str:
         + f"{accuracy_table(evaluation['summary'])}\n\n"
         "factor_graph_simulated_noise: the factor graph on the simulator's keypoints (paper-like noise) of the "
         "same vehicles, for comparison with the network's keypoints.\n"
-        + (f"\nPer body type, from the network's keypoints (each vehicle solved with a shape model learnt without "
-           f"it):\n\n{body_type_table(evaluation['rows'])}\n\nConsistency of the factor graph's covariances from "
-           f"the network's keypoints and their heatmap covariances (NEES; consistent: 1.00x and 95 %):\n\n"
-           f"{consistency_table(evaluation['rows'])}\n\nThe same from the simulator's keypoints:\n\n"
-           f"{consistency_table(evaluation['rows'], 'factor_graph_simulated_noise')}\n" if evaluation.get("rows") else "")
+        + (f"\n{network_class_tables(evaluation['rows'])}" if evaluation.get("rows") else "")
         + (f"\nThe vehicles whose model the network never saw in training (`vfactor.net.end_to_end.network_saw`: "
            f"the held-out half of the vehicle library, the hatchback and SUV presets, PASCAL3D+ models 7-8), per "
            f"body type:\n\n{body_type_table(_unseen(evaluation['rows']))}\n\nTheir covariances' consistency:\n\n"

@@ -208,6 +208,7 @@ def solve_observations(
             several times more precise than they are (docs/factors.md, "Keypoint noise sized by the vehicle").
             Only with the refinement (a shape model or ``options.estimate_noise``).
     """
+    given = obs  # as the caller gave them: a restart (_restarted) solves them again
     model, single, bounds = resolve_shape_prior(prior, bounds)
     first_prior = model.pooled if model is not None else single
     keys = KeyScheme()
@@ -395,7 +396,13 @@ def solve_observations(
             result.message = f"covariance unavailable: {exc}"
     result.box = vehicle_box(world_T_vehicle, wireframe, joint, result.extras.get("body_type_posterior"),
                              options.box_model)
-    return checked(result, [as_given.cameras[c] for c in np.unique(as_given.camera_index)], options.covariance)  # vfactor.sanity
+    final = checked(result, [as_given.cameras[c] for c in np.unique(as_given.camera_index)], options.covariance)
+    if search is not None and (final.status == Status.POOR_FIT or not final.ok):  # vfactor.sanity said not sane
+        restarted = _restarted(given, options, vehicle_id, prior, bounds, hints, resize, search, reached,
+                               world_T_vehicle, fit_scale if final.ok else None)
+        if restarted is not None:
+            return restarted
+    return final
 
 
 #: A further start (up to ``SolveOptions.num_starts``) is optimised only while the best solution so far keeps fewer than
@@ -404,6 +411,57 @@ def solve_observations(
 #: once, where the first solution, turned by 180 degrees, kept 24 % of them; solutions within 90 degrees of the truth
 #: keep at least 43 % (hard noise: 15 % outliers, 8 % swaps), 90 % at the median, and 0.9 % of them fewer than 60 %.
 FURTHER_START_INLIERS = 0.6
+
+
+#: A solution that fits poorly (noise scale at least :data:`POOR_FIT_SCALE`) or that is not sane
+#: (:func:`vfactor.sanity.checked`: upside down, turned front to back, behind a camera) is solved again, in full, from
+#: at most this many further starts (RANSAC PnP's among them) that differ from every pose reached (:func:`_restarted`).
+POOR_FIT_RESTARTS = 3
+
+
+def _restarted(obs: KeypointObservations, options: SolveOptions, vehicle_id: str, prior, bounds, hints, resize,
+               search: StartSearch, reached: list[gtsam.Pose3], solution: gtsam.Pose3,
+               fit_scale: float | None) -> VehicleResult | None:
+    """The vehicle solved again from further starts when its solution fits poorly or is not sane; None when no
+    start gives a better one.
+
+    Such a solution is most often in a wrong basin (turned, or held by one camera's outliers) that the first start
+    led to, while its fit looked good enough at the first sigmas to try no other (:data:`FURTHER_START_INLIERS`).
+    Each further start (the candidates of ``search`` by their robust cost, RANSAC PnP's included, that differ from
+    every pose in ``reached`` and from the first ``solution``; at most :data:`POOR_FIT_RESTARTS`) is solved in full
+    (:func:`solve_observations` from it) until one fits below :data:`POOR_FIT_SCALE`. The best fit among them (the
+    lowest noise scale; the lowest cost where the solve estimates none) is returned if it has an estimate and, where the first solution had one (``fit_scale``: its ``fit_noise_scale``;
+    None: it was not sane), lies in another basin (:func:`vfactor.init.distinct_poses` from ``solution``) and fits
+    better. Its ``extras["restarted"]``: the first solution's ``fit_noise_scale`` (None where it was not sane), the
+    start's source and how many starts were solved.
+    """
+    best, tried, reached = None, 0, reached + [solution]
+    for candidate in search.best(None, ransac=True):
+        if tried == POOR_FIT_RESTARTS:
+            break
+        if not all(distinct_poses(candidate.world_T_vehicle, p) for p in reached):
+            continue
+        tried += 1
+        reached.append(candidate.world_T_vehicle)
+        result = solve_observations(obs, options, vehicle_id, prior, bounds,
+                                    (candidate.world_T_vehicle, candidate.wireframe), hints, resize)
+        if not result.ok:
+            continue
+        reached.append(result.world_T_vehicle)
+        scale = result.extras.get("fit_noise_scale")  # None: the sigmas as given (no noise scale), the same for all
+        score = result.final_error if scale is None else scale
+        better = fit_scale is None or (scale is not None and scale < fit_scale
+                                       and distinct_poses(result.world_T_vehicle, solution))
+        if better and (best is None or score < best[0]):
+            best = score, result, candidate.source
+        if scale is not None and scale < POOR_FIT_SCALE:
+            break
+    if best is None:
+        return None
+    _, result, source = best
+    result.extras["restarted"] = {"first_fit_noise_scale": None if fit_scale is None else float(fit_scale),
+                                  "start": source, "starts": tried}
+    return result
 
 
 def _inlier_share(obs: KeypointObservations, estimate: gtsam.Values, keys: KeyScheme, options: SolveOptions) -> float:

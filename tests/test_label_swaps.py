@@ -200,8 +200,8 @@ def test_the_search_finds_swaps_the_first_solution_bent_around(monkeypatch):
     for search in (True, False):
         if not search:  # and no restart from further starts for the poor fit (that finds the right basin too)
             monkeypatch.setattr(vfactor.solve, "SWAP_SEARCH_SCALE", np.inf)
-            monkeypatch.setattr(vfactor.solve, "POOR_FIT_RESTARTS", 0)
-        result = solve_observations(obs, SolveOptions(covariance=False), vid, model)
+        options = SolveOptions(covariance=False, **({} if search else {"poor_fit_restarts": 0}))
+        result = solve_observations(obs, options, vid, model)
         assert result.ok
         errors[search] = pose_errors(result.world_T_vehicle, result.keypoints_world, truth[vid].world_T_vehicle,
                                      truth[vid].keypoints_world)

@@ -531,7 +531,7 @@ def test_a_vehicle_whose_best_start_is_upside_down_is_solved_upright():
     assert errors["rotation_deg"] < 15.0, errors
 
 
-def _held_out_solve(scene, truth):
+def _held_out_solve(scene, truth, **options):
     """The scene's one vehicle solved as `vfactor eval` solves it: with the shape model learnt without its model."""
     from functools import partial
 
@@ -540,7 +540,7 @@ def _held_out_solve(scene, truth):
     from vfactor.metrics import pose_errors
     from vfactor.solve import SolveOptions
 
-    frame, options = scene.frames[0], SolveOptions()
+    frame, options = scene.frames[0], SolveOptions(**options)
     (vid,) = frame.vehicle_ids()
     detections = frame.detections_of(vid)
     obs = observations_from_detections(detections, scene.cameras, options.graph)
@@ -551,34 +551,30 @@ def _held_out_solve(scene, truth):
     return result, errors
 
 
-def test_a_poor_fit_in_a_wrong_basin_is_solved_again_from_further_starts(monkeypatch):
+def test_a_poor_fit_in_a_wrong_basin_is_solved_again_from_further_starts():
     """A Volvo V90 of library_2cam seed 456 at hard noise (held out): its best start led LM to a solution 104 degrees
     off whose keypoints fit 3.5 times worse than their sigmas; solved again from the next starts it is 5 degrees off."""
-    import vfactor.solve as solve_module
+    from vfactor.solve import POOR_FIT_SCALE, SolveOptions
 
     scene, truth = _poor_fit_scene(456, 44)
     result, errors = _held_out_solve(scene, truth)
     assert result.status == Status.CONVERGED and errors["rotation_deg"] < 10.0, (result.message, errors)
     restarted = result.extras["restarted"]
-    assert restarted["first_fit_noise_scale"] >= solve_module.POOR_FIT_SCALE > result.extras["fit_noise_scale"]
-    assert 1 <= restarted["starts"] <= solve_module.POOR_FIT_RESTARTS
-    monkeypatch.setattr(solve_module, "POOR_FIT_RESTARTS", 0)  # without the restarts: the wrong basin, flagged
-    result, errors = _held_out_solve(scene, truth)
+    assert restarted["first_fit_noise_scale"] >= POOR_FIT_SCALE > result.extras["fit_noise_scale"]
+    assert 1 <= restarted["starts"] <= SolveOptions().poor_fit_restarts
+    result, errors = _held_out_solve(scene, truth, poor_fit_restarts=0)  # without: the wrong basin, flagged
     assert result.status == Status.POOR_FIT and errors["rotation_deg"] > 90.0 and "restarted" not in result.extras
 
 
-def test_an_estimate_that_is_not_sane_is_solved_again_from_further_starts(monkeypatch):
+def test_an_estimate_that_is_not_sane_is_solved_again_from_further_starts():
     """A PASCAL3D+ car of library_2cam seed 80 at hard noise (held out): its first solution is upside down, which
     the sanity check fails; a further start gives an upright estimate, reported a poor fit (it is: 59 degrees off,
     and LM started from the truth ends there too)."""
-    import vfactor.solve as solve_module
-
     scene, truth = _poor_fit_scene(80, 13)
     result, errors = _held_out_solve(scene, truth)
     assert result.status == Status.POOR_FIT and result.extras["restarted"]["first_fit_noise_scale"] is None
     assert errors["rotation_deg"] < 90.0
-    monkeypatch.setattr(solve_module, "POOR_FIT_RESTARTS", 0)
-    result, _ = _held_out_solve(scene, truth)
+    result, _ = _held_out_solve(scene, truth, poor_fit_restarts=0)
     assert result.status == Status.FAILED and "upside down" in result.message
 
 

@@ -76,6 +76,11 @@ class SolveOptions:
             keypoints as inliers, the next candidates that differ from every
             solution reached (a start that LM would pull to a minimum already
             found is not another start).
+        poor_fit_restarts: a solution that fits its keypoints poorly (``fit_noise_scale`` at least
+            :data:`POOR_FIT_SCALE`) or is not sane (:mod:`vfactor.sanity`) is solved again, in full, from at most
+            this many further starts, and the best fit in another basin is kept (``extras["restarted"]``; 0: never).
+            Each costs a whole solve: about 0.7 % of the vehicles at hard simulated noise, none at paper-like noise,
+            but every vehicle of a detector whose sigmas are far below its errors (then fix the sigmas).
         covariance: compute the pose and keypoint covariances (``gtsam.Marginals``).
         min_observations: fewer seen keypoints (over all cameras) make the
             vehicle ``degenerate``.
@@ -108,6 +113,7 @@ class SolveOptions:
     relative_error_tol: float = 1e-6
     absolute_error_tol: float = 1e-9
     num_starts: int = 2
+    poor_fit_restarts: int = 3
     covariance: bool = True
     min_observations: int = 6
     min_keypoints_in_one_view: int = 4
@@ -397,7 +403,7 @@ def solve_observations(
     result.box = vehicle_box(world_T_vehicle, wireframe, joint, result.extras.get("body_type_posterior"),
                              options.box_model)
     final = checked(result, [as_given.cameras[c] for c in np.unique(as_given.camera_index)], options.covariance)
-    if search is not None and (final.status == Status.POOR_FIT or not final.ok):  # vfactor.sanity said not sane
+    if search is not None and options.poor_fit_restarts > 0 and (final.status == Status.POOR_FIT or not final.ok):
         restarted = _restarted(given, options, vehicle_id, prior, bounds, hints, resize, search, reached,
                                world_T_vehicle, fit_scale if final.ok else None)
         if restarted is not None:
@@ -413,12 +419,6 @@ def solve_observations(
 FURTHER_START_INLIERS = 0.6
 
 
-#: A solution that fits poorly (noise scale at least :data:`POOR_FIT_SCALE`) or that is not sane
-#: (:func:`vfactor.sanity.checked`: upside down, turned front to back, behind a camera) is solved again, in full, from
-#: at most this many further starts (RANSAC PnP's among them) that differ from every pose reached (:func:`_restarted`).
-POOR_FIT_RESTARTS = 3
-
-
 def _restarted(obs: KeypointObservations, options: SolveOptions, vehicle_id: str, prior, bounds, hints, resize,
                search: StartSearch, reached: list[gtsam.Pose3], solution: gtsam.Pose3,
                fit_scale: float | None) -> VehicleResult | None:
@@ -428,7 +428,7 @@ def _restarted(obs: KeypointObservations, options: SolveOptions, vehicle_id: str
     Such a solution is most often in a wrong basin (turned, or held by one camera's outliers) that the first start
     led to, while its fit looked good enough at the first sigmas to try no other (:data:`FURTHER_START_INLIERS`).
     Each further start (the candidates of ``search`` by their robust cost, RANSAC PnP's included, that differ from
-    every pose in ``reached`` and from the first ``solution``; at most :data:`POOR_FIT_RESTARTS`) is solved in full
+    every pose in ``reached`` and from the first ``solution``; at most ``options.poor_fit_restarts``) is solved in full
     (:func:`solve_observations` from it) until one fits below :data:`POOR_FIT_SCALE`. The best fit among them (the
     lowest noise scale; the lowest cost where the solve estimates none) is returned if it has an estimate and, where the first solution had one (``fit_scale``: its ``fit_noise_scale``;
     None: it was not sane), lies in another basin (:func:`vfactor.init.distinct_poses` from ``solution``) and fits
@@ -437,7 +437,7 @@ def _restarted(obs: KeypointObservations, options: SolveOptions, vehicle_id: str
     """
     best, tried, reached = None, 0, reached + [solution]
     for candidate in search.best(None, ransac=True):
-        if tried == POOR_FIT_RESTARTS:
+        if tried == options.poor_fit_restarts:
             break
         if not all(distinct_poses(candidate.world_T_vehicle, p) for p in reached):
             continue

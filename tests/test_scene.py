@@ -723,7 +723,8 @@ def test_ground_plane_round_trips_and_is_validated(tmp_path):
                          "world_T_camera": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}],
             "frames": [], "ground_plane": {"normal": [0, 0, 2], "offset": 0.1}}
     scene = scene_from_dict(data)
-    assert scene.ground_plane == GroundPlane((0.0, 0.0, 1.0), 0.1)
+    assert scene.ground_plane == GroundPlane((0.0, 0.0, 1.0), 0.05)  # the same plane, 2 z = 0.1, its normal unit
+    assert GroundPlane((0.0, 0.0, 4.0), 1.0) == GroundPlane((0.0, 0.0, 1.0), 0.25)
     save_scene(scene, tmp_path / "s.json")
     assert load_scene(tmp_path / "s.json").ground_plane == scene.ground_plane
     for bad, field in (({"normal": [0, 0, -1]}, "ground_plane.normal"), ({"normal": [0, 1]}, "ground_plane.normal"),

@@ -41,7 +41,9 @@ __all__ = ["GroundPlane", "ground_plane_factor", "hub_height_prior"]
 
 @dataclass(frozen=True)
 class GroundPlane:
-    """A road plane ``n . x = offset`` in the world frame (``normal`` is made unit length).
+    """A road plane ``n . x = offset`` in the world frame. A normal of any length is made unit length and the
+    offset divided by the same length, so that the plane stays the one given (``(0, 0, 4)`` and offset 1 is
+    ``z = 0.25``).
 
     Attributes:
         normal: (3,) upward normal.
@@ -55,13 +57,14 @@ class GroundPlane:
         n = np.asarray(self.normal, dtype=float)
         if n.shape != (3,) or not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
             raise ValueError(f"ground_plane.normal: expected a non-zero 3-vector, got {self.normal!r}")
-        n = n / np.linalg.norm(n)
+        length = np.linalg.norm(n)
+        n = n / length
         if n[2] <= 0:
             raise ValueError(f"ground_plane.normal: must point up (positive z), got {self.normal!r}")
         if not np.isfinite(self.offset):
             raise ValueError(f"ground_plane.offset: expected a finite number, got {self.offset!r}")
         object.__setattr__(self, "normal", tuple(float(v) for v in n))
-        object.__setattr__(self, "offset", float(self.offset))
+        object.__setattr__(self, "offset", float(self.offset) / float(length))
 
 
 def _error(key: int, params: np.ndarray, out: tuple, hub_key, this, values, H):

@@ -289,6 +289,22 @@ def test_out_is_checked_before_the_work(tmp_path, capsys, scene_text):
     code, err = run_cli(capsys, "simulate", "intersection_2cam", "--out", str(tmp_path / "a.json"),
                         "--truth", str(tmp_path / "a.json"))
     assert code == EXIT_INPUT and "--truth" in one_line_error(err)
+    os.mkfifo(tmp_path / "pipe")  # a pipe (or a device) is not replaced by a file
+    code, err = run_cli(capsys, "solve", str(scene), "--out", str(tmp_path / "pipe"))
+    assert code == EXIT_INPUT and "--out" in one_line_error(err) and "not a regular file" in err
+    assert (tmp_path / "pipe").is_fifo()
+    code, err = run_cli(capsys, "solve", str(scene), "--out", "-")  # '-' is a stream's, not a file named '-'
+    assert code == EXIT_INPUT and "--out" in one_line_error(err) and not Path("-").exists()
+
+
+def test_an_out_link_writes_its_target(tmp_path, capsys, scene_text):
+    scene = tmp_path / "scene.json"
+    scene.write_text(scene_text)
+    (tmp_path / "results").mkdir()
+    (tmp_path / "latest.json").symlink_to(tmp_path / "results" / "r.json")
+    code, _ = run_cli(capsys, "solve", str(scene), "--out", str(tmp_path / "latest.json"), "--quiet")
+    assert code == EXIT_OK and (tmp_path / "latest.json").is_symlink()
+    assert load_results(tmp_path / "results" / "r.json")[0].vehicles
 
 
 def test_results_are_written_atomically(tmp_path, monkeypatch):

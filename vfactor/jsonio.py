@@ -181,7 +181,8 @@ def write_text_atomic(path: str | os.PathLike, text: str | Iterable[str]) -> Non
 
     A temporary file in the same folder is written, flushed and ``fsync``-ed,
     then moved onto ``path`` with ``os.replace``; on any failure it is removed
-    and ``path`` is left as it was. The folder is created when missing.
+    and ``path`` is left as it was. The folder is created when missing. A
+    ``path`` that is a link is followed: its target is written, the link kept.
     ``text`` may be an iterable of pieces, written as they come (a result file
     written while its frames are still being solved); an exception raised by
     the iterable leaves ``path`` as it was.
@@ -189,7 +190,7 @@ def write_text_atomic(path: str | os.PathLike, text: str | Iterable[str]) -> Non
     Raises:
         OSError: the folder cannot be created or written, or the disk is full.
     """
-    path = Path(path)
+    path = Path(os.path.realpath(path)) if os.path.islink(path) else Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     folder.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")

@@ -160,3 +160,31 @@ def test_read_kitti_gives_the_world_boxes_back(written, known, real, tmp_path):
     for r in read_kitti(tmp_path):
         v = results[r.frame].vehicles[0]
         assert_same_box(r.box, v.box, rotation=False)  # centre, size, heading; the small tilt is not KITTI's
+
+
+def test_a_rerun_with_fewer_frames_leaves_no_stale_frame(known, tmp_path):
+    scene, results = known
+    write_kitti(tmp_path, results, scene)
+    (tmp_path / "tilted" / "notes.txt").write_text("mine")  # not a frame file: kept
+    import dataclasses
+
+    write_kitti(tmp_path, results[:1], dataclasses.replace(scene, frames=scene.frames[:1]))
+    for kind in ("label_2", "calib"):
+        assert sorted(p.name for p in (tmp_path / "tilted" / kind).iterdir()) == ["000000.txt"]
+    assert (tmp_path / "tilted" / "notes.txt").read_text() == "mine"
+    assert {r.frame for r in read_kitti(tmp_path)} == {0}
+
+
+@pytest.mark.parametrize("name", ["../escaped", "a/b", "..", "/tmp/abs"])
+def test_a_camera_name_that_is_not_a_folder_name_is_refused(known, tmp_path, name):
+    import dataclasses
+
+    scene, results = known
+    first = next(iter(scene.cameras))
+    renamed = {(name if n == first else n): dataclasses.replace(c, name=name if n == first else n)
+               for n, c in scene.cameras.items()}
+    bad = dataclasses.replace(scene, cameras=renamed)
+    with pytest.raises(InputError) as info:
+        write_kitti(tmp_path / "out", results, bad)
+    assert info.value.field == "cameras[0].name" and not (tmp_path / "out").exists()
+    assert not (tmp_path / "escaped").exists()

@@ -110,15 +110,22 @@ def check_positive(value, name):
 
 
 def check_out_file(value, option: str, inputs=()) -> Path:
-    """Checks an output file option before the work starts: not a folder, not one of ``inputs``,
-    and in a folder that exists (or can be made) and is writable.
+    """Checks an output file option before the work starts: not ``-``, not a folder nor another file that is not a
+    regular file (a pipe, a device), not one of ``inputs``, and in a folder that exists (or can be made) and is
+    writable. A link is followed: the file written is its target (:func:`vfactor.jsonio.write_text_atomic`).
 
     Raises:
         InputError: (field: ``option``) what is wrong.
     """
+    if str(value) == "-":
+        raise InputError(option, "'-' (standard output) is only for a stream of frames (vfactor track - --out -, or "
+                                 "--follow); give a file name")
     path = Path(value)
     if path.is_dir() or str(value).endswith(("/", os.sep)):
         raise InputError(option, f"{value} is a folder; give a file name")
+    if path.exists() and not path.is_file():
+        raise InputError(option, f"{value} is not a regular file (a pipe, a device or a socket); results are written "
+                                 "to a file, whole or not at all")
     for name, given in inputs:
         if given is not None and Path(given).exists() and path.exists() and os.path.samefile(path, given):
             raise InputError(option, f"{value} is the {name} itself; write the output to another file")

@@ -134,7 +134,8 @@ def write_kitti(folder: str | os.PathLike, results: list[FrameResult], scene: Sc
     """Writes KITTI labels and calibrations: ``folder/<camera>/label_2/NNNNNN.txt`` and ``.../calib/NNNNNN.txt``.
 
     ``NNNNNN`` is the frame's index in the results; every frame gets a file (empty when no box is seen).
-    Each file is written atomically.
+    Each file is written atomically. A camera's ``NNNNNN.txt`` files from an earlier run beyond this run's frames
+    are removed (they would read as this run's); other files and other cameras' folders are left as they are.
 
     Args:
         folder: the output folder (created when missing).
@@ -148,7 +149,8 @@ def write_kitti(folder: str | os.PathLike, results: list[FrameResult], scene: Sc
         The report; ``skipped`` lists the unsolved vehicles (no box, no line).
 
     Raises:
-        InputError: bad arguments (an unknown camera, frame or type map; results not paired with the scene).
+        InputError: bad arguments (an unknown camera, frame or type map; results not paired with the scene; a
+            camera name that is not a plain folder name, such as ``../x``).
         OSError: a file cannot be written.
     """
     folder = check_output_path(folder, "KITTI")
@@ -159,6 +161,10 @@ def write_kitti(folder: str | os.PathLike, results: list[FrameResult], scene: Sc
     if types is not None and (not isinstance(types, dict) or not all(isinstance(t, str) and t.strip() and
                                                                       " " not in t for t in types.values())):
         raise InputError("types", "expected a dict body type -> KITTI type without spaces")
+    for name in names:  # each camera's folder is folder/<name>: a name must not lead out of it
+        if name in ("", ".", "..") or Path(name).name != name or "\\" in name:
+            raise InputError(f"cameras[{list(scene.cameras).index(name)}].name",
+                             f"{name!r} is not a plain folder name, which KITTI output names a camera's folder by")
     paths = []
     for name in names:
         camera = scene.cameras[name]
@@ -170,6 +176,10 @@ def write_kitti(folder: str | os.PathLike, results: list[FrameResult], scene: Sc
             write_text_atomic(label_path, "".join(line + "\n" for line in lines))
             write_text_atomic(calib_path, calib)
             paths += [label_path, calib_path]
+        for kind in ("label_2", "calib"):  # an earlier run's frames beyond this run's
+            for stale in (folder / name / kind).glob("[0-9][0-9][0-9][0-9][0-9][0-9].txt"):
+                if int(stale.stem) >= len(results):
+                    stale.unlink()
     unsolved = unsolved_of(results)
     return WriteReport("kitti", paths, unsolved, list(unsolved))
 

@@ -35,6 +35,42 @@ def test_settings_name_the_field():
         GraphConfig(ground_sigma_road=0.0)
 
 
+def test_solve_options_name_the_field():
+    from vfactor.solve import SolveOptions
+
+    for settings, message in (({"max_iterations": 0}, r"SolveOptions\.max_iterations: expected an integer >= 1"),
+                              ({"num_starts": 0}, r"SolveOptions\.num_starts: expected an integer >= 1"),
+                              ({"poor_fit_restarts": -1}, r"SolveOptions\.poor_fit_restarts: expected an integer >= 0"),
+                              ({"relative_error_tol": math.nan}, r"SolveOptions\.relative_error_tol: expected a"),
+                              ({"graph": None}, r"SolveOptions\.graph: expected a GraphConfig"),
+                              ({"covariance": 1}, r"SolveOptions\.covariance: expected True or False")):
+        with pytest.raises(ValueError, match=message):
+            SolveOptions(**settings)
+    assert SolveOptions(poor_fit_restarts=0, num_starts=1).poor_fit_restarts == 0
+
+
+def test_a_detection_built_by_hand_is_checked():
+    import numpy as np
+
+    from vfactor.observations import Detection
+
+    uv, conf = np.full((12, 2), 100.0), np.ones(12)
+    made = Detection("c", "v", uv.tolist(), conf.tolist())  # lists become arrays
+    assert isinstance(made.keypoints, np.ndarray) and made.seen.all()
+    unseen = uv.copy()
+    unseen[3] = np.nan
+    assert not Detection("c", "v", unseen, np.r_[conf[:3], 0.0, conf[4:]]).seen[3]  # NaN where unseen: fine
+    for keypoints, confidence, field, words in (
+            (uv[:11], conf, "keypoints", "(12, 2)"), (uv, conf[:11], "confidence", "(12,)"),
+            (np.zeros((12, 3)), conf, "keypoints", "(12, 2)"), (uv, -conf, "confidence", "[0, 1]"),
+            (uv, np.full(12, np.nan), "confidence", "[0, 1]"), (unseen, conf, "keypoints", "not finite")):
+        with pytest.raises(InputError) as raised:
+            Detection("c", "v", keypoints, confidence)
+        assert raised.value.field == field and words in raised.value.problem and "'v'" in raised.value.problem
+    with pytest.raises(InputError, match="covariance"):
+        Detection("c", "v", uv, conf, covariance=np.ones((12, 2)))
+
+
 def test_input_error_field_and_prefix():
     err = SceneError("K", "singular")
     assert isinstance(err, InputError) and isinstance(err, ValueError)

@@ -97,6 +97,36 @@ class Detection:
     shape_sigma: float | None = None
     bias_sigma: tuple[float, ...] | None = None
 
+    def __post_init__(self):
+        """Checks what a user builds by hand as a scene file's reader checks it (the reader's fields name where).
+
+        Raises:
+            InputError: (field ``keypoints``, ``confidence`` or ``covariance``) a wrong shape, a confidence outside
+                [0, 1] or not a number, a seen keypoint (confidence > 0) that is not finite.
+        """
+        try:
+            keypoints = np.asarray(self.keypoints, dtype=float)
+            confidence = np.asarray(self.confidence, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise InputError("keypoints", f"expected (12, 2) pixels and (12,) confidences: {exc}") from None
+        where = f"detection of vehicle {self.vehicle!r} by camera {self.camera!r}: "
+        if keypoints.shape != (12, 2):
+            raise InputError("keypoints", f"{where}expected (12, 2) pixels (u, v), got shape {keypoints.shape}")
+        if confidence.shape != (12,):
+            raise InputError("confidence", f"{where}expected (12,) confidences, got shape {confidence.shape}")
+        if not np.all((confidence >= 0.0) & (confidence <= 1.0)):  # NaN fails too
+            raise InputError("confidence", f"{where}expected numbers in [0, 1] (0: not seen), got "
+                                           f"{confidence[~((confidence >= 0.0) & (confidence <= 1.0))][0]!r}")
+        if not np.all(np.isfinite(keypoints[confidence > 0])):
+            raise InputError("keypoints", f"{where}a seen keypoint (confidence > 0) is not finite")
+        if self.covariance is not None:
+            covariance = np.asarray(self.covariance, dtype=float)
+            if covariance.shape != (12, 2, 2):
+                raise InputError("covariance", f"{where}expected (12, 2, 2) px^2, got shape {covariance.shape}")
+            object.__setattr__(self, "covariance", covariance)
+        object.__setattr__(self, "keypoints", keypoints)
+        object.__setattr__(self, "confidence", confidence)
+
     @property
     def seen(self) -> np.ndarray:
         """(12,) boolean mask of keypoints with confidence > 0."""

@@ -21,7 +21,7 @@ import numpy.ma  # noqa: F401  numpy 2 imports it lazily, on a solve's first np.
 
 from vfactor.box import BoxModel, vehicle_box
 from vfactor.camera import Camera
-from vfactor.errors import InputError
+from vfactor.errors import InputError, check_numbers
 from vfactor.factors.body_frame import canonical_gauge
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.factors.projection import KeypointObservations, projection_factor, whitened_residuals
@@ -122,6 +122,23 @@ class SolveOptions:
     relabel_swaps: bool = True
     shape_information: bool = False
     box_model: BoxModel | None = None
+
+    def __post_init__(self):  # as GraphConfig checks its fields: a bad setting fails here, naming itself
+        for name, least in (("max_iterations", 1), ("num_starts", 1), ("poor_fit_restarts", 0),
+                            ("min_observations", 1), ("min_keypoints_in_one_view", 1)):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or isinstance(value, (bool, np.bool_)) or value < least:
+                raise ValueError(f"SolveOptions.{name}: expected an integer >= {least}, got {value!r}")
+        check_numbers("SolveOptions", self, ("relative_error_tol", "absolute_error_tol"), strict=False)
+        if not isinstance(self.graph, GraphConfig):
+            raise ValueError(f"SolveOptions.graph: expected a GraphConfig, got {self.graph!r}")
+        for name in ("covariance", "estimate_noise", "relabel_swaps", "shape_information"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"SolveOptions.{name}: expected True or False, got {getattr(self, name)!r}")
+        if self.ground_plane is not None and not isinstance(self.ground_plane, GroundPlane):
+            raise ValueError(f"SolveOptions.ground_plane: expected a GroundPlane or None, got {self.ground_plane!r}")
+        if self.box_model is not None and not isinstance(self.box_model, BoxModel):
+            raise ValueError(f"SolveOptions.box_model: expected a BoxModel or None, got {self.box_model!r}")
 
     def for_scene(self, scene: Scene) -> "SolveOptions":
         """These options, with the scene's road plane when they name none and the scene gives one."""

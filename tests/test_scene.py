@@ -853,3 +853,12 @@ def test_results_written_as_they_come(tmp_path):
     with pytest.raises(RuntimeError, match="solver crashed"):
         save_results(tmp_path / "partial.json", failing())
     assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.json", "streamed.json"]  # no partial file, no temp
+
+
+def test_two_frames_at_one_time_are_refused(tmp_path):
+    """`t` is unique per frame (docs/scene-format.md): `vfactor solve` refused it no more than `vfactor track` does."""
+    data = base_scene(tmp_path)
+    data["frames"].append(dict(data["frames"][0]))
+    with pytest.raises(SceneError) as info:
+        load_scene(write_json(tmp_path / "scene.json", data))
+    assert info.value.field == f"frames[{len(data['frames']) - 1}].t" and "same time as frames[0]" in info.value.problem

@@ -250,6 +250,11 @@ def scene_from_dict(data: dict, base_dir: Path | None = None, allow_outside_path
     frames = [
         _frame_from_dict(item, f"frames[{i}]", cameras, base) for i, item in enumerate(_list(top["frames"], "frames"))
     ]
+    first_at: dict[float, int] = {}
+    for i, frame in enumerate(frames):  # solve and track read the same files: a time names one frame
+        if first_at.setdefault(frame.t, i) != i:
+            raise SceneError(f"frames[{i}].t", f"same time as frames[{first_at[frame.t]}] ({frame.t} s); each frame "
+                                               "has its own time")
     return Scene(cameras=cameras, frames=frames, base_dir=base.path, ground_plane=_ground_plane(top.get("ground_plane")))
 
 

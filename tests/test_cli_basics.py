@@ -48,6 +48,19 @@ def test_network_commands_are_reachable_from_vfactor(command, capsys):
     assert capsys.readouterr().out.startswith(f"usage: vfactor {command}")
 
 
+def test_network_commands_say_what_they_need_without_torch(monkeypatch, capsys):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "vfactor.net.commands", None)  # as where torch is not installed
+    for argv in (["detect", "--help"], ["help", "detect"]):
+        assert main(argv) == 0
+        out = capsys.readouterr().out
+        assert out.startswith("vfactor detect: keypoints, confidences") and "this needs PyTorch" in out
+        assert "pip install -c constraints.txt -e '.[net]'" in out and "vfactor help detect" in out
+    assert main(["detect", "image.png", "--roi", "0", "0", "9", "9"]) == 2  # running it is an error
+    assert "this needs PyTorch" in capsys.readouterr().err
+
+
 def test_common_options_before_or_after_the_command(tmp_path, capsys):
     scene = tmp_path / "scene.json"
     assert main(["simulate", "intersection_2cam", "--out", str(scene), "--frames", "1", "-q", "--debug"]) == 0

@@ -464,6 +464,10 @@ def _net(argv: list[str], command: str) -> int:
         except ImportError as exc:
             from vfactor.cli.common import missing_extra
 
+            if "-h" in rest or "--help" in rest:  # asked what the command is: say it, and what its options need
+                print(f"vfactor {command}: {NET_COMMANDS[command]}.\n{missing_extra('', exc, 'net')}; "
+                      f"then vfactor help {command} lists its options.")
+                return EXIT_OK
             raise missing_extra("", exc, "net") from None
         return net_main(rest, prog="vfactor")
 

@@ -349,9 +349,9 @@ def _camera_from_dict(data, path: str, base: "_Folder") -> Camera:
             or len(image_size) != 2
             or not all(_is_int(s) and s > 0 for s in image_size)
         ):
-            raise SceneError(
-                f"{path}.image_size", f"expected [width, height], two positive integers, got {_kind(image_size)}"
-            )
+            shown = (f"[{', '.join(_kind(s) if not _is_number(s) else repr(s) for s in image_size)}]"
+                     if isinstance(image_size, (list, tuple)) and len(image_size) <= 4 else _kind(image_size))
+            raise SceneError(f"{path}.image_size", f"expected [width, height], two positive integers, got {shown}")
         image_size = (int(image_size[0]), int(image_size[1]))
     if cam.get("calibration") is not None:
         return _camera_from_file(cam, path, base, name, world_T_camera, image_size)

@@ -56,15 +56,23 @@ class GroundPlane:
     def __post_init__(self):
         n = np.asarray(self.normal, dtype=float)
         if n.shape != (3,) or not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
-            raise ValueError(f"ground_plane.normal: expected a non-zero 3-vector, got {self.normal!r}")
+            raise ValueError(f"ground_plane.normal: expected a non-zero 3-vector, got {_shown(self.normal)}")
         length = np.linalg.norm(n)
         n = n / length
         if n[2] <= 0:
-            raise ValueError(f"ground_plane.normal: must point up (positive z), got {self.normal!r}")
+            raise ValueError(f"ground_plane.normal: must point up (positive z), got {_shown(self.normal)}")
         if not np.isfinite(self.offset):
             raise ValueError(f"ground_plane.offset: expected a finite number, got {self.offset!r}")
         object.__setattr__(self, "normal", tuple(float(v) for v in n))
         object.__setattr__(self, "offset", float(self.offset) / float(length))
+
+
+def _shown(value) -> str:
+    """A normal as the user wrote it, for a message: ``[0.0, 0.0, -1.0]``, not NumPy's reprs."""
+    try:
+        return "[" + ", ".join(repr(float(v)) for v in value) + "]"
+    except (TypeError, ValueError):
+        return repr(value)
 
 
 def _error(key: int, params: np.ndarray, out: tuple, hub_key, this, values, H):

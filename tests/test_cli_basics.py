@@ -61,6 +61,29 @@ def test_network_commands_say_what_they_need_without_torch(monkeypatch, capsys):
     assert "this needs PyTorch" in capsys.readouterr().err
 
 
+def test_demo_with_images_without_the_extras_writes_nothing(tmp_path, monkeypatch, capsys):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "vfactor.net.pipeline", None)  # as where torch is not installed
+    assert main(["demo", "--images", "--out", str(tmp_path / "demo")]) == 2
+    assert "--images: this needs PyTorch and moderngl" in capsys.readouterr().err
+    assert not (tmp_path / "demo").exists()
+
+
+def test_a_read_only_out_file_is_not_replaced(tmp_path, monkeypatch, capsys):
+    import os
+
+    out = tmp_path / "r.json"
+    out.write_text("keep")
+    out.chmod(0o444)
+    if os.access(out, os.W_OK):  # root may write any file: ask as a user would be answered
+        real = os.access
+        monkeypatch.setattr(os, "access", lambda p, mode, **k: False if Path(p) == out and mode & os.W_OK
+                            else real(p, mode, **k))
+    assert main(["simulate", "intersection_2cam", "--out", str(out), "--frames", "1"]) == 2
+    assert "read-only" in capsys.readouterr().err and out.read_text() == "keep"
+
+
 def test_common_options_before_or_after_the_command(tmp_path, capsys):
     scene = tmp_path / "scene.json"
     assert main(["simulate", "intersection_2cam", "--out", str(scene), "--frames", "1", "-q", "--debug"]) == 0

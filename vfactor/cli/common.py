@@ -111,7 +111,7 @@ def check_positive(value, name):
 
 def check_out_file(value, option: str, inputs=()) -> Path:
     """Checks an output file option before the work starts: not ``-``, not a folder nor another file that is not a
-    regular file (a pipe, a device), not one of ``inputs``, and in a folder that exists (or can be made) and is
+    regular file (a pipe, a device), not a read-only file, not one of ``inputs``, and in a folder that exists (or can be made) and is
     writable. A link is followed: the file written is its target (:func:`vfactor.jsonio.write_text_atomic`).
 
     Raises:
@@ -126,6 +126,8 @@ def check_out_file(value, option: str, inputs=()) -> Path:
     if path.exists() and not path.is_file():
         raise InputError(option, f"{value} is not a regular file (a pipe, a device or a socket); results are written "
                                  "to a file, whole or not at all")
+    if path.is_file() and not os.access(path, os.W_OK):
+        raise InputError(option, f"{value} is read-only; make it writable or give another file")
     for name, given in inputs:
         if given is not None and Path(given).exists() and path.exists() and os.path.samefile(path, given):
             raise InputError(option, f"{value} is the {name} itself; write the output to another file")

@@ -49,6 +49,12 @@ def demo(args) -> int:
     from vfactor.viz import plot_estimates, write_overlays
 
     echo = output(args)
+    if args.images:  # before anything is written: the extras it needs
+        try:
+            import vfactor.net.pipeline  # noqa: F401
+            import vfactor.render.scenes  # noqa: F401
+        except ImportError as exc:
+            raise missing_extra("--images", exc, "net,render") from None
     out = check_out_dir(Path(args.out))
     scenario = load_scenario(args.scenario)
     frames = check_positive(args.frames, "--frames")
@@ -99,15 +105,14 @@ def demo(args) -> int:
 
 
 def _demo_images(sim, out: Path, echo=print):
-    """``vfactor demo --images``: renders the simulation's camera images and finds the keypoints with the network."""
-    try:
-        from vfactor.net.infer import KeypointDetector
-        from vfactor.net.pipeline import detect_scene
-        from vfactor.render import RenderingUnavailable
-        from vfactor.render.scenes import render_simulation
-        from vfactor.scene import save_scene
-    except ImportError as exc:
-        raise missing_extra("--images", exc, "net,render") from None
+    """``vfactor demo --images``: renders the simulation's camera images and finds the keypoints with the network
+    (:func:`demo` checked that the extras import)."""
+    from vfactor.net.infer import KeypointDetector
+    from vfactor.net.pipeline import detect_scene
+    from vfactor.render import RenderingUnavailable
+    from vfactor.render.scenes import render_simulation
+    from vfactor.scene import save_scene
+
     t0 = time.perf_counter()
     try:
         rendered = render_simulation(sim, out, seed=sim.seed, progress=progress("rendering"))

@@ -44,6 +44,19 @@ def test_stream_gives_the_online_estimates_of_track_scene(sim):
             assert np.allclose(v.world_T_vehicle.matrix(), w.world_T_vehicle.matrix(), atol=1e-9)
 
 
+def test_a_stream_goes_on_past_the_key_schemes_frame_numbers(sim):
+    """A live stream at 10 Hz reaches frame 10^6 (KeyScheme.frame_stride) after 28 hours: it went on raising there."""
+    options = TrackOptions(solve=SolveOptions(covariance=False), lag=0.5, covariance=False)
+    tracker = StreamTracker(sim.scene, options)
+    stride = tracker.tracker.keys.frame_stride
+    results = [tracker.add(frame, stride - 4 + n) for n, frame in enumerate(sim.scene.frames)]
+    online = track_scene(sim.scene, options).online
+    for (result, note), expected in zip(results, online):
+        assert note == "" and [v.status for v in result.vehicles] == [v.status for v in expected.vehicles]
+        for v, w in zip(result.vehicles, expected.vehicles):
+            assert np.allclose(v.world_T_vehicle.matrix(), w.world_T_vehicle.matrix(), atol=1e-9)
+
+
 def test_late_and_bad_lines_are_reported_and_the_stream_goes_on(sim):
     lines = _lines(sim.scene)
     late = lines[2]  # frame 1 again, after frame 3

@@ -86,7 +86,8 @@ class StreamItem:
 
 
 class StreamTracker:
-    """Tracks frames as they arrive (a :class:`~vfactor.track.Tracker` with a fixed lag), bounded in memory.
+    """Tracks frames as they arrive (a :class:`~vfactor.track.Tracker` with a fixed lag), bounded in memory, for
+    any number of frames (the pose keys take the stream's frame number modulo ``KeyScheme.frame_stride``).
 
     Args:
         scene: the stream's header (its cameras and ground plane; its frames are not used).
@@ -120,7 +121,9 @@ class StreamTracker:
                     "own (one-frame solve), not tracked")
             return solve_frame(frame, self.scene.cameras, self._alone), note
         self.last_t = frame.t
-        result = self.tracker.add_frame(frame, index)
+        # the pose keys number a vehicle's frames below KeyScheme.frame_stride (10^6: 28 h at 10 Hz); a stream runs
+        # longer, and its lag lets a frame's key go long before the number comes round again
+        result = self.tracker.add_frame(frame, index % self.tracker.keys.frame_stride)
         self.tracker.forget(frame.t)
         return result, ""
 

@@ -871,3 +871,32 @@ def test_an_absurd_shape_sigma_is_held_to_its_range_in_frames_and_tracks(shape_s
         for v in frame.vehicles:
             assert (v.ok and np.all(np.isfinite(v.pose_covariance))) or (v.status.value == "failed" and v.message)
             assert v.ok or shape_sigma > 1.0
+
+
+def test_a_failed_frame_leaves_the_earlier_poses_their_online_results():
+    """A frame that fails (a detection naming an unknown camera) restarts the track; Tracker.estimates() kept only
+    the new segment's poses and dropped the earlier ones, which track_scene reports (filtered)."""
+    sim = simulate("intersection_2cam_track", seed=0, num_frames=8)
+    frames = list(sim.scene.frames)
+    bad = frames[4]
+    frames[4] = dataclasses.replace(bad, detections=[dataclasses.replace(d, camera="camX") if i == 0 else d
+                                                     for i, d in enumerate(bad.detections)])
+    tracker = Tracker(sim.scene.cameras)
+    online = [tracker.add_frame(frame).vehicles[0] for frame in frames]
+    assert online[4].status == Status.FAILED and all(v.ok for i, v in enumerate(online) if i != 4)
+    estimates = tracker.estimates(covariance=True)
+    assert sorted(i for i, _ in estimates) == [0, 1, 2, 3, 5, 6, 7]
+    for i in range(4):  # the results add_frame gave them, labelled as such
+        assert estimates[(i, online[i].id)].world_T_vehicle.equals(online[i].world_T_vehicle, 1e-12)
+        assert estimates[(i, online[i].id)].extras["covariance"] == "filtered"
+    run = track_scene(dataclasses.replace(sim.scene, frames=frames))
+    assert [f.vehicles[0].extras.get("covariance") for f in run.frames] == ["filtered"] * 4 + [None] + ["smoothed"] * 3
+
+
+def test_the_estimates_of_a_fixed_lag_are_labelled_fixed_lag(sim):
+    for lag, kind in ((0.5, "fixed_lag"), (None, "smoothed")):
+        tracker = Tracker(sim.scene.cameras, TrackOptions(lag=lag))
+        for frame in sim.scene.frames:
+            tracker.add_frame(frame)
+        kinds = {v.extras.get("covariance") for v in tracker.estimates(covariance=True).values()}
+        assert kinds == {kind}, (lag, kinds)

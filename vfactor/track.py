@@ -278,6 +278,9 @@ class _TrackState:
     jumps: list = field(default_factory=list)  # (frame index, t, what) of each jump beyond the motion model
     # (frame index, id) -> the final result of each pose of the segments the track ended (Tracker._retire)
     retired: dict = field(default_factory=dict)
+    # pose key -> (frame index, the result add_frame gave it) of the poses the smoother holds: what a frame that fails
+    # leaves them (Tracker.add_frame)
+    online: dict = field(default_factory=dict)
     # the detector pose offsets of the smoother (docs/factors.md): camera name -> its current offset's key, and
     # each offset key the smoother was given -> its prior (their count numbers the next key)
     offsets: dict = field(default_factory=dict)
@@ -303,7 +306,7 @@ class _TrackState:
         """Drops the smoother and the young-track state: the track starts again from its next solvable frame."""
         self.smoother, self.poses, self.hwc_added, self.young, self.young_frames = None, [], False, False, []
         self.offsets, self.offset_priors, self.previous, self.ended_young = {}, {}, None, None
-        self.taken_back, self.observed = [], {}
+        self.taken_back, self.observed, self.online = [], {}, {}
 
 
 def frame_order(scene: Scene) -> list[int]:
@@ -389,9 +392,12 @@ class Tracker:
                 vehicles.append(VehicleResult(vid, Status.FAILED, message=summarise_error(exc)))
                 failed = True
             track = self._tracks.get(vid)
-            if failed and track is not None:  # restart this track from its next solvable frame
-                # (its earlier poses keep the estimates they had: its smoother now holds the failed frame too)
+            if failed and track is not None:  # restart this track from its next solvable frame; its earlier poses
+                # keep the estimates this method gave them (its smoother may now hold the failed frame too)
+                track.retired.update({(i, vid): result for i, result in track.online.values()})
                 track.restart()
+            elif track is not None and track.smoother is not None:
+                track.online[self.keys.pose_key(track.index, index)] = (index, vehicles[-1])
             vehicles[-1].extras["detections"] = frame.indices_of(vid)
         return FrameResult(frame.t, vehicles)
 
@@ -401,7 +407,9 @@ class Tracker:
 
         The poses of a segment a track ended by a jump or a gap beyond ``max_gap`` keep the estimates their
         smoother gave them at that point, smoothed over the whole segment (:meth:`_retire`); those of a segment
-        ended by a frame that failed the sanity check keep their last estimates before it (online, without a lag).
+        ended by a frame that failed (the sanity check, or an error such as an unknown camera) keep the results
+        :meth:`add_frame` gave them (online: ``filtered``). A covariance is labelled ``smoothed`` (from every frame
+        the smoother holds) or, with a lag, ``fixed_lag``.
 
         Args:
             covariance: also compute each pose's marginal covariance (one query per pose; the ended segments'
@@ -415,7 +423,8 @@ class Tracker:
 
     def _segment_estimates(self, track: _TrackState, covariance: bool) -> dict[tuple[int, str], VehicleResult]:
         """The estimates of every pose the track's smoother holds (none without a smoother): (frame index, id) ->
-        result, with its marginal covariance if asked (labelled ``smoothed``: from every frame the smoother holds)."""
+        result, with its marginal covariance if asked (labelled ``smoothed``: from every frame the smoother holds;
+        ``fixed_lag`` with a lag: from the window's frames)."""
         out = {}
         if track.smoother is None:
             return out
@@ -426,7 +435,8 @@ class Tracker:
             if estimate.exists(key):
                 cov = None if not covariance else (marginals.marginalCovariance(key) if marginals is not None
                                                    else track.smoother.marginalCovariance(key))
-                out[(frame_index, track.id)] = self._smoothed(track, estimate, key, wireframe, cov)
+                out[(frame_index, track.id)] = self._smoothed(track, estimate, key, wireframe, cov,
+                                                              "smoothed" if self.options.lag is None else "fixed_lag")
         return out
 
     def _marginals(self, track: _TrackState, estimate: gtsam.Values) -> gtsam.Marginals | None:
@@ -453,11 +463,11 @@ class Tracker:
             return None
 
     def _smoothed(self, track: _TrackState, estimate: gtsam.Values, key: int, wireframe: Wireframe,
-                  covariance: np.ndarray | None) -> VehicleResult:
-        """:meth:`_result` of a pose smoothed over its segment, its covariance (if any) labelled ``smoothed``."""
+                  covariance: np.ndarray | None, kind: str = "smoothed") -> VehicleResult:
+        """:meth:`_result` of a pose smoothed over its segment, its covariance (if any) labelled ``kind``."""
         result = self._result(track, estimate, key, wireframe, covariance)
         if covariance is not None:
-            result.extras["covariance"] = "smoothed"
+            result.extras["covariance"] = kind
         return result
 
     def forget(self, t: float) -> list[str]:
@@ -1090,6 +1100,7 @@ class Tracker:
         held = smoother.timestamps()  # forget poses the smoother has marginalised (with or without a lag)
         track.poses = [p for p in track.poses if p[2] in held]
         track.observed = {key: entry for key, entry in track.observed.items() if key in held}
+        track.online = {key: entry for key, entry in track.online.items() if key in held}
         if track.swaps:
             track.swaps = {key: found for key, found in track.swaps.items() if key in held}
         keys = [key for _, _, key in track.poses[-recent if recent else 0:]]
@@ -1395,7 +1406,8 @@ def _with_detections(frame: Frame, vehicles: list[VehicleResult]) -> FrameResult
 def _refresh(final: dict, estimates: dict, kind: str) -> None:
     """Replaces results by the smoothers' current estimates, keeping a covariance that was not recomputed.
 
-    A recomputed covariance is labelled ``kind`` (``extras["covariance"]``).
+    A recomputed covariance is labelled ``kind`` (``extras["covariance"]``); an online result a failed frame left a
+    pose (:meth:`Tracker.estimates`) keeps its ``filtered``.
     """
     for key, v in estimates.items():
         old = final.get(key)
@@ -1403,7 +1415,7 @@ def _refresh(final: dict, estimates: dict, kind: str) -> None:
             v.pose_covariance = old.pose_covariance
             if "covariance" in old.extras:
                 v.extras["covariance"] = old.extras["covariance"]
-        elif v.pose_covariance is not None:
+        elif v.pose_covariance is not None and v.extras.get("covariance") != "filtered":
             v.extras["covariance"] = kind
         final[key] = v
 

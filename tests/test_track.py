@@ -900,3 +900,15 @@ def test_the_estimates_of_a_fixed_lag_are_labelled_fixed_lag(sim):
             tracker.add_frame(frame)
         kinds = {v.extras.get("covariance") for v in tracker.estimates(covariance=True).values()}
         assert kinds == {kind}, (lag, kinds)
+
+
+def test_a_frame_index_a_track_holds_is_refused():
+    sim = simulate("intersection_2cam_track", seed=0, num_frames=4)
+    tracker = Tracker(sim.scene.cameras)
+    for index, frame in zip((0, 1), sim.scene.frames):
+        tracker.add_frame(frame, frame_index=index)
+    with pytest.raises(InputError) as raised:  # it failed with GTSAM's "key already exists" and overwrote frame 1
+        tracker.add_frame(sim.scene.frames[2], frame_index=1)
+    assert raised.value.field == "frame_index" and "already names the frame at 0.1 s" in raised.value.problem
+    assert tracker.add_frame(sim.scene.frames[2], frame_index=2).vehicles[0].ok  # the refused frame left no trace
+    assert sorted(i for i, _ in tracker.estimates()) == [0, 1, 2]

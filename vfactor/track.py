@@ -370,13 +370,21 @@ class Tracker:
 
         Args:
             frame: the frame (times must increase from frame to frame).
-            frame_index: index used in the pose keys (default: a running count).
+            frame_index: index used in the pose keys and by :meth:`estimates` (default: a running count); one a
+                track still holds for an earlier frame is refused.
 
         Raises:
-            InputError: the frame's time does not follow the previous frame's.
+            InputError: the frame's time does not follow the previous frame's, or ``frame_index`` is one a track
+                still holds.
         """
         if self._last_t is not None and frame.t <= self._last_t:
             raise InputError("t", f"frame at {frame.t} s does not follow the previous frame at {self._last_t} s")
+        if frame_index is not None:
+            for vid in frame.vehicle_ids():
+                held = next((t for i, t, _ in getattr(self._tracks.get(vid), "poses", ()) if i == frame_index), None)
+                if held is not None:
+                    raise InputError("frame_index", f"{frame_index} already names the frame at {held:g} s of vehicle "
+                                                    f"{vid!r}; give each frame its own index")
         self._last_t = frame.t
         index = self._frame_counter if frame_index is None else frame_index
         self._frame_counter = index + 1

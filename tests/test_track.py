@@ -912,3 +912,50 @@ def test_a_frame_index_a_track_holds_is_refused():
     assert raised.value.field == "frame_index" and "already names the frame at 0.1 s" in raised.value.problem
     assert tracker.add_frame(sim.scene.frames[2], frame_index=2).vehicles[0].ok  # the refused frame left no trace
     assert sorted(i for i, _ in tracker.estimates()) == [0, 1, 2]
+
+
+def _ids_swapped(scene: Scene, a: str, b: str, from_frame: int) -> Scene:
+    """The scene with vehicles ``a`` and ``b`` exchanging their ids from ``from_frame`` on (an id switch)."""
+    swap = {a: b, b: a}
+    frames = [f if i < from_frame else dataclasses.replace(f, detections=[
+        dataclasses.replace(d, vehicle=swap.get(d.vehicle, d.vehicle)) for d in f.detections])
+        for i, f in enumerate(scene.frames)]
+    return dataclasses.replace(scene, frames=frames)
+
+
+def test_batch_smoothing_cuts_a_track_where_its_id_follows_another_vehicle():
+    """Two vehicles exchange their ids half way (tracks_3veh seed 1, v1 and v3 from frame 15): batch smoothing bent
+    each track onto both vehicles (v1 14.5 m off before the switch, every pose `converged`, no message); it now
+    cuts the tracks at the tracker's jumps and smooths each piece on its own."""
+    sim = simulate("tracks_3veh", seed=1)
+    scene = _ids_swapped(sim.scene, "v1", "v3", 15)
+    results = smooth_scene(scene)
+    truth_of = lambda f, vid: sim.truth[f][{"v1": "v3", "v3": "v1"}.get(vid, vid) if f >= 15 else vid]  # noqa: E731
+    for vid in ("v1", "v3"):
+        first = next(v for v in results[15].vehicles if v.id == vid)
+        assert first.message.startswith("a new segment of the track:"), first.message
+    errors = [pose_errors(v.world_T_vehicle, v.keypoints_world, truth_of(f, v.id).world_T_vehicle,
+                          truth_of(f, v.id).keypoints_world)["translation_cm"]
+              for f, frame in enumerate(results) for v in frame.vehicles if v.ok]
+    assert max(errors) < 100.0, max(errors)
+    assert smooth_scene(sim.scene)[15].vehicles[0].message == ""  # no switch: no cut
+
+
+def test_batch_smoothing_gives_a_frame_without_keypoints_no_pose(sim):
+    frames = list(sim.scene.frames)
+    vid = frames[4].detections[0].vehicle
+    frames[4] = dataclasses.replace(frames[4], detections=[
+        dataclasses.replace(d, confidence=np.zeros(12), keypoints=np.full((12, 2), np.nan)) if d.vehicle == vid else d
+        for d in frames[4].detections])
+    results = smooth_scene(dataclasses.replace(sim.scene, frames=frames))
+    (unseen,) = [v for v in results[4].vehicles if v.id == vid]
+    assert unseen.status == Status.DEGENERATE and unseen.message == "no keypoint seen in this frame"
+    assert all(v.ok for i, f in enumerate(results) for v in f.vehicles if i != 4 or v.id != vid)
+
+
+def test_batch_smoothing_says_what_tracking_says_of_the_scene(sim):
+    from vfactor.track import scene_notes
+
+    shuffled = dataclasses.replace(sim.scene, frames=list(reversed(sim.scene.frames)))
+    assert scene_notes(shuffled, smooth_scene(shuffled)) == track_scene(shuffled).messages
+    assert scene_notes(shuffled, smooth_scene(shuffled))[0].startswith("frames are not in time order")

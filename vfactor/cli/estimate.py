@@ -176,7 +176,7 @@ def track(args) -> int:
 
 def _track_one(args, engine: _Engine) -> int:
     from vfactor.solve import SolveOptions
-    from vfactor.track import TrackOptions, smooth_scene, track_scene
+    from vfactor.track import TrackOptions, scene_notes, smooth_scene, track_scene
 
     check_outputs(args)
     if args.plot:
@@ -192,7 +192,8 @@ def _track_one(args, engine: _Engine) -> int:
 
     def estimate(scene):
         if args.batch:
-            return smooth_scene(scene, options, progress=progress("smoothing", not args.quiet), engine=where), []
+            smoothed = smooth_scene(scene, options, progress=progress("smoothing", not args.quiet), engine=where)
+            return smoothed, scene_notes(scene, smoothed)
         run = track_scene(scene, options, progress=progress("tracking", not args.quiet), engine=where)
         return (run.online if args.online else run.frames), run.messages
 

@@ -49,6 +49,22 @@ def test_solve_options_name_the_field():
     assert SolveOptions(poor_fit_restarts=0, num_starts=1).poor_fit_restarts == 0
 
 
+def test_track_options_name_the_field():
+    from vfactor.track import TrackOptions
+
+    for settings, message in (({"update_tolerance": -1.0}, r"TrackOptions\.update_tolerance: expected a number >= 0"),
+                              ({"relinearize_threshold": math.nan}, r"TrackOptions\.relinearize_threshold"),
+                              ({"dogleg_delta": 0.0}, r"TrackOptions\.dogleg_delta: expected a number > 0"),
+                              ({"lag": True}, r"TrackOptions\.lag: expected a number > 0"),
+                              ({"lag": "1"}, r"TrackOptions\.lag: expected a number > 0"),
+                              ({"motion": None}, r"TrackOptions\.motion: expected a MotionModel"),
+                              ({"solve": None}, r"TrackOptions\.solve: expected a SolveOptions"),
+                              ({"covariance": "no"}, r"TrackOptions\.covariance: expected True or False")):
+        with pytest.raises(ValueError, match=message):
+            TrackOptions(**settings)
+    assert TrackOptions(lag=0.5, max_gap=math.inf).lag == 0.5
+
+
 def test_a_detection_built_by_hand_is_checked():
     import numpy as np
 

@@ -28,3 +28,14 @@ def test_bad_schemes_raise(kw):
 def test_frame_index_must_fit_the_stride():
     with pytest.raises(ValueError, match="frame"):
         KeyScheme(frame_stride=10).pose_key(0, 10)
+
+
+def test_keys_that_would_collide_or_fail_in_gtsam_are_refused():
+    for settings in ({"pose": "\x00"}, {"pose": "é"}, {"pose": " "}, {"frame_stride": True}, {"frame_stride": 2 ** 60}):
+        with pytest.raises(ValueError, match="KeyScheme"):
+            KeyScheme(**settings)  # "\x00" made plain integer keys, which a user's own graph uses
+    keys = KeyScheme()
+    for make in (lambda: keys.pose_key(-1, 0), lambda: keys.layer_key("wheel", -1), lambda: keys.hub_key(-1),
+                 lambda: keys.pose_key(2 ** 40, 0)):
+        with pytest.raises(ValueError, match="^vehicle: expected an index from 0"):
+            make()

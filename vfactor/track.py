@@ -31,7 +31,7 @@ import numpy as np
 
 from vfactor.box import vehicle_box
 from vfactor.camera import Camera
-from vfactor.errors import InputError
+from vfactor.errors import InputError, check_numbers
 from vfactor.factors.body_frame import canonical_gauge
 from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomic_factor
 from vfactor.factors.projection import KeypointObservations, whitened_pose_jacobian, whitened_residuals
@@ -155,11 +155,19 @@ class TrackOptions:
     optimizer: str = "dogleg"
     dogleg_delta: float = 1.0
 
-    def __post_init__(self):
-        if self.lag is not None and (not np.isfinite(self.lag) or self.lag <= 0):
-            raise ValueError(f"TrackOptions.lag: expected a positive number of seconds or None, got {self.lag!r}")
+    def __post_init__(self):  # every field, as SolveOptions and GraphConfig check theirs
+        if self.lag is not None:
+            check_numbers("TrackOptions", self, ("lag",))
         if not isinstance(self.max_gap, (int, float)) or isinstance(self.max_gap, bool) or not self.max_gap > 0:
-            raise ValueError(f"TrackOptions.max_gap: expected a positive number of seconds, got {self.max_gap!r}")
+            raise ValueError(f"TrackOptions.max_gap: expected a positive number of seconds (inf: never a new "
+                             f"segment), got {self.max_gap!r}")
+        check_numbers("TrackOptions", self, ("dogleg_delta",))
+        check_numbers("TrackOptions", self, ("update_tolerance", "relinearize_threshold"), strict=False)
+        for name, kind in (("solve", SolveOptions), ("motion", MotionModel)):
+            if not isinstance(getattr(self, name), kind):
+                raise ValueError(f"TrackOptions.{name}: expected a {kind.__name__}, got {getattr(self, name)!r}")
+        if not isinstance(self.covariance, bool):
+            raise ValueError(f"TrackOptions.covariance: expected True or False, got {self.covariance!r}")
         if self.optimizer not in ("dogleg", "gn"):
             raise ValueError(f"TrackOptions.optimizer: expected 'dogleg' or 'gn', got {self.optimizer!r}")
         if not isinstance(self.max_updates, int) or self.max_updates < 0:

@@ -90,7 +90,7 @@ def _error(key: int, params: np.ndarray, out: tuple, hub_key, this, values, H):
 
 
 def ground_plane_factor(pose_key: int, plane: GroundPlane = GroundPlane(), hub_height: float = 0.34,
-                        sigma_height: float = 0.05, sigma_tilt: float = 0.03,
+                        sigma_height: float = 0.06, sigma_tilt: float = 0.03,
                         hub_key: int | None = None) -> gtsam.CustomFactor:
     """The vehicle pose ``pose_key`` on the road plane (3 whitened rows).
 

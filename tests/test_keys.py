@@ -31,7 +31,8 @@ def test_frame_index_must_fit_the_stride():
 
 
 def test_keys_that_would_collide_or_fail_in_gtsam_are_refused():
-    for settings in ({"pose": "\x00"}, {"pose": "é"}, {"pose": " "}, {"frame_stride": True}, {"frame_stride": 2 ** 60}):
+    for settings in ({"pose": "\x00"}, {"pose": "é"}, {"pose": " "}, {"frame_stride": True},
+                     {"frame_stride": 2 ** 60}):
         with pytest.raises(ValueError, match="KeyScheme"):
             KeyScheme(**settings)  # "\x00" made plain integer keys, which a user's own graph uses
     keys = KeyScheme()

@@ -1529,8 +1529,8 @@ def _through_common(offsets: dict[str, int], obs: KeypointObservations, biased: 
 #: Batch smoothing looks for the tracker's jumps in a track (:func:`_smooth_unit`) where at least this many of its
 #: frames' keypoints fit a vehicle of their own :data:`~vfactor.solve.POOR_FIT_SCALE` times better than the smoothed
 #: track: on 1414 frames of fresh scenes (tracks_3veh, library_tracks_2cam and library_tracks seeds 307-309 at
-#: paper-like and hard noise) 9 frames did so, none of them in a wrong track (0.3-1.3 deg, 4-12 cm off); the two ids
-#: swapped half way of an audit's scene, 40 of 79.
+#: paper-like and hard noise) 9 frames did so, none of them in a wrong track (0.3-1.3 deg, 4-12 cm off), never three
+#: in one track (seeds 310-315, 108 tracks: none); of the two ids exchanged half way of an audit's scene, 40 of 79.
 _BATCH_SUSPECT_FRAMES = 3
 
 

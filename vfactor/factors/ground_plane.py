@@ -28,6 +28,7 @@ for the motion factors.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 from functools import partial
 
@@ -61,7 +62,8 @@ class GroundPlane:
         n = n / length
         if n[2] <= 0:
             raise ValueError(f"ground_plane.normal: must point up (positive z), got {_shown(self.normal)}")
-        if not np.isfinite(self.offset):
+        if not isinstance(self.offset, numbers.Real) or isinstance(self.offset, (bool, np.bool_)) or \
+                not np.isfinite(self.offset):
             raise ValueError(f"ground_plane.offset: expected a finite number, got {self.offset!r}")
         object.__setattr__(self, "normal", tuple(float(v) for v in n))
         object.__setattr__(self, "offset", float(self.offset) / float(length))

@@ -220,6 +220,20 @@ def test_associate_option_checks_given_ids(tmp_path, capsys):
             assert len({sim.scene.frames[f].detections[j].vehicle for j in v.extras["detections"]}) == 1
 
 
+def test_associate_never_makes_an_id_the_scene_gives(tmp_path, capsys):
+    """With --associate the scene's ids are ignored, not freed: a made id that a given one also names would mean two
+    vehicles to a reader (the scene's own t1-t3 came out on other vehicles)."""
+    sim = simulate(load_scenario("intersection_multi"), seed=0, num_frames=3)
+    renamed = {"v1": "t3", "v2": "t1", "v3": "t2"}
+    frames = [dataclasses.replace(f, detections=[dataclasses.replace(d, vehicle=renamed[d.vehicle])
+                                                 for d in f.detections]) for f in sim.scene.frames]
+    path = tmp_path / "scene.json"
+    save_scene(dataclasses.replace(sim.scene, frames=frames), path)
+    assert main(["track", str(path), "--out", str(tmp_path / "r.json"), "--associate", "--no-covariance", "-q"]) == 0
+    ids = {v.id for f in load_results(tmp_path / "r.json") for v in f.vehicles}
+    assert ids.isdisjoint(renamed.values()) and len(ids) >= 3, ids
+
+
 def test_a_flicker_is_left_out_and_said_so_and_results_point_at_the_detections_given(multi):
     """A van's keypoints in one camera for one frame only (a false detection): left out, not a vehicle."""
     import gtsam

@@ -90,7 +90,8 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
         InputError: a detection still waits for the keypoint network (it has no keypoints to associate by).
     """
     scene.require_detected()
-    taken = set() if force else {d.vehicle for f in scene.frames for d in f.detections if d.vehicle != UNASSIGNED}
+    # never an id the scene uses, even where they are ignored (force): the same id would name two vehicles to a reader
+    taken = {d.vehicle for f in scene.frames for d in f.detections if d.vehicle != UNASSIGNED}
     linker = TrackLinker(options, taken=taken)
     frames = list(scene.frames)
     groups: list[dict[str, list[int]]] = [{} for _ in frames]

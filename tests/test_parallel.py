@@ -117,6 +117,26 @@ def test_open_engine_and_bad_options():
         open_engine(workers=1, scheduler="tcp://127.0.0.1:1")
     with pytest.raises(InputError, match="--scheduler: cannot reach"):
         open_engine(scheduler="tcp://127.0.0.1:1")
+    for address in ("nonsense", "", "tcp://host"):  # Dask's own ValueError was an 'internal error', exit 1
+        with pytest.raises(InputError, match="--scheduler: expected the scheduler's address"):
+            open_engine(scheduler=address)
+
+
+def test_a_scheduler_port_that_never_answers_is_an_error_not_a_hang(monkeypatch):
+    """A port that takes the connection and never answers as Dask does (the dashboard's HTTP port) held the
+    command for ever."""
+    import socket
+
+    import vfactor.parallel.engine as engine
+
+    monkeypatch.setattr(engine, "CONNECT_TIMEOUT", 1.0)
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        start = time.perf_counter()
+        with pytest.raises(InputError, match="--scheduler: no answer from a Dask scheduler"):
+            open_engine(scheduler=f"tcp://127.0.0.1:{server.getsockname()[1]}")
+        assert time.perf_counter() - start < 10.0
 
 
 def test_cli_many_scenes_with_workers_equal_serial(tmp_path, capsys, multi_scene):

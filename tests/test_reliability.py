@@ -331,6 +331,30 @@ def test_exit_codes_are_documented_in_help(capsys):
     assert EXIT_UNSOLVED == 3 and EXIT_UNSOLVED not in (EXIT_OK, EXIT_INPUT)
 
 
+def test_sigterm_ends_a_command_as_an_interrupt_does(tmp_path, monkeypatch, capsys, scene_text):
+    """A job scheduler stops a job with SIGTERM: the command installs a handler that raises where it is (as Ctrl-C
+    does), so the result file it was writing stays whole and its temporary file goes; exit 143 and one line."""
+    import signal
+
+    import vfactor.cli as cli
+    import vfactor.cli.estimate as estimate
+
+    scene = tmp_path / "scene.json"
+    scene.write_text(scene_text)
+    out = tmp_path / "r.json"
+    out.write_text("old")
+
+    def stopped(args):  # the signal arrives while the result is being written
+        assert signal.getsignal(signal.SIGTERM) is cli._terminated
+        write_text_atomic(out, (piece for piece in ("{", cli._terminated(signal.SIGTERM, None))))
+
+    monkeypatch.setattr(estimate, "solve", stopped)
+    code, err = run_cli(capsys, "solve", str(scene), "--out", str(out))
+    assert code == 143 and one_line_error(err) == "vfactor: terminated (SIGTERM)"
+    assert out.read_text() == "old" and sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "scene.json"]
+    assert signal.getsignal(signal.SIGTERM) is not cli._terminated  # put back when the command ends
+
+
 def test_usage_errors_are_one_line(capsys):
     with pytest.raises(SystemExit) as info:
         main(["solve"])

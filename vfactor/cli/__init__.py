@@ -29,7 +29,8 @@ import os
 import sys
 
 from vfactor._version import __version__
-from vfactor.cli.common import EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, EXIT_UNSOLVED, configure_logging, say
+from vfactor.cli.common import (EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, EXIT_TERMINATED, EXIT_UNSOLVED,
+                                configure_logging, say)
 from vfactor.errors import InputError
 from vfactor.sanity import one_line
 
@@ -42,7 +43,8 @@ EXIT_CODES = {
     EXIT_INTERNAL: "internal error (a bug: run again with --debug for the traceback)",
     EXIT_INPUT: "bad input: a malformed scene, scenario, calibration or option (one line names the field)",
     EXIT_UNSOLVED: "some vehicles could not be solved: reported degenerate or failed (result file and stderr)",
-    EXIT_INTERRUPTED: "interrupted",
+    EXIT_INTERRUPTED: "interrupted (Ctrl-C): the result file left as it was",
+    EXIT_TERMINATED: "terminated (SIGTERM, as a job scheduler stops a job): the result file left as it was",
 }
 
 _DESCRIPTION = """\
@@ -377,8 +379,30 @@ def _estimate_options(p: argparse.ArgumentParser) -> None:
                    "first solve found, beyond the border, and solve again (vfactor.net.amodal; docs/network.md)")
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a job scheduler or ``kill`` stopping the command), raised where the command is, so that it ends as an
+    interrupt does: the result file it was writing left as it was, its temporary file removed, one line said."""
+
+
+def _terminated(signum, frame):
+    raise Terminated()
+
+
 def main(argv=None) -> int:
     """Runs the ``vfactor`` command on ``argv`` (default: ``sys.argv[1:]``); returns the exit code (:data:`EXIT_CODES`)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return _main(argv)
+    previous = signal.signal(signal.SIGTERM, _terminated)
+    try:
+        return _main(argv)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((a for a in argv if not a.startswith("-")), None)
     if command in NET_COMMANDS:  # the network's own parser; torch is imported only here
@@ -433,7 +457,10 @@ def _guarded(command: str, run, debug: bool) -> int:
     except MemoryError:
         say(f"vfactor {command}: error: out of memory (is an input far larger than it should be?)")
         return EXIT_INPUT
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        if isinstance(exc, Terminated):
+            say("vfactor: terminated (SIGTERM)")
+            return EXIT_TERMINATED
         say("vfactor: interrupted")
         return EXIT_INTERRUPTED
     except Exception as exc:  # noqa: BLE001 - the CLI reports, never dumps a bare traceback

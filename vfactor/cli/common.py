@@ -18,11 +18,12 @@ from vfactor.errors import InputError
 from vfactor.result import Status
 from vfactor.sanity import one_line
 
-__all__ = ["EXIT_OK", "EXIT_INTERNAL", "EXIT_INPUT", "EXIT_UNSOLVED", "EXIT_INTERRUPTED", "configure_logging", "say",
+__all__ = ["EXIT_OK", "EXIT_INTERNAL", "EXIT_INPUT", "EXIT_UNSOLVED", "EXIT_INTERRUPTED", "EXIT_TERMINATED",
+           "configure_logging", "say",
            "note", "output", "progress", "missing_extra", "check_positive", "check_out_file", "check_out_dir", "report_unsolved",
-           "detect", "amodal_pass", "check_amodal_pass", "check_outputs"]
+           "detect", "amodal_pass", "check_amodal_pass", "check_outputs", "open_command_engine"]
 
-EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_UNSOLVED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_UNSOLVED, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 3, 130, 143
 
 #: The library's logger: modules log under ``vfactor.<module>``; the commands show WARNING and above, INFO
 #: with ``-v``, DEBUG with ``-vv``, ERROR only with ``-q``.
@@ -67,6 +68,19 @@ def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
         log.addHandler(handler)
     log.setLevel(level)
     log.propagate = False
+
+
+def open_command_engine(workers, scheduler):
+    """A command's engine (:func:`vfactor.parallel.open_engine`), with Dask's own log records (``distributed``,
+    configured when it is imported) shown only at ``-vv``: a lost scheduler is a multi-line traceback there, which
+    the command says in one line."""
+    from vfactor.parallel import open_engine
+
+    engine = open_engine(workers, scheduler)
+    if log.level > logging.DEBUG:
+        for name in [n for n in logging.root.manager.loggerDict if n == "distributed" or n.startswith("distributed.")]:
+            logging.getLogger(name).setLevel(logging.CRITICAL)
+    return engine
 
 
 def output(args):

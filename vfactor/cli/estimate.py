@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from vfactor.cli.common import (EXIT_INPUT, EXIT_OK, EXIT_UNSOLVED, amodal_pass, check_amodal_pass, check_out_file,
-                                check_outputs, detect, note, output, progress, report_unsolved, say)
+                                check_outputs, detect, note, open_command_engine, output, progress, report_unsolved,
+                                say)
 from vfactor.cli.scenes import scene_jobs
 from vfactor.cli.stream import is_stream, track_stream_command
 from vfactor.cli.interop import name_file_pairs
@@ -78,9 +79,7 @@ class _Engine:
 
     def get(self):
         if self.engine is None:
-            from vfactor.parallel import open_engine
-
-            self.engine = open_engine(self.args.workers, self.args.scheduler)
+            self.engine = open_command_engine(self.args.workers, self.args.scheduler)
         return self.engine
 
     def close(self):

@@ -7,7 +7,8 @@ from collections import defaultdict
 
 import numpy as np
 
-from vfactor.cli.common import EXIT_OK, check_out_file, check_positive, missing_extra, output, progress
+from vfactor.cli.common import (EXIT_OK, check_out_file, check_positive, missing_extra, open_command_engine, output,
+                                progress)
 from vfactor.errors import InputError
 from vfactor.jsonio import write_text_atomic
 
@@ -55,9 +56,7 @@ def evaluate(args) -> int:
     if args.amodal_pass and not (args.experiment == "images" and args.clipped_boxes):
         raise InputError("--amodal-pass", "only with eval images --clipped-boxes (whole boxes stop at no image border)")
     if args.experiment in ("frames", "tracks", "association"):
-        from vfactor.parallel import open_engine
-
-        with open_engine(args.workers, args.scheduler) as engine:
+        with open_command_engine(args.workers, args.scheduler) as engine:
             if args.experiment == "frames":
                 sections = _eval_frames(args.scenario or "library_2cam", frames, args.seed,
                                         _levels(args.levels or "clean,paper,hard"), args.seeds, engine)

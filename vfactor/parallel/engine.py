@@ -23,6 +23,7 @@ from __future__ import annotations
 import itertools
 import logging
 import os
+import re
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
@@ -135,10 +136,7 @@ class DaskEngine(Engine):
         if client is not None:
             self.client = client
         elif scheduler is not None:
-            try:
-                self.client = Client(scheduler, timeout="5s")
-            except (OSError, TimeoutError) as exc:
-                raise InputError("--scheduler", f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+            self.client = _connected(Client, scheduler)
         else:
             self._cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                          dashboard_address=":0", silence_logs=logging.ERROR)
@@ -178,7 +176,14 @@ class DaskEngine(Engine):
             pass
         try:
             for future in pending:
-                ready[index_of.pop(future.key)] = future.result()
+                try:
+                    result = future.result()
+                except Exception as exc:  # noqa: BLE001  the unit's own errors come back as they were raised
+                    if not _lost(exc):
+                        raise
+                    raise ConnectionError(f"lost the Dask scheduler at {self.client.scheduler.address} mid-run "
+                                          f"({type(exc).__name__}); the work done so far is not written") from None
+                ready[index_of.pop(future.key)] = result
                 future.release()
                 while next_out in ready:
                     for result in ready.pop(next_out):
@@ -198,6 +203,50 @@ class DaskEngine(Engine):
             self.client.close()
         if self._cluster is not None:
             self._cluster.close()
+
+
+#: Seconds to reach a ``--scheduler`` and hear back from it: a port that takes the connection and never answers as
+#: Dask does (a dashboard's HTTP port) would hold the command for ever.
+CONNECT_TIMEOUT = 10.0
+
+
+def _connected(client_class, scheduler: str):
+    """A client of the scheduler at ``scheduler``, or a one-line InputError (field ``--scheduler``) within
+    :data:`CONNECT_TIMEOUT` seconds: not reached, not a Dask scheduler (its answer is not Dask's), or no answer."""
+    import threading
+
+    outcome: dict = {}
+
+    def connect():
+        try:
+            outcome["client"] = client_class(scheduler, timeout=f"{CONNECT_TIMEOUT / 2:g}s")
+        except BaseException as exc:  # noqa: BLE001  reported below, in the caller's thread
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=connect, name="vfactor-dask-connect", daemon=True)
+    thread.start()
+    thread.join(CONNECT_TIMEOUT)
+    if thread.is_alive():
+        raise InputError("--scheduler", f"no answer from a Dask scheduler at {scheduler} within "
+                                        f"{CONNECT_TIMEOUT:g} s (is it the scheduler's port, 8786 by default?)")
+    error = outcome.get("error")
+    if isinstance(error, (OSError, TimeoutError)):
+        raise InputError("--scheduler", f"cannot reach the Dask scheduler at {scheduler}: {error}") from None
+    if error is not None:  # a MemoryError from a length read off another protocol's bytes, a ValueError, ...
+        raise InputError("--scheduler", f"{scheduler} does not answer as a Dask scheduler "
+                                        f"({type(error).__name__}: {str(error)[:120]})") from None
+    return outcome["client"]
+
+
+def _lost(exc: BaseException) -> bool:
+    """Whether a task's failure is the cluster's (the scheduler or its connection lost), not the unit's."""
+    from distributed.client import FutureCancelledError
+
+    try:
+        from distributed.comm.core import CommClosedError
+    except ImportError:  # pragma: no cover  older distributed
+        CommClosedError = OSError  # noqa: N806
+    return isinstance(exc, (FutureCancelledError, CommClosedError))
 
 
 def _warm_up_plugin():
@@ -220,6 +269,9 @@ def _chunks(units: Iterable, size: int) -> Iterator[list]:
         yield piece
 
 
+_ADDRESS = r"(?:[a-z]+://)?(?:\[[0-9a-fA-F:.]+\]|[^\s:/\[\]]+):\d{1,5}/?"  # [scheme://]host:port, IPv6 in []
+
+
 def check_engine_options(workers: int | None = None, scheduler: str | None = None) -> None:
     """Checks a command's ``--workers N`` / ``--scheduler ADDRESS`` before any work (starts nothing).
 
@@ -230,6 +282,8 @@ def check_engine_options(workers: int | None = None, scheduler: str | None = Non
         raise InputError("--workers", "give --workers (a local cluster) or --scheduler (an existing one), not both")
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
         raise InputError("--workers", f"expected an integer >= 1, got {workers}")
+    if scheduler is not None and not re.fullmatch(_ADDRESS, str(scheduler)):
+        raise InputError("--scheduler", f"expected the scheduler's address, as tcp://host:8786, got {scheduler!r}")
 
 
 def open_engine(workers: int | None = None, scheduler: str | None = None) -> Engine:

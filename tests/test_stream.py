@@ -151,3 +151,22 @@ def test_a_late_frame_gets_the_covariances_the_tracker_gives(sim):
     assert late.note.startswith("arrived late")
     assert all(v.pose_covariance is not None for v in tracked.result.vehicles if v.ok)
     assert all(v.pose_covariance is not None for v in late.result.vehicles if v.ok) and late.result.vehicles
+
+
+def test_a_recorded_stream_is_a_scene_file(tmp_path, sim, capsys):
+    """scaling.md: "vfactor track on the recorded stream gives the smoothed estimates"; it said "not valid JSON"."""
+    from vfactor.errors import SceneError
+    from vfactor.scene import load_results, load_scene
+
+    recorded = tmp_path / "live.jsonl"
+    recorded.write_text("".join(_lines(sim.scene)))
+    scene = load_scene(recorded)
+    assert [f.t for f in scene.frames] == [f.t for f in sim.scene.frames]
+    assert list(scene.cameras) == list(sim.scene.cameras)
+    assert main(["track", str(recorded), "--out", str(tmp_path / "r.json"), "--no-covariance", "-q"]) == 0
+    assert len(load_results(tmp_path / "r.json")) == len(sim.scene.frames)
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text("".join(_lines(sim.scene)[:2]) + "{not json\n")
+    with pytest.raises(SceneError) as raised:
+        load_scene(bad)
+    assert raised.value.field == f"{bad}:3"

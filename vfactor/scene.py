@@ -65,7 +65,8 @@ from vfactor.camera import DIST_SIZES, LENS_MODELS, Camera, check_rigid_transfor
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.errors import CalibrationError, SceneError
 from vfactor.heatmaps import decode_heatmaps
-from vfactor.jsonio import describe as _kind, is_int as _is_int, is_number as _is_number, read_json, write_text_atomic
+from vfactor.jsonio import (describe as _kind, is_int as _is_int, is_number as _is_number, parse_json, read_json,
+                            write_text_atomic)
 from vfactor.keypoints import NUM_KEYPOINTS
 from vfactor.label_swaps import SwapFinding
 from vfactor.observations import DEFAULT_VEHICLE_ID, UNASSIGNED, Detection, Frame, Scene, resolve_path
@@ -140,16 +141,20 @@ def load_scene(path: str | os.PathLike, allow_outside_paths: bool = False,
         camera_files: camera name -> calibration file that replaces that camera's
             calibration (``vfactor solve --camera NAME=FILE``); see :func:`scene_from_dict`.
 
+    A recorded stream (``.jsonl`` or ``.ndjson``: a header line, then a frame per line, docs/scene-format.md) is
+    read as the scene of its header and frames (``frames[k]`` is the file's line ``k + 2``), so that it can be
+    tracked and smoothed afterwards.
+
     Returns:
         The :class:`~vfactor.observations.Scene`, with cameras and frames in file order.
 
     Raises:
         SceneError: the file is missing (field: the path), is not JSON (field:
-            the path), or any field is invalid (field: its path in the file,
+            the path; a stream's line: ``path:line``), or any field is invalid (field: its path in the file,
             e.g. ``frames[3].detections[0].keypoints[5]``).
     """
     path = Path(path)
-    data = _read_json(path)
+    data = _read_json_lines(path) if path.suffix.lower() in (".jsonl", ".ndjson") else _read_json(path)
     return scene_from_dict(data, base_dir=Path(os.path.abspath(path)).parent, allow_outside_paths=allow_outside_paths,
                            camera_files=camera_files)
 
@@ -1048,6 +1053,23 @@ def _check_symmetric(S: np.ndarray, field: str) -> None:
 # ============================================================== JSON helpers
 def _read_json(path: Path):
     return read_json(path, SceneError)
+
+
+def _read_json_lines(path: Path) -> dict:
+    """A recorded stream as a scene file's dictionary: its header line with the frame lines as ``frames``."""
+    if not path.is_file():
+        raise SceneError(str(path), "file not found" if not path.exists() else "expected a file, got a directory")
+    try:
+        lines = [(n, line) for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1) if line.strip()]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(str(path), f"could not read the file: {exc}") from None
+    if not lines:
+        raise SceneError(str(path), "empty: a stream starts with its header line (the scene's cameras)")
+    header, *frames = [parse_json(line, f"{path}:{n}", SceneError) for n, line in lines]
+    if not isinstance(header, dict) or "frames" in header:
+        raise SceneError(f"{path}:{lines[0][0]}", "expected the stream's header: an object with the cameras and no "
+                                                  "frames")
+    return {**header, "frames": frames}
 
 
 def _write_json(path: Path, data) -> None:

@@ -102,3 +102,30 @@ def test_every_format_gives_a_real_solve_back(run, request, tmp_path):
         box = boxes[(r.frame, "v1")]
         assert np.allclose(r.box.world_T_box.translation(), box.world_T_box.translation(), atol=MM)
         assert np.allclose(r.box.size, box.size, atol=MM)
+
+
+def test_readers_refuse_rows_and_boxes_that_are_not_boxes(known, tmp_path):
+    """A short CSV row raised a TypeError; NaN centres and negative sizes were read as boxes; a nuScenes entry filed
+    under another sample's token was taken as that sample's."""
+    import json
+
+    scene, results = known
+    write_csv(tmp_path / "r.csv", results)
+    header, first, *_ = (tmp_path / "r.csv").read_text().splitlines()
+    (tmp_path / "short.csv").write_text(header + "\n" + ",".join(first.split(",")[:5]) + "\n")
+    with pytest.raises(InputError, match="row 1: expected the header's"):
+        read_csv(tmp_path / "short.csv")
+    fields = first.split(",")
+    for column, value, words in (("length", "-5", "must be positive"), ("x", "nan", "must be finite")):
+        bad = list(fields)
+        bad[CSV_COLUMNS.index(column)] = value
+        (tmp_path / "bad.csv").write_text(header + "\n" + ",".join(bad) + "\n")
+        with pytest.raises(InputError, match=words):
+            read_csv(tmp_path / "bad.csv")
+    write_results(tmp_path / "n.json", results, scene, "nuscenes")
+    data = json.loads((tmp_path / "n.json").read_text())
+    token, entries = next((t, e) for t, e in data["results"].items() if e)
+    entries[0]["sample_token"] = "another"
+    (tmp_path / "n.json").write_text(json.dumps(data))
+    with pytest.raises(InputError, match="sample_token"):
+        read_nuscenes(tmp_path / "n.json")

@@ -188,3 +188,11 @@ def test_a_camera_name_that_is_not_a_folder_name_is_refused(known, tmp_path, nam
         write_kitti(tmp_path / "out", results, bad)
     assert info.value.field == "cameras[0].name" and not (tmp_path / "out").exists()
     assert not (tmp_path / "escaped").exists()
+
+
+def test_other_cameras_folders_in_the_output_are_named(known, tmp_path):
+    scene, results = known
+    write_kitti(tmp_path, results, scene)  # both cameras
+    report = write_kitti(tmp_path, results, scene, cameras=["level"])
+    assert report.foreign == ["tilted/"] and "also holds tilted/, which this run did not write" in report.note()
+    assert write_kitti(tmp_path / "fresh", results, scene).foreign == []

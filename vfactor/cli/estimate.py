@@ -62,11 +62,11 @@ def associate(scene, args):
 
 def write_output(args, results, scene) -> None:
     """Writes the results to ``--out`` in ``--format`` (vfactor.formats); says which unsolved vehicles a format
-    has no place for."""
+    has no place for, and what the output folder holds besides this run's."""
     from vfactor.formats import write_results
 
     report = write_results(args.out, results, scene, args.format)
-    if report.skipped:
+    if report.skipped or report.foreign:
         note(report.note())
 
 

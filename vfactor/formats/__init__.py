@@ -19,6 +19,7 @@ import os
 from pathlib import Path
 
 from vfactor.errors import InputError
+from vfactor.jsonio import describe
 from vfactor.formats.common import ReadBox, WriteReport, box_corners, unsolved_of
 from vfactor.formats.csv_table import CSV_COLUMNS, read_csv, write_csv
 from vfactor.formats.kitti import KITTI_TYPES, read_kitti, write_kitti
@@ -103,7 +104,7 @@ def write_results(path: str | os.PathLike, results: list[FrameResult], scene: Sc
     """
     writer = _WRITERS.get(format) if isinstance(format, str) else None
     if writer is None:
-        raise InputError("format", f"expected one of {list(FORMATS)}, got {format!r}")
+        raise InputError("format", f"expected one of {list(FORMATS)}, got {describe(format)}")
     if format != "vfactor":  # the other formats need every frame at once
         results = list(results)
     allowed = [p for p in inspect.signature(writer).parameters if p not in ("path", "folder", "results", "scene")]

@@ -80,12 +80,20 @@ def rotation_from_wxyz(q) -> np.ndarray:
     ])
 
 
-def box_from_centre(centre, world_R_box: np.ndarray, size, **sigmas) -> Box:
-    """A :class:`~vfactor.box.Box` from its world centre (m), rotation (box -> world) and (l, w, h) size (m).
+def box_from_centre(centre, world_R_box: np.ndarray, size, where: str = "box", **sigmas) -> Box:
+    """A :class:`~vfactor.box.Box` from its world centre (m), rotation (box -> world) and (l, w, h) size (m), as a
+    reader finds them in a file.
 
     ``heading`` is computed from the rotation as :func:`vfactor.box.vehicle_box` does (yaw of the box x axis
     about world z); ``sigmas`` are passed on (``size_sigma``, ``heading_sigma``, ``centre_sigma``).
+
+    Raises:
+        InputError: (field ``where``) a centre or rotation that is not finite, or a size that is not positive.
     """
+    if not np.all(np.isfinite(np.asarray(centre, dtype=float))) or not np.all(np.isfinite(world_R_box)):
+        raise InputError(where, f"a box centre and rotation must be finite numbers, got centre {[float(c) for c in centre]}")
+    if not np.all(np.asarray(size, dtype=float) > 0):  # NaN fails too
+        raise InputError(where, f"a box's length, width and height must be positive, got {[float(x) for x in size]}")
     R = np.asarray(world_R_box, dtype=float)
     u, _, vt = np.linalg.svd(R)
     R = u @ vt
@@ -150,17 +158,26 @@ class WriteReport:
         unsolved: ``(frame index, vehicle id, status)`` of every vehicle that was not solved.
         skipped: those of ``unsolved`` the format has no place for, so they are absent from the files
             (KITTI, nuScenes); OpenLABEL and CSV keep every vehicle, so theirs is empty.
+        foreign: what the output folder holds that this run did not write and a reader of the folder reads as
+            well (KITTI: other cameras' folders, from an earlier run).
     """
 
     format: str
     paths: list[Path] = field(default_factory=list)
     unsolved: list[tuple[int, str, str]] = field(default_factory=list)
     skipped: list[tuple[int, str, str]] = field(default_factory=list)
+    foreign: list[str] = field(default_factory=list)
 
     def note(self) -> str:
-        """One line for the command line about the unsolved vehicles; empty when there are none."""
-        if not self.unsolved:
-            return ""
+        """One line for the command line about the unsolved vehicles and what the output holds besides this
+        run's; empty when there is nothing to say."""
+        notes = [self._unsolved_note()] if self.unsolved else []
+        if self.foreign:
+            notes.append(f"the {self.format} output folder also holds {', '.join(self.foreign)}, which this run did "
+                         "not write (an earlier run's?): a reader of the folder reads them too")
+        return "; ".join(notes)
+
+    def _unsolved_note(self) -> str:
         listed = ", ".join(f"frame {f} {vid} ({status})" for f, vid, status in self.unsolved[:5])
         more = f" and {len(self.unsolved) - 5} more" if len(self.unsolved) > 5 else ""
         if self.skipped:

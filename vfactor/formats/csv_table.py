@@ -106,6 +106,8 @@ def read_csv(path: str | os.PathLike) -> list[ReadBox]:
     out = []
     for n, row in enumerate(rows):
         where = f"{path}: row {n + 1}"
+        if None in row or any(row[k] is None for k in CSV_COLUMNS):  # more or fewer fields than the header's
+            raise InputError(where, f"expected the header's {len(header)} fields, got another number")
         try:
             values = {k: float(row[k]) if row[k] != "" else None for k in CSV_COLUMNS[4:20]}
             frame = int(row["frame"])
@@ -121,7 +123,7 @@ def read_csv(path: str | os.PathLike) -> list[ReadBox]:
                 return None if any(g is None for g in got) else np.array(got)
 
             heading_sigma = values["yaw_sigma"]
-            box = box_from_centre(triple("x", "y", "z"), R, triple("length", "width", "height"),
+            box = box_from_centre(triple("x", "y", "z"), R, triple("length", "width", "height"), where,
                                   size_sigma=triple("length_sigma", "width_sigma", "height_sigma"),
                                   centre_sigma=triple("x_sigma", "y_sigma", "z_sigma"), heading_sigma=heading_sigma)
         out.append(ReadBox(frame=frame, id=row["id"], box=box, status=row["status"], label=row["body_type"] or None,

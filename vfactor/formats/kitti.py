@@ -135,7 +135,8 @@ def write_kitti(folder: str | os.PathLike, results: list[FrameResult], scene: Sc
 
     ``NNNNNN`` is the frame's index in the results; every frame gets a file (empty when no box is seen).
     Each file is written atomically. A camera's ``NNNNNN.txt`` files from an earlier run beyond this run's frames
-    are removed (they would read as this run's); other files and other cameras' folders are left as they are.
+    are removed (they would read as this run's); other files and other cameras' folders are left as they are, and
+    the report names those folders (``foreign``: :func:`read_kitti` reads them too).
 
     Args:
         folder: the output folder (created when missing).
@@ -181,7 +182,8 @@ def write_kitti(folder: str | os.PathLike, results: list[FrameResult], scene: Sc
                 if int(stale.stem) >= len(results):
                     stale.unlink()
     unsolved = unsolved_of(results)
-    return WriteReport("kitti", paths, unsolved, list(unsolved))
+    foreign = sorted(f"{p.name}/" for p in folder.iterdir() if (p / "label_2").is_dir() and p.name not in names)
+    return WriteReport("kitti", paths, unsolved, list(unsolved), foreign)
 
 
 def read_kitti(folder: str | os.PathLike) -> list[ReadBox]:
@@ -226,7 +228,7 @@ def read_kitti(folder: str | os.PathLike) -> list[ReadBox]:
                 label_R_box = np.column_stack([forward, np.cross(up, forward), up])
                 centre = np.array([x, y - 0.5 * h, z])
                 box = box_from_centre(world_T_label[:3, :3] @ centre + world_T_label[:3, 3],
-                                      world_T_label[:3, :3] @ label_R_box, [length, w, h])
+                                      world_T_label[:3, :3] @ label_R_box, [length, w, h], where)
                 out.append(ReadBox(frame=int(label_path.stem), id=None, box=box, label=parts[0],
                                    score=values[14] if len(values) == 15 else None, camera=camera_dir.name,
                                    extras={"alpha": alpha, "bbox": [x1, y1, x2, y2], "truncated": truncated,

@@ -213,7 +213,9 @@ def read_nuscenes(path: str | os.PathLike) -> list[ReadBox]:
                 R = rotation_from_wxyz(q)
             except InputError as exc:
                 raise InputError(f"{where}.rotation", exc.problem) from None
-            out.append(ReadBox(frame=f, id=None, box=box_from_centre(centre, R, [length, width, height]),
+            if "sample_token" in e and e["sample_token"] != token:
+                raise InputError(f"{where}.sample_token", f"{e['sample_token']!r} is in the results of {token!r}")
+            out.append(ReadBox(frame=f, id=None, box=box_from_centre(centre, R, [length, width, height], where),
                                label=name, score=score,
                                extras={"sample_token": token, "velocity": velocity, "attribute_name": attribute}))
     return out

@@ -185,7 +185,7 @@ def read_openlabel(path: str | os.PathLike) -> list[ReadBox]:
                     R = rotation_from_wxyz([qw, qx, qy, qz])
                 except InputError as exc:
                     raise InputError(field, exc.problem) from None
-                box = box_from_centre([x, y, z], R, [length, width, height])
+                box = box_from_centre([x, y, z], R, [length, width, height], field)
             obj = objects.get(uid, {}) if isinstance(objects.get(uid), dict) else {}
             out.append(ReadBox(frame=int(key), id=str(obj.get("name", uid)), box=box, status=texts.get("status"),
                                label=texts.get("body_type"), score=nums.get("body_type_probability"),

@@ -395,3 +395,11 @@ def test_a_vehicle_seen_in_two_halves_is_merged_and_two_vehicles_are_not():
     _merge_split_vehicles(det, own, groups, results, sim.scene.cameras,
                           dataclasses.replace(options, link_distance=1000.0))
     assert groups == [halves[0], pair]
+
+
+def test_every_detection_left_out_is_named_at_verbose():
+    from vfactor.cli.estimate import left_out_lines
+
+    lines = left_out_lines([(f, 0, "flicker") for f in range(7)] + [(3, 2, "crowd")])
+    assert lines[0][0].endswith("frames[4].detections[0], ... (every one with -v)") and "frames[6]" in lines[0][1]
+    assert lines[1] == ("left out 1 detections: crowd: frames[3].detections[2]", "")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 import time
 from pathlib import Path
 
@@ -51,13 +52,24 @@ def associate(scene, args):
     vehicles = sum(len(groups) for groups in found.groups)
     output(args)(f"associated {todo} detections into {vehicles} vehicles over the frames ({single} seen by one "
                  f"camera only), {len(found.vehicle_ids)} ids ({time.perf_counter() - t0:.2f} s)")
-    if found.left_out:
-        reasons: dict[str, list[str]] = {}
-        for f, j, why in found.left_out:
-            reasons.setdefault(why, []).append(f"frames[{f}].detections[{j}]")
-        for why, where in reasons.items():
-            note(f"left out {len(where)} detections: {why}: " + ", ".join(where[:5]) + (", ..." if len(where) > 5 else ""))
+    for line, every in left_out_lines(found.left_out):
+        note(line)
+        if every:
+            logging.getLogger("vfactor").info(every)
     return found.scene, found
+
+
+def left_out_lines(left_out: list[tuple[int, int, str]], shown: int = 5) -> list[tuple[str, str]]:
+    """Per reason, the note on the detections the association left out (``(frame, detection, why)``): the first
+    ``shown`` named, and the line that names every one (for ``-v``; empty when the note names them all), so that
+    nothing the user gave goes unsaid."""
+    reasons: dict[str, list[str]] = {}
+    for f, j, why in left_out:
+        reasons.setdefault(why, []).append(f"frames[{f}].detections[{j}]")
+    return [(f"left out {len(where)} detections: {why}: " + ", ".join(where[:shown]) +
+             (", ... (every one with -v)" if len(where) > shown else ""),
+             f"left out {len(where)} detections: {why}: " + ", ".join(where) if len(where) > shown else "")
+            for why, where in reasons.items()]
 
 
 def write_output(args, results, scene) -> None:

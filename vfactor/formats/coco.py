@@ -590,7 +590,8 @@ def _times(indices: list[int], files: dict[str, _CocoFile], frame_of: dict, fps:
 
 
 def _check_vehicles(dets: list[_Det], index: int) -> None:
-    """The scene format's rule for one frame: all detections name their vehicle, or none does (one vehicle)."""
+    """The scene format's rule for one frame: all detections name their vehicle, or none does (then one vehicle
+    where each camera has one detection, else the vehicles are found from geometry: vfactor.association)."""
     named = [d for d in dets if d.vehicle is not None]
     if named and len(named) != len(dets):
         d = next(d for d in dets if d.vehicle is None)
@@ -599,11 +600,7 @@ def _check_vehicles(dets: list[_Det], index: int) -> None:
     seen: dict[tuple[str, str | None], _Det] = {}
     for d in dets:
         key = (d.camera, d.vehicle)
-        if key in seen:
-            if d.vehicle is None:
-                raise SceneError(d.where, f"camera {d.camera!r} has several detections in frame {index} (also "
-                                          f"{seen[key].where}) and they have no track_id: several vehicles in one "
-                                          "frame need ids (association across cameras without ids is not supported)")
+        if key in seen and d.vehicle is not None:
             raise SceneError(f"{d.where}.track_id", f"camera {d.camera!r} has two detections of vehicle "
                                                     f"{d.vehicle!r} in frame {index} (also {seen[key].where})")
         seen[key] = d

@@ -447,10 +447,11 @@ def _restarted(obs: KeypointObservations, options: SolveOptions, vehicle_id: str
     Each further start (the candidates of ``search`` by their robust cost, RANSAC PnP's included, that differ from
     every pose in ``reached`` and from the first ``solution``; at most ``options.poor_fit_restarts``) is solved in full
     (:func:`solve_observations` from it) until one fits below :data:`POOR_FIT_SCALE`. The best fit among them (the
-    lowest noise scale; the lowest cost where the solve estimates none) is returned if it has an estimate and, where the first solution had one (``fit_scale``: its ``fit_noise_scale``;
-    None: it was not sane), lies in another basin (:func:`vfactor.init.distinct_poses` from ``solution``) and fits
-    better. Its ``extras["restarted"]``: the first solution's ``fit_noise_scale`` (None where it was not sane), the
-    start's source and how many starts were solved.
+    lowest noise scale; the lowest cost where the solve estimates none) is returned if it has an estimate and,
+    where the first solution had one (``fit_scale``: its ``fit_noise_scale``; None: it was not sane), lies in
+    another basin (:func:`vfactor.init.distinct_poses` from ``solution``) and fits better. Its
+    ``extras["restarted"]``: the first solution's ``fit_noise_scale`` (None where it was not sane), the start's
+    source and how many starts were solved.
     """
     best, tried, reached = None, 0, reached + [solution]
     for candidate in search.best(None, ransac=True):

@@ -125,8 +125,9 @@ def check_positive(value, name):
 
 def check_out_file(value, option: str, inputs=()) -> Path:
     """Checks an output file option before the work starts: not ``-``, not a folder nor another file that is not a
-    regular file (a pipe, a device), not a read-only file, not one of ``inputs``, and in a folder that exists (or can be made) and is
-    writable. A link is followed: the file written is its target (:func:`vfactor.jsonio.write_text_atomic`).
+    regular file (a pipe, a device), not a read-only file, not one of ``inputs``, and in a folder that exists (or
+    can be made) and is writable. A link is followed: the file written is its target
+    (:func:`vfactor.jsonio.write_text_atomic`).
 
     Raises:
         InputError: (field: ``option``) what is wrong.

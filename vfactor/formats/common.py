@@ -91,7 +91,8 @@ def box_from_centre(centre, world_R_box: np.ndarray, size, where: str = "box", *
         InputError: (field ``where``) a centre or rotation that is not finite, or a size that is not positive.
     """
     if not np.all(np.isfinite(np.asarray(centre, dtype=float))) or not np.all(np.isfinite(world_R_box)):
-        raise InputError(where, f"a box centre and rotation must be finite numbers, got centre {[float(c) for c in centre]}")
+        raise InputError(where, "a box centre and rotation must be finite numbers, got centre "
+                                f"{[float(c) for c in centre]}")
     if not np.all(np.asarray(size, dtype=float) > 0):  # NaN fails too
         raise InputError(where, f"a box's length, width and height must be positive, got {[float(x) for x in size]}")
     R = np.asarray(world_R_box, dtype=float)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import sys
@@ -170,3 +171,15 @@ def test_a_recorded_stream_is_a_scene_file(tmp_path, sim, capsys):
     with pytest.raises(SceneError) as raised:
         load_scene(bad)
     assert raised.value.field == f"{bad}:3"
+
+
+def test_a_stream_detection_without_its_vehicle_is_named(sim):
+    from vfactor.observations import UNASSIGNED
+
+    frame = sim.scene.frames[0]
+    unnamed = dataclasses.replace(frame, detections=[frame.detections[0], dataclasses.replace(
+        frame.detections[1], vehicle=UNASSIGNED)])
+    tracker = StreamTracker(sim.scene, TrackOptions(solve=SolveOptions(covariance=False), lag=0.5, covariance=False))
+    with pytest.raises(InputError) as raised:  # it named the field "vehicle", not which detection
+        tracker.add(unnamed, 0)
+    assert raised.value.field == "frame.detections[1].vehicle"

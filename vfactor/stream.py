@@ -114,8 +114,10 @@ class StreamTracker:
         Raises:
             InputError: a detection names no vehicle.
         """
-        if any(d.vehicle == UNASSIGNED for d in frame.detections):
-            raise InputError("vehicle", "the detections of a stream must name their vehicle (no association)")
+        unnamed = next((j for j, d in enumerate(frame.detections) if d.vehicle == UNASSIGNED), None)
+        if unnamed is not None:
+            raise InputError(f"frame.detections[{unnamed}].vehicle",
+                             "missing: the detections of a stream must name their vehicle (no association)")
         if self.last_t is not None and frame.t <= self.last_t:
             note = (f"arrived late: t = {frame.t:g} s is not after the last frame's {self.last_t:g} s; solved on its "
                     "own (one-frame solve), not tracked")

@@ -50,8 +50,10 @@ def associate(scene, args):
         note(message)
     single = sum(len(ids) for ids in found.single_view)
     vehicles = sum(len(groups) for groups in found.groups)
-    output(args)(f"associated {todo} detections into {vehicles} vehicles over the frames ({single} seen by one "
-                 f"camera only), {len(found.vehicle_ids)} ids ({time.perf_counter() - t0:.2f} s)")
+    output(args)(f"associated {todo - len(found.left_out)} detections into {vehicles} vehicles over the frames "
+                 f"({single} seen by one camera only), {len(found.vehicle_ids)} ids"
+                 + (f", {len(found.left_out)} left out" if found.left_out else "")
+                 + f" ({time.perf_counter() - t0:.2f} s)")
     for line, every in left_out_lines(found.left_out):
         note(line)
         if every:

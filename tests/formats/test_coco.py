@@ -392,3 +392,20 @@ def test_calibration_files_and_coco_files_solve_from_the_command_line_as_the_inl
     assert main(["solve", str(tmp_path / "inline.json"), "--out", str(tmp_path / "x.json"),
                  "--camera", f"cam9={tmp_path / entry['calibration']}"]) == 2
     assert "--camera cam9" in capsys.readouterr().err
+
+
+def test_per_camera_track_ids_are_tracks_not_vehicles(tmp_path, sim):
+    """A per-camera 2D tracker's ids (mmpose, OpenPifPaf) taken as vehicle ids would join different cars of two
+    cameras under one id: with track_ids="per-camera" they become the scene's per-camera `track`."""
+    from vfactor.observations import UNASSIGNED
+
+    entries = [{"image_id": 0, "keypoints": [10.0, 20.0, 0.5] * 12, "track_id": 7},
+               {"image_id": 0, "keypoints": [30.0, 40.0, 0.5] * 12, "track_id": 8}]
+    path = tmp_path / "cam0.json"
+    path.write_text(json.dumps(entries))
+    scene = coco_to_scene(sim.scene, {"cam0": path}, "vfactor12", track_ids="per-camera")
+    assert [(d.vehicle, d.track) for d in scene.frames[0].detections] == [(UNASSIGNED, "7"), (UNASSIGNED, "8")]
+    shared = coco_to_scene(sim.scene, {"cam0": path}, "vfactor12")
+    assert [(d.vehicle, d.track) for d in shared.frames[0].detections] == [("7", None), ("8", None)]
+    with pytest.raises(InputError, match="track_ids"):
+        coco_to_scene(sim.scene, {"cam0": path}, "vfactor12", track_ids="mine")

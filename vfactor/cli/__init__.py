@@ -268,6 +268,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pixel-origin", default="centre", choices=("centre", "corner"),
                    help="where pixel (0, 0) is: the centre of the top-left pixel (COCO, vfactor; default) or its "
                    "outer corner (0.5 px is subtracted)")
+    p.add_argument("--track-ids", default="shared", choices=("shared", "per-camera"),
+                   help="what an entry's track_id is: the vehicle id every camera shares (default), or the id a "
+                   "camera's own 2D tracker gave (mmpose, OpenPifPaf): then the vehicles are found from geometry "
+                   "and the ids help follow them (docs/association.md)")
 
     p = add("help", help="show the help of a command: vfactor help solve",
             description="Show the help of COMMAND (the same as vfactor COMMAND --help), or of vfactor itself.")

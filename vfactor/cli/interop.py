@@ -40,7 +40,7 @@ def import_detections(args) -> int:
     skipped: dict[str, int] = {}
     scene = import_coco(args.cameras, results, args.keypoints, out, values=args.values, min_score=args.min_score,
                         min_confidence=args.min_confidence, frames=args.frames, images=images, fps=args.fps,
-                        pixel_origin=args.pixel_origin, skipped=skipped)
+                        pixel_origin=args.pixel_origin, track_ids=args.track_ids, skipped=skipped)
     if skipped:
         note(f"left out {sum(skipped.values())} detections: " + ", ".join(
             f"{n} {reason}" for reason, n in skipped.items()) + " (crowd: iscrowd 1; score: under --min-score; "

@@ -54,6 +54,7 @@ from vfactor.scene import save_scene, scene_from_dict
 __all__ = [
     "KEYPOINT_SETS",
     "VALUE_KINDS",
+    "TRACK_ID_KINDS",
     "FRAME_MODES",
     "PIXEL_ORIGINS",
     "DEFAULT_VISIBILITY_CONFIDENCE",
@@ -75,6 +76,8 @@ FRAME_MODES = ("auto", "image_id", "file_name")
 #: Where pixel (0, 0) lies: ``"centre"`` of the top-left pixel (COCO, vfactor;
 #: no shift) or its outer ``"corner"`` (0.5 px subtracted from x and y).
 PIXEL_ORIGINS = ("centre", "corner")
+#: What an entry's ``track_id`` is: the vehicle id every camera shares, or a camera's own 2D tracker's id.
+TRACK_ID_KINDS = ("shared", "per-camera")
 #: Confidence of an annotated keypoint of visibility 1 (labelled, not visible)
 #: and 2 (visible); visibility 0 (not labelled) is always not seen.
 DEFAULT_VISIBILITY_CONFIDENCE = (0.5, 1.0)
@@ -99,6 +102,7 @@ def coco_to_scene_dict(
     images: Mapping[str, str | os.PathLike] | None = None,
     fps: float | None = None,
     pixel_origin: str = "centre",
+    track_ids: str = "shared",
     skipped: dict | None = None,
 ) -> dict:
     """A scene-file dictionary (docs/scene-format.md) from COCO keypoint files, one per camera.
@@ -132,6 +136,10 @@ def coco_to_scene_dict(
             frame's images) when every frame has one, else ``t = k``.
         pixel_origin: :data:`PIXEL_ORIGINS`; ``"corner"`` subtracts 0.5 px from
             keypoints and boxes.
+        track_ids: :data:`TRACK_ID_KINDS`: ``"shared"`` takes an entry's ``track_id`` as the vehicle id that
+            every camera shares; ``"per-camera"`` as the id a camera's own 2D tracker gave (the scene's per-camera
+            ``track``: evidence for the association across frames, docs/association.md), the vehicle left to the
+            association (an entry's ``vehicle`` stays its vehicle).
         skipped: when given, a dict filled with why detections were left out
             (:data:`SKIP_REASONS`) -> how many, so that the caller can say so.
 
@@ -150,7 +158,7 @@ def coco_to_scene_dict(
         InputError: a bad option (``field`` names it), e.g. an unknown camera in ``results``.
     """
     kps = _keypoint_set(keypoint_set)
-    opts = _Options.checked(values, visibility_confidence, min_confidence, min_score, fps, pixel_origin)
+    opts = _Options.checked(values, visibility_confidence, min_confidence, min_score, fps, pixel_origin, track_ids)
     camera_dicts, ground_plane = _cameras(cameras)
     names = [c["name"] for c in camera_dicts]
     if not isinstance(results, Mapping) or not results:
@@ -229,9 +237,11 @@ class _Options:
     min_score: float
     fps: float | None
     shift: float
+    per_camera_tracks: bool = False
 
     @classmethod
-    def checked(cls, values, visibility_confidence, min_confidence, min_score, fps, pixel_origin) -> "_Options":
+    def checked(cls, values, visibility_confidence, min_confidence, min_score, fps, pixel_origin,
+                track_ids: str = "shared") -> "_Options":
         if values not in VALUE_KINDS:
             raise InputError("values", f"expected one of {', '.join(VALUE_KINDS)}, got {values!r}")
         vc = visibility_confidence
@@ -247,8 +257,11 @@ class _Options:
             raise InputError("fps", f"expected a positive number of frames per second, got {fps!r}")
         if pixel_origin not in PIXEL_ORIGINS:
             raise InputError("pixel_origin", f"expected one of {', '.join(PIXEL_ORIGINS)}, got {pixel_origin!r}")
+        if track_ids not in TRACK_ID_KINDS:
+            raise InputError("track_ids", f"expected one of {', '.join(TRACK_ID_KINDS)}, got {track_ids!r}")
         return cls(values, (float(vc[0]), float(vc[1])), float(min_confidence), float(min_score),
-                   None if fps is None else float(fps), -0.5 if pixel_origin == "corner" else 0.0)
+                   None if fps is None else float(fps), -0.5 if pixel_origin == "corner" else 0.0,
+                   track_ids == "per-camera")
 
 
 def _cameras(cameras) -> tuple[list[dict], dict | None]:
@@ -297,6 +310,7 @@ class _Det:
     vehicle: str | None = None
     roi: list[float] | None = None
     vehicle_class: str | None = None
+    track: str | None = None
 
     def to_dict(self) -> dict:
         rows = [[float(u), float(v), float(c)] if c > 0 else [None, None, 0]
@@ -308,6 +322,8 @@ class _Det:
             out["roi"] = self.roi
         if self.vehicle_class is not None:
             out["class"] = self.vehicle_class
+        if self.track is not None:
+            out["track"] = self.track
         return out
 
 
@@ -438,6 +454,8 @@ def _detection(entry, where: str, camera: str, kps: KeypointSet, kind: str, opts
     for key, value in ids.items():
         if not ((isinstance(value, int) and not isinstance(value, bool)) or (isinstance(value, str) and value)):
             raise SceneError(f"{where}.{key}", f"expected an integer or a non-empty string, got {_kind(value)}")
+    if opts.per_camera_tracks and "track_id" in ids:  # a camera's own tracker's id: evidence, not the vehicle
+        det.track = str(ids.pop("track_id"))
     if len({str(v) for v in ids.values()}) > 1:
         raise SceneError(f"{where}.vehicle", f"differs from track_id ({ids['vehicle']!r} and {ids['track_id']!r})")
     if ids:

@@ -168,6 +168,9 @@ def test_cli_many_scenes_options(tmp_path, capsys):
     captured = capsys.readouterr()
     assert "1 ground-truth files" in captured.err and "1 scenes: 1 done" in captured.out
     assert (tmp_path / "out" / "a.json").exists() and not (tmp_path / "out" / "a_truth.json").exists()
+    assert main(["track", str(folder / "*.json"), "--out", str(tmp_path / "glob")]) == 0  # a glob skips them too
+    captured = capsys.readouterr()
+    assert "1 ground-truth files" in captured.err and "1 scenes: 1 done" in captured.out
     assert main(["track", str(folder), "--out", str(tmp_path / "x"), "--plot", str(tmp_path / "p.png")]) == 2
     assert "--plot: names one file: not for many scenes" in capsys.readouterr().err
     (tmp_path / "file.json").write_text("{}")

@@ -27,7 +27,8 @@ _SUFFIX = {"vfactor": ".json", "openlabel": ".json", "nuscenes": ".json", "csv":
 
 def scene_files(spec: str) -> list[Path] | None:
     """The scene files ``spec`` names: None for one scene file (or a path that does not exist: the loader
-    says so); the ``*.json`` files of a folder (not its ``*_truth.json``), or a glob's matches, sorted.
+    says so); the ``*.json`` files of a folder, or a glob's matches, sorted, without the ground-truth files of
+    ``vfactor simulate`` (``*_truth.json``; said in a note), unless the glob asks for them by that suffix.
 
     Raises:
         InputError: (field ``scene``) a folder without scene files, or a glob that matches none.
@@ -35,18 +36,17 @@ def scene_files(spec: str) -> list[Path] | None:
     path = Path(spec)
     if path.is_dir():
         files = sorted(p for p in path.glob("*.json") if p.is_file())
-        truth = [p for p in files if p.name.endswith(TRUTH_SUFFIX)]
-        if truth:
-            note(f"{len(truth)} ground-truth files ({TRUTH_SUFFIX}) of {spec} are not scenes: not read")
-        files = [p for p in files if p not in truth]
-        if not files:
-            raise InputError("scene", f"the folder {spec} holds no scene file (*.json)")
-        return files
-    if path.exists() or not glob.has_magic(spec):
+    elif path.exists() or not glob.has_magic(spec):
         return None
-    files = sorted(Path(p) for p in glob.glob(spec, recursive=True) if Path(p).is_file())
+    else:
+        files = sorted(Path(p) for p in glob.glob(spec, recursive=True) if Path(p).is_file())
+    truth = [] if spec.endswith(TRUTH_SUFFIX) else [p for p in files if p.name.endswith(TRUTH_SUFFIX)]
+    if truth:  # a glob over simulated sites (sites/*/*.json) matches them too
+        note(f"{len(truth)} ground-truth files ({TRUTH_SUFFIX}) of {spec} are not scenes: not read")
+    files = [p for p in files if p not in truth]
     if not files:
-        raise InputError("scene", f"no scene file matches {spec}")
+        raise InputError("scene", f"the folder {spec} holds no scene file (*.json)" if path.is_dir()
+                         else f"no scene file matches {spec}")
     return files
 
 

@@ -370,6 +370,9 @@ def _place_routes(
                 break
         else:
             draws_note = f" after {tries} draws" if tries > 1 else ""
+            if num_frames < scenario.num_frames:  # --frames shortened a scenario whose vehicles come in over its time
+                problem += (f"; the scenario's routes span its {scenario.num_frames} frames: give at least that many "
+                            "frames, or a scenario with fewer vehicles")
             raise ScenarioError(where, f"no route found for vehicle {vid}{draws_note}: {problem}")
     return frames, trajectories
 

@@ -409,3 +409,12 @@ def test_per_camera_track_ids_are_tracks_not_vehicles(tmp_path, sim):
     assert [(d.vehicle, d.track) for d in shared.frames[0].detections] == [("7", None), ("8", None)]
     with pytest.raises(InputError, match="track_ids"):
         coco_to_scene(sim.scene, {"cam0": path}, "vfactor12", track_ids="mine")
+
+
+def test_an_images_file_of_a_camera_without_results_is_refused(tmp_path, sim):
+    path = tmp_path / "cam0.json"
+    path.write_text(json.dumps([{"image_id": 0, "keypoints": [10.0, 20.0, 0.5] * 12}]))
+    other = next(name for name in sim.scene.cameras if name != "cam0")
+    with pytest.raises(InputError) as raised:  # it was ignored without a word
+        coco_to_scene(sim.scene, {"cam0": path}, "vfactor12", images={other: path})
+    assert raised.value.field == f"images.{other}"

@@ -171,8 +171,9 @@ def coco_to_scene_dict(
                 raise InputError(f"{option}.{name}", f"unknown camera {name!r}; known: {', '.join(names)}")
     files = {name: _read_coco(path, kps) for name, path in results.items()}
     for name, path in (images or {}).items():
-        if name in files:
-            files[name].use_images_of(_read_coco(path, kps, images_only=True))
+        if name not in files:  # it was ignored: the images file of a camera without detections
+            raise InputError(f"images.{name}", f"camera {name!r} has no results file; give its detections too")
+        files[name].use_images_of(_read_coco(path, kps, images_only=True))
     frame_of = _frame_maps(files, frames)
 
     detections: dict[int, list[_Det]] = {}

@@ -147,3 +147,23 @@ def test_bad_arguments_name_the_field(known, tmp_path):
     with pytest.raises(InputError, match="^scene:"):
         write_openlabel(tmp_path / "x.json", results[:2], scene)
     assert not (tmp_path / "x.json").exists()
+
+
+def test_a_camera_named_world_does_not_stop_the_output(known, tmp_path):
+    """The CLI names no world coordinate system: a camera called "world" made --format openlabel fail."""
+    import dataclasses
+    import json
+
+    scene, results = known
+    first = next(iter(scene.cameras))
+    renamed = {("world" if n == first else n): dataclasses.replace(c, name="world" if n == first else n)
+               for n, c in scene.cameras.items()}
+    frames = [dataclasses.replace(f, detections=[dataclasses.replace(d, camera="world" if d.camera == first
+                                                                     else d.camera) for d in f.detections])
+              for f in scene.frames]
+    named = dataclasses.replace(scene, cameras=renamed, frames=frames)
+    write_openlabel(tmp_path / "w.json", results, named)
+    systems = json.loads((tmp_path / "w.json").read_text())["openlabel"]["coordinate_systems"]
+    assert systems["world_cs"]["type"] == "scene_cs" and systems["world"]["parent"] == "world_cs"
+    assert len(read_openlabel(tmp_path / "w.json")) == len(read_openlabel(write_openlabel(
+        tmp_path / "plain.json", results, scene).paths[0]))

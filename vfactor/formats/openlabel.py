@@ -69,19 +69,25 @@ SCHEMA_VERSION = "1.0.0"
 CUBOID_NAME = "shape3D"
 
 
-def openlabel_dict(results: list[FrameResult], scene: Scene, name: str | None = None, world: str = "world") -> dict:
+def openlabel_dict(results: list[FrameResult], scene: Scene, name: str | None = None,
+                   world: str | None = None) -> dict:
     """The results as an OpenLABEL 1.0.0 dictionary (module docstring; docs/output-formats.md).
 
     Args:
         results: one :class:`~vfactor.result.FrameResult` per scene frame, in the scene's order.
         scene: the scene they were solved from (cameras, 2D keypoints).
         name: ``metadata.name``; None: none written.
-        world: the world coordinate system's name.
+        world: the world coordinate system's name; None: ``"world"``, or where a camera has that name,
+            ``"world_cs"`` (and so on: a name no camera has).
 
     Raises:
         InputError: the results and the scene do not pair up, ``world`` is empty or a camera's name.
     """
     check_results(results, scene, True, "OpenLABEL")
+    if world is None:  # the CLI names none: a camera called "world" must not stop the output
+        world = "world"
+        while world in scene.cameras:
+            world += "_cs"
     if not isinstance(world, str) or not world or world in scene.cameras:
         raise InputError("world", f"expected a coordinate-system name that no camera has, got {world!r}")
     from vfactor import __version__
@@ -131,7 +137,7 @@ def openlabel_dict(results: list[FrameResult], scene: Scene, name: str | None = 
 
 
 def write_openlabel(path: str | os.PathLike, results: list[FrameResult], scene: Scene, name: str | None = None,
-                    world: str = "world") -> WriteReport:
+                    world: str | None = None) -> WriteReport:
     """Writes the results as one OpenLABEL 1.0.0 JSON file, atomically (:func:`openlabel_dict`).
 
     Unsolved vehicles stay in the file: their object, ``status`` and ``message`` text and 2D keypoints,

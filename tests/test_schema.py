@@ -79,3 +79,13 @@ def test_structural_errors_fail_the_schema_too(tmp_path, name, edit):
 
 def test_every_structural_case_is_known():
     assert STRUCTURAL <= {c[0] for c in BAD_CASES}
+
+
+def test_a_problem_names_the_row_at_fault_in_one_short_line():
+    """A short keypoint row was reported as the whole 12-row list, its numbers in the message."""
+    data = scene_to_dict(simulate("intersection_2cam", seed=0, num_frames=1).scene)
+    data["frames"][0]["detections"][0]["keypoints"][3] = [1.0, 2.0]
+    (problem,) = validate(data)
+    assert problem == "frames[0].detections[0].keypoints[3]: [1.0, 2.0] is too short"
+    data["frames"][0]["detections"][0]["keypoints"] = [[1.0, 2.0, 0.5]] * 400
+    assert all(len(p) < 300 for p in validate(data))

@@ -46,18 +46,26 @@ def load_schema(which: str = "scene") -> dict:
 def validate(data, which: str = "scene") -> list[str]:
     """Checks parsed JSON against a schema with :mod:`jsonschema`; returns the problems, one line each.
 
-    Each line names the field by its path in vfactor's style (``frames[0].detections[1].keypoints``).
+    Each line names the field by its path in vfactor's style (``frames[0].detections[1].keypoints[3]``): where
+    a field may take one of several forms (``oneOf``), the deepest part of the most relevant form that fails
+    (:func:`jsonschema.exceptions.best_match`), and the value shown is cut to :data:`_SHOWN` characters.
 
     Returns:
         The problems (empty when the data validates), in the order of their paths.
     """
     import jsonschema
+    from jsonschema.exceptions import best_match
 
     validator = jsonschema.Draft202012Validator(_schema(which))
     problems = []
     for error in sorted(validator.iter_errors(data), key=lambda e: [str(p) for p in e.absolute_path]):
+        error = best_match([error])  # into a oneOf's context: the row or number at fault, not the whole list
         path = ""
         for part in error.absolute_path:
             path += f"[{part}]" if isinstance(part, int) else (f".{part}" if path else str(part))
-        problems.append(f"{path or '(top level)'}: {error.message}")
+        message = error.message if len(error.message) <= _SHOWN else error.message[:_SHOWN - 3] + "..."
+        problems.append(f"{path or '(top level)'}: {message}")
     return problems
+
+
+_SHOWN = 200  # characters of a problem's message (jsonschema writes the whole value into it)

@@ -45,3 +45,22 @@ def test_track_writes_csv_and_kitti_out_must_be_a_folder(solved, capsys):
     (folder / "a_file").write_text("x")
     assert main(["solve", str(scene), "--out", str(folder / "a_file"), "--format", "kitti"]) == 2
     assert "--out: " in capsys.readouterr().err
+
+
+def test_kitti_frame_option(tmp_path, capsys):
+    """The level label frame (exact upright boxes for a tilted roadside camera) had no flag."""
+    from vfactor.cli import main
+    from vfactor.formats import read_kitti
+    from vfactor.scene import save_scene
+    from vfactor.sim import simulate
+
+    save_scene(simulate("intersection_2cam", seed=0, num_frames=2).scene, tmp_path / "s.json")
+    assert main(["solve", str(tmp_path / "s.json"), "--out", str(tmp_path / "camera"), "--format", "kitti", "-q"]) == 0
+    assert main(["solve", str(tmp_path / "s.json"), "--out", str(tmp_path / "level"), "--format", "kitti",
+                 "--kitti-frame", "level", "-q"]) == 0
+    camera, level = (sorted((b.camera, b.frame) for b in read_kitti(tmp_path / n)) for n in ("camera", "level"))
+    assert camera == level
+    assert (tmp_path / "camera" / "cam0" / "calib" / "000000.txt").read_text() != \
+        (tmp_path / "level" / "cam0" / "calib" / "000000.txt").read_text()
+    assert main(["solve", str(tmp_path / "s.json"), "--out", str(tmp_path / "r.json"), "--kitti-frame", "level"]) == 2
+    assert "--kitti-frame: only with --format kitti" in capsys.readouterr().err

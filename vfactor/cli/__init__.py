@@ -366,6 +366,10 @@ def _estimate_options(p: argparse.ArgumentParser) -> None:
                    help="the result's format (docs/output-formats.md): vfactor (default; JSON with poses, wireframes, "
                    "covariances, boxes), openlabel (ASAM OpenLABEL 1.0 JSON), kitti (a folder of label files per "
                    "camera), nuscenes (detection results JSON), csv")
+    p.add_argument("--kitti-frame", choices=("camera", "level"), default=None,
+                   help="--format kitti: the label frame, the camera's own (default) or the camera turned level, "
+                   "whose upright boxes are exact for level vehicles seen by a tilted roadside camera "
+                   "(docs/output-formats.md)")
     p.add_argument("--camera", action="append", metavar="NAME=FILE",
                    help="take camera NAME's calibration from FILE (OpenCV, ROS camera_info, Kalibr camchain or a 3x4 "
                    "projection matrix; docs/calibration.md): its intrinsics, and its extrinsic where the file has one "

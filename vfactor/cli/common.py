@@ -248,6 +248,8 @@ def check_amodal_pass(raw, args) -> None:
 def check_outputs(args) -> None:
     """``solve`` and ``track``: --out (a folder for ``--format kitti``) and --save-detections checked before any
     work."""
+    if getattr(args, "kitti_frame", None) and getattr(args, "format", "vfactor") != "kitti":
+        raise InputError("--kitti-frame", f"only with --format kitti, not {args.format}")
     if getattr(args, "format", "vfactor") == "kitti":
         if Path(args.out).exists() and not Path(args.out).is_dir():
             raise InputError("--out", f"{args.out} exists and is not a folder (--format kitti writes a folder)")

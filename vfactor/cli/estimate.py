@@ -79,7 +79,8 @@ def write_output(args, results, scene) -> None:
     has no place for, and what the output folder holds besides this run's."""
     from vfactor.formats import write_results
 
-    report = write_results(args.out, results, scene, args.format)
+    options = {"frame": args.kitti_frame} if getattr(args, "kitti_frame", None) else {}
+    report = write_results(args.out, results, scene, args.format, **options)
     if report.skipped or report.foreign:
         note(report.note())
 

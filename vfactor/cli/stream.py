@@ -27,7 +27,8 @@ def track_stream_command(args) -> int:
 
     for option, given in (("--batch", args.batch), ("--plot", args.plot), ("--associate", args.associate),
                           ("--workers", args.workers is not None), ("--scheduler", args.scheduler is not None),
-                          ("--save-detections", args.save_detections), ("--camera", args.camera)):
+                          ("--save-detections", args.save_detections), ("--camera", args.camera),
+                          ("--kitti-frame", args.kitti_frame)):
         if given:
             raise InputError(option, "not for a stream (SCENE '-' or --follow)")
     if args.format != "vfactor":

@@ -183,3 +183,12 @@ def test_a_stream_detection_without_its_vehicle_is_named(sim):
     with pytest.raises(InputError) as raised:  # it named the field "vehicle", not which detection
         tracker.add(unnamed, 0)
     assert raised.value.field == "frame.detections[1].vehicle"
+
+
+def test_a_second_header_is_said_to_be_one(sim):
+    lines = _lines(sim.scene)
+    items = list(track_stream(lines[:3] + [lines[0]] + lines[3:], TrackOptions(
+        solve=SolveOptions(covariance=False), lag=0.5, covariance=False)))
+    (bad,) = [item for item in items if item.error]
+    assert bad.line == 4 and bad.error.startswith("frame: a second header")  # it was "frame.cameras: unknown key"
+    assert len([item for item in items if item.result is not None]) == len(sim.scene.frames)

@@ -210,7 +210,11 @@ def track_stream(lines: Iterable[str], options: TrackOptions = TrackOptions(lag=
     for k, line in numbered:
         n += 1
         try:
-            frame = frame_from_dict(json.loads(line), header, "frame", allow_outside_paths)
+            data = json.loads(line)
+            if isinstance(data, dict) and "cameras" in data:  # it read "frame.cameras: unknown key"
+                raise InputError("frame", "a second header: a stream's cameras are its first line's and stay; "
+                                          "start a new stream for other cameras")
+            frame = frame_from_dict(data, header, "frame", allow_outside_paths)
             yield StreamItem(n, k, *tracker.add(frame, n))
         except json.JSONDecodeError as exc:
             yield StreamItem(n, k, error=f"not JSON ({exc.msg} at column {exc.colno})")

@@ -192,3 +192,14 @@ def test_a_second_header_is_said_to_be_one(sim):
     (bad,) = [item for item in items if item.error]
     assert bad.line == 4 and bad.error.startswith("frame: a second header")  # it was "frame.cameras: unknown key"
     assert len([item for item in items if item.result is not None]) == len(sim.scene.frames)
+
+
+def test_a_stream_refuses_boxes_the_network_would_have_to_read(sim):
+    """A stream does not run the keypoint network: its box-only detections came out 'degenerate', no error."""
+    frame = sim.scene.frames[0]
+    boxed = dataclasses.replace(frame.detections[0], keypoints=np.full((12, 2), np.nan), confidence=np.zeros(12),
+                                roi=(10.0, 10.0, 200.0, 120.0), from_image=True)
+    tracker = StreamTracker(sim.scene, TrackOptions(solve=SolveOptions(covariance=False), lag=0.5, covariance=False))
+    with pytest.raises(InputError) as raised:
+        tracker.add(dataclasses.replace(frame, detections=[boxed, *frame.detections[1:]]), 0)
+    assert raised.value.field == "frame.detections[0]" and "does not run the keypoint network" in raised.value.problem

@@ -114,6 +114,11 @@ class StreamTracker:
         Raises:
             InputError: a detection names no vehicle.
         """
+        boxed = next((j for j, d in enumerate(frame.detections) if d.from_image), None)
+        if boxed is not None:  # they came out "degenerate: no keypoint seen", the network never run
+            raise InputError(f"frame.detections[{boxed}]", "a box without keypoints: a stream does not run the "
+                             "keypoint network; give its keypoints (vfactor detect), or track the recorded stream as "
+                             "a scene file (vfactor track live.jsonl --out r.json)")
         unnamed = next((j for j, d in enumerate(frame.detections) if d.vehicle == UNASSIGNED), None)
         if unnamed is not None:
             raise InputError(f"frame.detections[{unnamed}].vehicle",

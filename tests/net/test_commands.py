@@ -95,6 +95,26 @@ def test_detect_command_reports_bad_input(tmp_path, capsys):
     assert "--roi" in capsys.readouterr().err
 
 
+def test_detect_command_names_a_bad_box_file_image_and_device(tmp_path, capfd):
+    """A --rois value of another shape and a --device the machine lacks were internal errors (exit 1); a missing
+    image printed OpenCV's warning before the error."""
+    image = tmp_path / "a.png"
+    cv2.imwrite(str(image), np.zeros((40, 40, 3), np.uint8))
+    for value, field in (([0, 0, 9, 9], f"--rois['{image}']"), (None, f"--rois['{image}']"),
+                         ([["a", 0, 9, 9]], f"--rois['{image}'][0]")):
+        (tmp_path / "rois.json").write_text(json.dumps({str(image): value}))
+        assert main(["detect", str(image), "--rois", str(tmp_path / "rois.json")]) == 2
+        assert capfd.readouterr().err.startswith(f"error: {field}: expected")
+    if not torch.cuda.is_available():
+        assert main(["detect", str(image), "--roi", "0", "0", "9", "9", "--device", "cuda"]) == 2
+        assert capfd.readouterr().err.startswith("error: device: 'cuda': this machine has no such device")
+    assert main(["detect", str(image), "--roi", "0", "0", "9", "9", "--device", "foo"]) == 2
+    assert capfd.readouterr().err.startswith("error: device: expected cpu, cuda")
+    assert main(["detect", str(tmp_path / "missing.png"), "--roi", "0", "0", "5", "5"]) == 2
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and "cannot read" in err and "WARN" not in err
+
+
 @pytest.mark.parametrize("command", ["calibrate-shape", "calibrate-bias"])
 def test_calibrate_shape_and_bias_commands_report_bad_input(command, tmp_path, capsys):
     """The inputs the two commands share (their weights, seeds and scenario) named when bad, in one line."""

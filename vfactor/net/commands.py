@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from vfactor.errors import InputError
-from vfactor.jsonio import read_json, write_text_atomic
+from vfactor.jsonio import describe, is_number, read_json, write_text_atomic
 from vfactor.keypoints import KEYPOINT_NAMES
 from vfactor.sanity import one_line
 
@@ -348,9 +348,12 @@ def run_detect(args: argparse.Namespace) -> int:
     boxes = _boxes(args)
     images = []
     for name in args.images:
-        bgr = cv2.imread(name, cv2.IMREAD_COLOR)
+        try:  # decoded from its bytes: OpenCV's imread prints a warning of its own for a file it cannot read
+            bgr = cv2.imdecode(np.fromfile(name, np.uint8), cv2.IMREAD_COLOR)
+        except OSError as exc:
+            raise InputError("IMAGE", f"cannot read {name}: {exc.strerror or exc}") from None
         if bgr is None:
-            raise InputError("IMAGE", f"cannot read {name}")
+            raise InputError("IMAGE", f"cannot read {name}: not an image OpenCV decodes")
         images.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
     with _file_of("--weights"):
         detector = KeypointDetector(args.weights, device=args.device)
@@ -404,12 +407,22 @@ def _boxes(args) -> dict[str, list]:
         missing = [name for name in args.images if name not in table]
         if missing:
             raise InputError("--rois", f"no boxes for {missing}")
-        return {name: [tuple(map(float, b)) for b in table[name]] for name in args.images}
+        return {name: _rois_of(table[name], f"--rois[{name!r}]") for name in args.images}
     if not args.roi:
         raise InputError("--roi", "give at least one box: --roi X0 Y0 X1 Y1 (or --rois FILE)")
     if len(args.images) != 1:
         raise InputError("--roi", f"--roi boxes go with a single IMAGE, got {len(args.images)}; use --rois FILE")
     return {args.images[0]: [tuple(b) for b in args.roi]}
+
+
+def _rois_of(value, where: str) -> list[tuple[float, ...]]:
+    """An image's boxes from a --rois file: a list of [x0, y0, x1, y1] (px)."""
+    if not isinstance(value, list) or not all(isinstance(b, list) for b in value):
+        raise InputError(where, f"expected a list of boxes [[x0, y0, x1, y1], ...], got {describe(value)}")
+    for k, box in enumerate(value):
+        if len(box) != 4 or not all(is_number(v) and math.isfinite(float(v)) for v in box):
+            raise InputError(f"{where}[{k}]", f"expected 4 finite numbers [x0, y0, x1, y1], got {box!r}")
+    return [tuple(float(v) for v in box) for box in value]
 
 
 def _nan_to_none(a):

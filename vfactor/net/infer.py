@@ -25,7 +25,7 @@ from vfactor.heatmaps import CLIPPED_EXTENSION, DecodedKeypoints, decode_heatmap
 from vfactor.keypoints import MIRROR_PERMUTATION
 from vfactor.net.calibrate import CovarianceCalibration
 from vfactor.net.crop import check_roi_in_image, crop_roi, expand_roi
-from vfactor.net.model import StackedHourglass, default_weights_path, load_weights
+from vfactor.net.model import StackedHourglass, default_weights_path, load_weights, torch_device
 
 #: Left/right swap of the heatmap channels, as a tensor index.
 _MIRROR = torch.tensor(MIRROR_PERMUTATION.tolist())
@@ -94,7 +94,7 @@ class KeypointDetector:
                  min_confidence: float | None = None, batch_size: int = 16,
                  calibration: CovarianceCalibration | dict | None = None, flip_test: bool = True,
                  clipped_extension: float = CLIPPED_EXTENSION):
-        device = torch.device(device if device is not None else ("cuda" if torch.cuda.is_available() else "cpu"))
+        device = torch_device(device)
         meta: dict = {}
         if isinstance(weights, StackedHourglass):
             model, self.weights_path = weights, None

@@ -43,6 +43,7 @@ from vfactor.errors import InputError
 from vfactor.keypoints import NUM_KEYPOINTS
 
 __all__ = [
+    "torch_device",
     "ModelConfig",
     "Residual",
     "Hourglass",
@@ -214,6 +215,29 @@ class StackedHourglass(nn.Module):
             if i < self.config.num_stacks - 1:
                 x = x + self.merge_features[i](feat) + self.merge_heatmaps[i](heat)
         return outputs
+
+
+def torch_device(device=None) -> torch.device:
+    """The torch device ``device`` names (None: CUDA when there is one, else the CPU), checked: a name torch does
+    not know, or a device this machine does not have (CUDA or MPS without one), is a one-line error.
+
+    Raises:
+        InputError: (field ``device``) what is wrong.
+    """
+    if device is None:
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        chosen = torch.device(device)
+    except (RuntimeError, TypeError) as exc:
+        raise InputError("device", f"expected cpu, cuda, cuda:N or mps, got {device!r}") from None
+    available = {"cpu": True, "cuda": torch.cuda.is_available(),
+                 "mps": bool(getattr(torch.backends, "mps", None) and torch.backends.mps.is_available())}
+    if not available.get(chosen.type, False):
+        raise InputError("device", f"{device!r}: this machine has no such device for the network (cpu"
+                                   + ", cuda" * available["cuda"] + ", mps" * available["mps"] + ")")
+    if chosen.type == "cuda" and chosen.index is not None and chosen.index >= torch.cuda.device_count():
+        raise InputError("device", f"{device!r}: this machine has {torch.cuda.device_count()} CUDA device(s)")
+    return chosen
 
 
 def count_parameters(model: nn.Module) -> int:

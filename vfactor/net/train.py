@@ -41,7 +41,7 @@ from vfactor.net.data import AugmentConfig, KeypointDataset, as_dataset, augment
 from vfactor.net.evaluate import decode_batch, score_predictions
 from vfactor.net.model import (
     StackedHourglass, WeightsError, check_state_dict, count_parameters, load_weights, read_torch_file, save_weights,
-    weights_digest)
+    torch_device, weights_digest)
 from vfactor.net.targets import heatmap_targets, keypoint_weights
 from vfactor.progress import Progress
 
@@ -228,7 +228,7 @@ def train(
         raise ValueError(f"dataset: expected at least 2 samples, got {len(train_set)}")
     if train_set.num_keypoints != 12:
         raise ValueError(f"dataset: expected 12 keypoints per sample, got {train_set.num_keypoints}")
-    device = torch.device(device if device is not None else ("cuda" if torch.cuda.is_available() else "cpu"))
+    device = torch_device(device)
     out = Path(out_dir)
     ckpt_dir = out / "checkpoints"
     ckpt_dir.mkdir(parents=True, exist_ok=True)

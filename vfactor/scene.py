@@ -142,8 +142,8 @@ def load_scene(path: str | os.PathLike, allow_outside_paths: bool = False,
             calibration (``vfactor solve --camera NAME=FILE``); see :func:`scene_from_dict`.
 
     A recorded stream (``.jsonl`` or ``.ndjson``: a header line, then a frame per line, docs/scene-format.md) is
-    read as the scene of its header and frames (``frames[k]`` is the file's line ``k + 2``), so that it can be
-    tracked and smoothed afterwards.
+    read as the scene of its header and frames (``frames[k]`` is the file's line ``k + 2`` where the stream has no
+    blank line; a line that is not JSON is named ``path:line``), so that it can be tracked and smoothed afterwards.
 
     Returns:
         The :class:`~vfactor.observations.Scene`, with cameras and frames in file order.

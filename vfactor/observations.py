@@ -48,8 +48,11 @@ class Detection:
         covariance: optional (12, 2, 2) pixel covariances (px^2), e.g. from a
             heatmap's spread; NaN blocks where unknown. When given, it replaces the
             confidence-derived noise of the projection factor.
-        heatmaps: optional path of a (12, H, W) ``.npy`` heatmap stack covering ``roi``.
-        roi: optional box ``(x0, y0, x1, y1)`` in pixels.
+        heatmaps: optional path of a (12, H, W) ``.npy`` heatmap stack covering ``heatmaps_roi`` (else ``roi``).
+        roi: optional box ``(x0, y0, x1, y1)`` in pixels: the 2D detector's box of the vehicle.
+        heatmaps_roi: optional box the ``heatmaps`` cover, where it is not ``roi`` (the keypoint network's crop
+            of ``roi``, grown and squared: :func:`vfactor.net.pipeline.detect_scene`); ``roi`` stays the
+            detector's box, which says whether the image border cuts the view.
         from_image: the keypoints are still to be found by the keypoint network
             in the frame's image of this camera, inside ``roi`` (a detection given
             as a box only); until then ``keypoints`` are NaN and ``confidence`` 0.
@@ -91,6 +94,7 @@ class Detection:
     heatmaps: str | None = None
     roi: tuple[float, float, float, float] | None = None
     from_image: bool = False
+    heatmaps_roi: tuple[float, float, float, float] | None = None
     vehicle_class: str | None = None
     track: str | None = None
     covariance_calibrated: bool = False

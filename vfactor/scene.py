@@ -96,7 +96,7 @@ _CAMERA_KEYS = ("name", "model", "K", "dist", "image_size", "world_T_camera", "c
 _INTRINSIC_KEYS = ("model", "K", "dist")
 _FRAME_KEYS = ("t", "detections", "images")
 _DETECTION_KEYS = ("camera", "vehicle", "track", "keypoints", "keypoint_covariances", "covariances_calibrated",
-                   "shape_sigma", "bias_sigma", "heatmaps", "roi", "class")
+                   "shape_sigma", "bias_sigma", "heatmaps", "heatmaps_roi", "roi", "class")
 _RESULT_TOP_KEYS = ("frames",)
 _RESULT_FRAME_KEYS = ("t", "vehicles")
 _VEHICLE_KEYS = (
@@ -533,12 +533,21 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Fol
             raise SceneError(f"{path}.roi", f"expected [x0, y0, x1, y1] with x1 > x0 and y1 > y0, got {box.tolist()}")
         roi = tuple(float(b) for b in box)
 
-    heatmaps = det.get("heatmaps")
+    heatmaps, heatmaps_roi = det.get("heatmaps"), det.get("heatmaps_roi")
+    if heatmaps_roi is not None:
+        if heatmaps is None:
+            raise SceneError(f"{path}.heatmaps_roi", "given without 'heatmaps': the box they cover")
+        box = _numbers(heatmaps_roi, f"{path}.heatmaps_roi", "[x0, y0, x1, y1]", sizes=(4,))
+        if not (box[2] > box[0] and box[3] > box[1]):
+            raise SceneError(f"{path}.heatmaps_roi", f"expected [x0, y0, x1, y1] with x1 > x0 and y1 > y0, got "
+                                                     f"{box.tolist()}")
+        heatmaps_roi = tuple(float(b) for b in box)
     if heatmaps is not None:
         heatmaps = _existing_file(heatmaps, f"{path}.heatmaps", base, "a path to a .npy heatmap stack")
         if roi is None:
             raise SceneError(f"{path}.roi", "missing: required with 'heatmaps' (the box [x0, y0, x1, y1] they cover)")
         stack = _load_heatmaps(heatmaps, f"{path}.heatmaps")
+    covered = heatmaps_roi if heatmaps_roi is not None else roi  # the box the heatmaps cover
 
     covariance = None
     if det.get("keypoint_covariances") is not None:
@@ -560,9 +569,9 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Fol
     if det.get("keypoints") is not None:
         keypoints, confidence = _keypoints(det["keypoints"], f"{path}.keypoints")
         if covariance is None and heatmaps is not None:
-            covariance = _decode(stack, roi, f"{path}.heatmaps").covariance
+            covariance = _decode(stack, covered, f"{path}.heatmaps").covariance
     elif heatmaps is not None:
-        decoded = _decode(stack, roi, f"{path}.heatmaps")
+        decoded = _decode(stack, covered, f"{path}.heatmaps")
         keypoints, confidence = decoded.uv, decoded.confidence
         if covariance is None:
             covariance = decoded.covariance
@@ -589,6 +598,7 @@ def _detection_from_dict(data, path: str, cameras: dict[str, Camera], base: _Fol
         covariance=covariance,
         heatmaps=heatmaps,
         roi=roi,
+        heatmaps_roi=heatmaps_roi,
         from_image=from_image,
         vehicle_class=vehicle_class,
         track=track,
@@ -724,6 +734,8 @@ def _detection_to_dict(det: Detection, path: str, scene_base: Path | None, out_b
         out["heatmaps"] = _path_out(det.heatmaps, scene_base, out_base)
     if det.roi is not None:
         out["roi"] = [float(b) for b in det.roi]
+    if det.heatmaps is not None and det.heatmaps_roi is not None:
+        out["heatmaps_roi"] = [float(b) for b in det.heatmaps_roi]
     if det.vehicle_class:
         out["class"] = det.vehicle_class
     return out

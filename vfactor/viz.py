@@ -512,7 +512,7 @@ def draw_overlay(
             blended in with an inferno colour map over ``roi``.
         roi: ``(x0, y0, x1, y1)`` box the heatmaps cover, in image pixel
             edges as in :mod:`vfactor.heatmaps` (``(0, 0, W, H)`` is the whole
-            image); defaults to ``detection.roi``, else to the whole image.
+            image); defaults to ``detection.heatmaps_roi`` or ``detection.roi``, else to the whole image.
         label: text written in a tag above the vehicle (e.g. its track id).
         legend: whether to draw a small legend in the bottom-left corner.
         keypoint_numbers: whether to write each observed keypoint's index beside it.
@@ -532,7 +532,7 @@ def draw_overlay(
 
     if heatmaps is not None:
         if roi is None and detection is not None:
-            roi = detection.roi
+            roi = detection.heatmaps_roi if detection.heatmaps_roi is not None else detection.roi
         _blend_heatmaps(img, heatmaps, roi)
         legend_items.append(("heatmap", None))
 

@@ -122,6 +122,14 @@ def test_cli_solve_runs_the_network_and_saves_the_detections(rendered, tmp_path,
     again = load_results(tmp_path / "again.json")
     for a, b in zip(results, again):
         np.testing.assert_allclose(a.vehicles[0].keypoints_world, b.vehicles[0].keypoints_world, atol=1e-6)
+        np.testing.assert_allclose(a.vehicles[0].pose_covariance, b.vehicles[0].pose_covariance, rtol=1e-9)
+    # Saving them changes nothing: the detector's boxes stay the roi (the crop boxes the heatmaps cover, which can
+    # reach past the image, made views count as cut by its border); the heatmaps' box is heatmaps_roi.
+    assert main(["solve", str(folder / "scene.json"), "--out", str(tmp_path / "plain.json"), "--quiet"]) == 0
+    assert (tmp_path / "plain.json").read_text() == out.read_text()
+    for given, kept in zip(load_scene(folder / "scene.json").frames, detected.frames):
+        for g, d in zip(given.detections, kept.detections):
+            assert d.roi == g.roi and d.heatmaps_roi is not None and d.heatmaps_roi != d.roi
 
 
 def test_cli_bad_weights_is_input_error(rendered, tmp_path, capsys):

@@ -78,11 +78,10 @@ def detect_scene(
         detector: a :class:`~vfactor.net.infer.KeypointDetector`; None: the shipped weights.
         heatmaps_dir: when given, each detection's heatmaps are saved there as
             ``f<frame>_d<detection index>_<camera>_<vehicle>.npy`` and the detection names the file,
-            with ``roi`` set to the box the heatmaps cover (the given box grown
-            and squared as the detector crops it), so that
-            :func:`vfactor.scene.save_scene` writes a scene that reloads to the
-            same keypoints and overlays can show the heatmaps. Otherwise ``roi``
-            stays the given box.
+            with ``heatmaps_roi`` the box they cover (the given box grown and squared as the detector crops
+            it), so that :func:`vfactor.scene.save_scene` writes a scene that reloads to the same keypoints
+            and overlays can show the heatmaps. ``roi`` stays the given box either way: saving the heatmaps
+            changes no estimate (it made views whose crop reaches past the image count as cut by the border).
         progress: called with ``(frames done, frames total)``.
         engine: where the frames' boxes go through the network (:mod:`vfactor.parallel`; default: in this
             process). On a cluster every worker loads the detector's weights once (its images and
@@ -172,7 +171,7 @@ def _detect_frame(unit: tuple):
         if out_dir is not None:
             path = out_dir / f"f{f:04d}_d{j:02d}_{_safe(det.camera)}_{_safe(det.vehicle)}.npy"
             np.save(path, np.asarray(result.heatmaps, np.float32))
-            changes.update(heatmaps=str(path.resolve()), roi=tuple(float(b) for b in result.roi))
+            changes.update(heatmaps=str(path.resolve()), heatmaps_roi=tuple(float(b) for b in result.roi))
         detections[j] = dataclasses.replace(det, **changes)
     return dataclasses.replace(frame, detections=detections)
 

@@ -166,6 +166,10 @@ def test_a_recorded_stream_is_a_scene_file(tmp_path, sim, capsys):
     assert list(scene.cameras) == list(sim.scene.cameras)
     assert main(["track", str(recorded), "--out", str(tmp_path / "r.json"), "--no-covariance", "-q"]) == 0
     assert len(load_results(tmp_path / "r.json")) == len(sim.scene.frames)
+    with_frames = json.loads(_lines(sim.scene)[0])  # a header may hold the first frames, as a live stream's
+    with_frames["frames"] = [json.loads(_lines(sim.scene)[1])]
+    (tmp_path / "header.jsonl").write_text(json.dumps(with_frames) + "\n" + "".join(_lines(sim.scene)[2:]))
+    assert [f.t for f in load_scene(tmp_path / "header.jsonl").frames] == [f.t for f in sim.scene.frames]
     bad = tmp_path / "bad.jsonl"
     bad.write_text("".join(_lines(sim.scene)[:2]) + "{not json\n")
     with pytest.raises(SceneError) as raised:

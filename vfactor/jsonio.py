@@ -43,6 +43,7 @@ __all__ = [
     "OutOfRange",
     "parse_json",
     "read_json",
+    "read_text",
     "write_text_atomic",
 ]
 
@@ -165,15 +166,22 @@ def read_json(path: str | os.PathLike, error: type[InputError] = SceneError):
         InputError: (``error``, field: the path) the file is missing, a folder,
             unreadable, not UTF-8, or not valid JSON under :func:`parse_json`.
     """
+    return parse_json(read_text(path, error), str(path), error)
+
+
+def read_text(path: str | os.PathLike, error: type[InputError] = SceneError) -> str:
+    """The UTF-8 text of a file a user gives (:func:`read_json`'s, a recorded stream's).
+
+    Raises:
+        InputError: (``error``, field: the path) the file is missing, a folder, unreadable or not UTF-8.
+    """
     path = Path(path)
-    where = str(path)
     if not path.is_file():
-        raise error(where, "file not found" if not path.exists() else "expected a file, got a directory")
+        raise error(str(path), "file not found" if not path.exists() else "expected a file, got a directory")
     try:
-        text = path.read_text(encoding="utf-8")
+        return path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise error(where, f"could not read the file: {exc}") from None
-    return parse_json(text, where, error)
+        raise error(str(path), f"could not read the file: {exc}") from None
 
 
 def write_text_atomic(path: str | os.PathLike, text: str | Iterable[str]) -> None:

@@ -66,7 +66,7 @@ from vfactor.factors.ground_plane import GroundPlane
 from vfactor.errors import CalibrationError, SceneError
 from vfactor.heatmaps import decode_heatmaps
 from vfactor.jsonio import (describe as _kind, is_int as _is_int, is_number as _is_number, parse_json, read_json,
-                            write_text_atomic)
+                            read_text, write_text_atomic)
 from vfactor.keypoints import NUM_KEYPOINTS
 from vfactor.label_swaps import SwapFinding
 from vfactor.observations import DEFAULT_VEHICLE_ID, UNASSIGNED, Detection, Frame, Scene, resolve_path
@@ -1068,20 +1068,16 @@ def _read_json(path: Path):
 
 
 def _read_json_lines(path: Path) -> dict:
-    """A recorded stream as a scene file's dictionary: its header line with the frame lines as ``frames``."""
-    if not path.is_file():
-        raise SceneError(str(path), "file not found" if not path.exists() else "expected a file, got a directory")
-    try:
-        lines = [(n, line) for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1) if line.strip()]
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(str(path), f"could not read the file: {exc}") from None
+    """A recorded stream as a scene file's dictionary: its header line with the frame lines after its own
+    ``frames``, if any (as :func:`vfactor.stream.stream_header` reads a live stream's)."""
+    lines = [(n, line) for n, line in enumerate(read_text(path, SceneError).splitlines(), 1) if line.strip()]
     if not lines:
         raise SceneError(str(path), "empty: a stream starts with its header line (the scene's cameras)")
     header, *frames = [parse_json(line, f"{path}:{n}", SceneError) for n, line in lines]
-    if not isinstance(header, dict) or "frames" in header:
-        raise SceneError(f"{path}:{lines[0][0]}", "expected the stream's header: an object with the cameras and no "
-                                                  "frames")
-    return {**header, "frames": frames}
+    if not isinstance(header, dict):
+        raise SceneError(f"{path}:{lines[0][0]}", "expected the stream's header: an object with the cameras")
+    given = header.get("frames", [])
+    return {**header, "frames": given + frames} if isinstance(given, list) else header  # the reader names a bad one
 
 
 def _write_json(path: Path, data) -> None:

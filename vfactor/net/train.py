@@ -316,7 +316,7 @@ def evaluate_model(model: StackedHourglass, dataset, config: TrainConfig | None 
     config = config or TrainConfig(**{k: v for k, v in model.config.to_dict().items() if k != "num_keypoints"})
     S = model.config.input_size
     ds = as_dataset(dataset, size=S).resized(S)
-    device = torch.device(device) if device is not None else next(model.parameters()).device
+    device = torch_device(device) if device is not None else next(model.parameters()).device
     h = model.config.heatmap_size
     was_training = model.training
     model.eval()

@@ -39,6 +39,7 @@ import gtsam
 import numpy as np
 
 from vfactor.camera import Camera
+from vfactor.images import read_rgb
 from vfactor.keypoints import NUM_KEYPOINTS, WIREFRAME_EDGES, layer_of
 from vfactor.observations import Detection, Frame, resolve_path
 from vfactor.result import VehicleResult
@@ -1589,8 +1590,13 @@ def write_overlays(
         image = (frame.images or {}).get(name)
         image_path = resolve_path(image, base_dir) if image else None
         if image_path is not None:
-            img = cv2.imread(str(image_path), cv2.IMREAD_COLOR)
-            if img is None:
+            try:
+                img = read_rgb(image_path)
+            except (OSError, ValueError):
+                img = None
+            if img is not None:
+                img = np.ascontiguousarray(img[..., ::-1])  # drawn in OpenCV's BGR
+            else:
                 log.warning("frame image for camera %r not readable: %s; drawing a stand-in", name, image_path)
         if img is None:
             img = draw_view(camera)

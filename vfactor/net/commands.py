@@ -341,20 +341,19 @@ def _load(path: Path, flag: str, size: int):
 # ------------------------------------------------------------------ detect
 def run_detect(args: argparse.Namespace) -> int:
     """The ``detect`` command on parsed arguments (see :func:`add_detect_arguments`)."""
-    import cv2  # noqa: PLC0415
-
+    from vfactor.images import read_rgb  # noqa: PLC0415
     from vfactor.net.infer import KeypointDetector  # noqa: PLC0415
 
     boxes = _boxes(args)
     images = []
     for name in args.images:
-        try:  # decoded from its bytes: OpenCV's imread prints a warning of its own for a file it cannot read
-            bgr = cv2.imdecode(np.fromfile(name, np.uint8), cv2.IMREAD_COLOR)
-        except OSError as exc:
-            raise InputError("IMAGE", f"cannot read {name}: {exc.strerror or exc}") from None
-        if bgr is None:
+        try:
+            rgb = read_rgb(name)
+        except (OSError, ValueError) as exc:
+            raise InputError("IMAGE", f"cannot read {name}: {getattr(exc, 'strerror', None) or exc}") from None
+        if rgb is None:
             raise InputError("IMAGE", f"cannot read {name}: not an image OpenCV decodes")
-        images.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+        images.append(rgb)
     with _file_of("--weights"):
         detector = KeypointDetector(args.weights, device=args.device)
     results = detector.detect_batch(images, [boxes[name] for name in args.images])

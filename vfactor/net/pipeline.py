@@ -25,10 +25,10 @@ import dataclasses
 from pathlib import Path
 from typing import Callable
 
-import cv2
 import numpy as np
 
 from vfactor.errors import SceneError
+from vfactor.images import read_rgb
 from vfactor.net.crop import check_roi_in_image
 from vfactor.observations import Scene, resolve_path
 
@@ -36,24 +36,28 @@ __all__ = ["detect_scene", "read_image"]
 
 
 def read_image(path: str | Path, field: str, image_size: tuple[int, int] | None = None) -> np.ndarray:
-    """Reads an image file as (H, W, 3) uint8 RGB.
+    """Reads an image file as (H, W, 3) uint8 RGB (:func:`vfactor.images.read_rgb`: 16-bit files scaled by their bit
+    depth, grey as three channels).
 
     Args:
-        path: image file (any format OpenCV reads: PNG, JPEG, ...).
+        path: image file (any format OpenCV reads: PNG, JPEG, TIFF, ...).
         field: the scene field that names it (for error messages).
         image_size: the camera's ``(width, height)``, checked when given.
 
     Raises:
         SceneError: unreadable file, or a size other than the camera's.
     """
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    try:
+        image = read_rgb(path)
+    except (OSError, ValueError) as exc:
+        raise SceneError(field, f"cannot read an image from {path}: {getattr(exc, 'strerror', None) or exc}") from None
     if image is None:
         raise SceneError(field, f"cannot read an image from {path}")
     height, width = image.shape[:2]
     if image_size is not None and (width, height) != tuple(image_size):
         raise SceneError(field, f"the image is {width}x{height} pixels but the camera's image_size is "
                                 f"{image_size[0]}x{image_size[1]}")
-    return np.ascontiguousarray(image[..., ::-1])
+    return image
 
 
 def detect_scene(

@@ -716,3 +716,54 @@ def test_a_cut_view_that_the_joint_solve_followed_is_left_out():
                 assert "'cam0', whose view the image border cuts, disagree with those of camera(s) 'cam1'" in v.message
                 nees.append(pose_nees(v.world_T_vehicle, v.pose_covariance, sim.truth[f][v.id].world_T_vehicle))
     assert len(nees) >= 4 and np.mean(nees) < 12.0
+
+
+# ------------------------------------------------------------------ a detector's confidences on another scale
+@pytest.fixture(scope="module")
+def two_camera_frames():
+    """Gaussian keypoint noise, every seen keypoint's confidence 1."""
+    from vfactor.sim import simulate
+
+    sim = simulate("intersection_2cam_gaussian", seed=11, num_frames=4)
+    return sim.scene, [[dataclasses.replace(d, confidence=(d.confidence > 0).astype(float))
+                        for d in f.detections_of(v)] for f in sim.scene.frames for v in f.vehicle_ids()]
+
+
+def test_confidences_far_below_the_keypoints_precision_are_scaled_not_raised(two_camera_frames):
+    """Confidences set the keypoints' relative weights; their level is the noise scale's to find. The scale stopped at
+    a thirtieth of the nominal sigmas, and scores 300 to 1000 times below full raised 'projection_factor: no
+    observations' from the covariances (docs/reliability.md, "Confidences on another scale")."""
+    from vfactor.solve import solve_vehicle
+
+    scene, cases = two_camera_frames
+    for detections in cases:
+        reference = solve_vehicle(detections, scene.cameras)
+        low = solve_vehicle([dataclasses.replace(d, confidence=d.confidence / 100) for d in detections], scene.cameras)
+        assert low.ok, low.message
+        assert low.extras["noise_scale"] < 1 / 30  # was held at 1 / 30
+        moved = np.linalg.norm(low.world_T_vehicle.translation() - reference.world_T_vehicle.translation())
+        assert moved < 0.2, moved
+        for factor in (1 / 300, 1 / 1000):  # far off: solved or reported, never raised
+            result = solve_vehicle([dataclasses.replace(d, confidence=d.confidence * factor) for d in detections],
+                                   scene.cameras)
+            assert result.status is not None
+
+
+@pytest.mark.parametrize("block, problem", [([[0.0, 0.0], [0.0, 0.0]], "positive-definite"),
+                                            ([[-4.0, 0.0], [0.0, -4.0]], "positive-definite"),
+                                            ([[1.0, 3.0], [3.0, 1.0]], "positive-definite"),
+                                            ([[4.0, 1.0], [0.0, 4.0]], "symmetric")])
+def test_a_detection_built_in_python_refuses_a_covariance_the_reader_refuses(block, problem):
+    """A Detection's covariance went unchecked (numpy's LinAlgError from the solve), where the scene reader names
+    the entry; NaN blocks still mean 'none of its own'."""
+    from vfactor.errors import InputError
+    from vfactor.observations import Detection
+
+    uv, confidence = np.full((12, 2), 100.0), np.ones(12)
+    covariance = np.full((12, 2, 2), np.nan)
+    covariance[3] = block
+    with pytest.raises(InputError, match=f"keypoint 3: expected a {problem} matrix") as info:
+        Detection("cam0", "v1", keypoints=uv, confidence=confidence, covariance=covariance)
+    assert info.value.field == "covariance"
+    covariance[3] = [[4.0, 1.0], [1.0, 4.0]]
+    Detection("cam0", "v1", keypoints=uv, confidence=confidence, covariance=covariance)

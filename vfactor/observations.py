@@ -16,7 +16,20 @@ from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.ground_plane import GroundPlane
 
-__all__ = ["DEFAULT_VEHICLE_ID", "UNASSIGNED", "Detection", "Frame", "Scene", "resolve_path"]
+__all__ = ["DEFAULT_VEHICLE_ID", "UNASSIGNED", "Detection", "Frame", "Scene", "resolve_path", "covariance_problem"]
+
+#: Relative asymmetry a covariance matrix may have (rounding): keypoints' 2x2 blocks, results' covariances.
+SYMMETRY_RTOL = 1e-9
+
+
+def covariance_problem(S: np.ndarray) -> str | None:
+    """What is wrong with a keypoint's 2x2 pixel covariance (not symmetric, not positive definite), or None."""
+    S = np.asarray(S, dtype=float)
+    if abs(S[0, 1] - S[1, 0]) > SYMMETRY_RTOL * np.abs(S).max():
+        return f"expected a symmetric matrix, got {S.tolist()}"
+    if not (S[0, 0] > 0 and np.linalg.det(S) > 0):
+        return f"expected a positive-definite matrix, got {S.tolist()}"
+    return None
 
 #: Track id given to the vehicle of a detection that names none (allowed when
 #: its frame holds a single vehicle).
@@ -106,7 +119,8 @@ class Detection:
 
         Raises:
             InputError: (field ``keypoints``, ``confidence`` or ``covariance``) a wrong shape, a confidence outside
-                [0, 1] or not a number, a seen keypoint (confidence > 0) that is not finite.
+                [0, 1] or not a number, a seen keypoint (confidence > 0) that is not finite, a finite covariance
+                block that is not symmetric positive definite (NaN blocks: none of its own).
         """
         try:
             keypoints = np.asarray(self.keypoints, dtype=float)
@@ -127,6 +141,10 @@ class Detection:
             covariance = np.asarray(self.covariance, dtype=float)
             if covariance.shape != (12, 2, 2):
                 raise InputError("covariance", f"{where}expected (12, 2, 2) px^2, got shape {covariance.shape}")
+            for k in np.flatnonzero(np.isfinite(covariance).all(axis=(1, 2))):  # NaN (or inf): none of its own
+                problem = covariance_problem(covariance[k])
+                if problem:
+                    raise InputError("covariance", f"{where}keypoint {k}: {problem}")
             object.__setattr__(self, "covariance", covariance)
         object.__setattr__(self, "keypoints", keypoints)
         object.__setattr__(self, "confidence", confidence)

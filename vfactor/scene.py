@@ -69,7 +69,8 @@ from vfactor.jsonio import (describe as _kind, is_int as _is_int, is_number as _
                             read_text, write_text_atomic)
 from vfactor.keypoints import NUM_KEYPOINTS
 from vfactor.label_swaps import SwapFinding
-from vfactor.observations import DEFAULT_VEHICLE_ID, UNASSIGNED, Detection, Frame, Scene, resolve_path
+from vfactor.observations import (DEFAULT_VEHICLE_ID, SYMMETRY_RTOL, UNASSIGNED, Detection, Frame, Scene,
+                                  covariance_problem, resolve_path)
 from vfactor.result import COVARIANCE_KINDS, ESTIMATE_STATUSES, FrameResult, Status, VehicleResult
 from vfactor.wireframe import Wireframe
 
@@ -117,8 +118,6 @@ _VEHICLE_KEYS = (
     "detections",
     "swapped_keypoints",
 )
-#: Relative tolerance of the symmetry checks of covariance matrices.
-_SYMMETRY_RTOL = 1e-9
 #: keypoints_world must match world_T_vehicle * keypoints_vehicle to within this (metres).
 _KEYPOINTS_WORLD_TOL = 1e-6
 
@@ -658,10 +657,9 @@ def _keypoint_covariances(data, path: str) -> np.ndarray:
             continue
         field = f"{path}[{k}]"
         S = _matrix(item, field, (2, 2), "a 2x2 covariance matrix (px^2) or null")
-        if abs(S[0, 1] - S[1, 0]) > _SYMMETRY_RTOL * np.abs(S).max():
-            raise SceneError(field, f"expected a symmetric matrix, got {S.tolist()}")
-        if not (S[0, 0] > 0 and np.linalg.det(S) > 0):
-            raise SceneError(field, f"expected a positive-definite matrix, got {S.tolist()}")
+        problem = covariance_problem(S)
+        if problem:
+            raise SceneError(field, problem)
         out[k] = S
     return out
 
@@ -1056,7 +1054,7 @@ def box_from_dict(data, path: str) -> Box:
 
 
 def _check_symmetric(S: np.ndarray, field: str) -> None:
-    if np.abs(S - S.T).max() > _SYMMETRY_RTOL * max(np.abs(S).max(), np.finfo(float).tiny):
+    if np.abs(S - S.T).max() > SYMMETRY_RTOL * max(np.abs(S).max(), np.finfo(float).tiny):
         raise SceneError(field, "expected a symmetric matrix, got an asymmetric one")
     if np.any(np.diag(S) < 0):
         raise SceneError(field, f"expected non-negative variances on the diagonal, got {np.diag(S).tolist()}")

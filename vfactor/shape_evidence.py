@@ -33,7 +33,7 @@ __all__ = ["Linearisation", "linearise", "noise_scale", "inlier_noise_scale", "c
 
 #: The noise scale is kept within this range: down to a thirtieth of the detector's nominal sigma, up to four times it
 #: (a noisier detector; beyond that, keypoints at odds with each other are outliers, not noise).
-NOISE_SCALE_RANGE = (1.0 / 30.0, 4.0)
+NOISE_SCALE_RANGE = (1e-4, 4.0)
 
 _CHI2_2_MEDIAN = 2.0 * np.log(2.0)  # median of a chi-square with 2 degrees of freedom
 

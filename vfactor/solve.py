@@ -567,7 +567,11 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
             inflation = 1.0 if calibrated.all() else inflation
         else:
             obs = obs.scaled(relative)
-    inliers = obs.subset(np.sum(whitened_residuals(obs, world_T_vehicle, points) ** 2, axis=1) < INLIER_BOUND)
+    within = np.sum(whitened_residuals(obs, world_T_vehicle, points) ** 2, axis=1) < INLIER_BOUND
+    if not within.any():  # sigmas far from the residuals (a refinement that failed at a detector's extreme sigmas)
+        raise RuntimeError(f"no keypoint is within {np.sqrt(INLIER_BOUND):.3g} sigmas of the solution at the "
+                           "covariances' sigmas")
+    inliers = obs.subset(within)
     out = copy_graph(graph)
     out.replace(0, projection_factor(pose_key, layer_keys, inliers, RobustLoss("none")))
     return out, inflation, inliers, noise

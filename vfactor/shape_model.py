@@ -14,6 +14,8 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass, field
 from functools import lru_cache
 from itertools import combinations
@@ -22,6 +24,7 @@ import numpy as np
 
 from vfactor import prebuilt
 from vfactor._kernels import log_evidence_kernel
+from vfactor.errors import InputError
 from vfactor.keypoints import LAYERS
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes, symmetrised
 
@@ -46,11 +49,36 @@ class ShapePrior:
     mean: np.ndarray
     covariance: np.ndarray
 
-    def __post_init__(self):  # read-only float copies: a prior is shared by every solve that uses it
+    def __post_init__(self):
+        """Read-only float copies (a prior is shared by every solve that uses it), checked.
+
+        Raises:
+            InputError: (field ``ShapePrior.mean`` or ``ShapePrior.covariance``) not numbers of that shape, not
+                finite, a covariance that is not symmetric positive definite.
+        """
         for name, shape in (("mean", (12, 3)), ("covariance", (36, 36))):
-            value = np.array(getattr(self, name), dtype=float).reshape(shape)
+            field_name = f"ShapePrior.{name}"
+            try:
+                value = np.array(getattr(self, name), dtype=float)
+            except (TypeError, ValueError):
+                raise InputError(field_name, f"expected {shape} numbers (metres), got "
+                                             f"{type(getattr(self, name)).__name__}") from None
+            if value.size != np.prod(shape):
+                raise InputError(field_name, f"expected {shape} numbers (metres), got shape {value.shape}")
+            value = value.reshape(shape)
+            if not np.all(np.isfinite(value)):
+                raise InputError(field_name, "expected finite numbers, got NaN or infinity")
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        cov = self.covariance
+        if np.abs(cov - cov.T).max() > 1e-9 * np.abs(cov).max():
+            raise InputError("ShapePrior.covariance", "expected a symmetric matrix")
+        try:
+            np.linalg.cholesky(cov)
+        except np.linalg.LinAlgError:
+            raise InputError("ShapePrior.covariance", "expected a positive-definite matrix (every direction of the "
+                                                      "shape some variance: add a floor, ShapePrior.from_wireframes)"
+                             ) from None
 
     @classmethod
     def from_wireframes(cls, wireframes, floor_sigma=0.04, inflation: float = 1.5) -> "ShapePrior":
@@ -247,6 +275,10 @@ class ShapeModel:
             :data:`ANY`): a vehicle unlike every type's vehicles (another
             keypoint convention, a body the library lacks) is held by the broad
             pooled prior instead of a wrong type's.
+        class_hints: a 2D detector's class name (lower case) -> the body types it
+            suggests (:data:`CLASS_HINTS` by default; a model with a body type of
+            its own maps its detector's classes to it: ``{**CLASS_HINTS, "bus":
+            ("bus",)}``). A class that names one of :attr:`types` suggests that type.
     """
 
     types: dict
@@ -256,8 +288,53 @@ class ShapeModel:
     hint_weight: float = 0.8
     spreads: tuple = (1.0, 4.0, 16.0)
     pooled_probability: float = 1.0 / 7.0
-    _variants: dict = field(default_factory=dict, repr=False, compare=False)
-    _evidence_stack: dict = field(default_factory=dict, repr=False, compare=False)
+    class_hints: dict = field(default_factory=lambda: dict(CLASS_HINTS))
+    # caches filled by solves; init=False: a model made by dataclasses.replace starts with its own (it shared the
+    # original's and served the original's priors, and wrote its own into the original's)
+    _variants: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    _evidence_stack: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        """Checks a model built by hand (the one place a user's priors enter the solve).
+
+        Raises:
+            InputError: (field ``ShapeModel.<attribute>``, or ``ShapeModel.types[<name>]``) a type that is not a
+                :class:`ShapePrior` or has no probability, a probability that is not a finite number >= 0 (or
+                all of them 0), no spread or one that is not a finite number > 0, ``hint_weight`` or
+                ``pooled_probability`` outside [0, 1), a pooled prior that is not a :class:`ShapePrior`, bounds that
+                are not :class:`HwcBounds`, class hints that are not a mapping of names to body types.
+        """
+        if not isinstance(self.types, dict) or not self.types:
+            raise InputError("ShapeModel.types", "expected a dict of body type -> ShapePrior, at least one")
+        for name, prior in self.types.items():
+            if not isinstance(name, str) or not name or name == ANY:
+                raise InputError("ShapeModel.types", f"expected body type names (strings, not {ANY!r}), got {name!r}")
+            if not isinstance(prior, ShapePrior):
+                raise InputError(f"ShapeModel.types[{name}]", f"expected a ShapePrior, got {type(prior).__name__}")
+        if not isinstance(self.pooled, ShapePrior):
+            raise InputError("ShapeModel.pooled", f"expected a ShapePrior, got {type(self.pooled).__name__}")
+        if not isinstance(self.bounds, HwcBounds):
+            raise InputError("ShapeModel.bounds", f"expected HwcBounds, got {type(self.bounds).__name__}")
+        probability = self.prior_probability if isinstance(self.prior_probability, dict) else {}
+        for name in self.types:
+            p = probability.get(name)
+            if not _finite_number(p) or p < 0:
+                raise InputError(f"ShapeModel.prior_probability[{name}]",
+                                 f"expected a number >= 0 for every body type of types, got {p!r}")
+        if not sum(probability[t] for t in self.types) > 0:
+            raise InputError("ShapeModel.prior_probability", "expected some body type a probability above 0")
+        spreads = tuple(self.spreads) if isinstance(self.spreads, (tuple, list)) else ()
+        if not spreads or not all(_finite_number(k) and k > 0 for k in spreads):
+            raise InputError("ShapeModel.spreads", f"expected one or more numbers > 0, got {self.spreads!r}")
+        for name in ("hint_weight", "pooled_probability"):
+            value = getattr(self, name)
+            if not _finite_number(value) or not 0 <= value < 1:
+                raise InputError(f"ShapeModel.{name}", f"expected a number in [0, 1), got {value!r}")
+        hints = self.class_hints
+        if not isinstance(hints, dict) or not all(
+                isinstance(k, str) and isinstance(v, (tuple, list)) and all(isinstance(t, str) for t in v)
+                for k, v in hints.items()):
+            raise InputError("ShapeModel.class_hints", "expected a dict of class name -> tuple of body types")
 
     def components(self) -> list[tuple[str, float]]:
         """The (body type, spread) priors the evidence weighs, and ``(ANY, 1.0)``: the pooled prior."""
@@ -272,21 +349,44 @@ class ShapeModel:
             self._variants[key] = base if spread == 1.0 else ShapePrior(mean=base.mean, covariance=base.covariance * spread)
         return self._variants[key]
 
-    def log_prior(self, hints=()) -> dict[str, float]:
-        """Body type -> log probability given the detections' class ``hints`` (unknown classes are ignored; normalised)."""
-        logp = {t: float(np.log(self.prior_probability[t])) for t in self.types}
+    def suggested_types(self, hints=()) -> tuple[str, ...]:
+        """The body types a vehicle's detections' class ``hints`` suggest together (empty: no suggestion).
+
+        Each hint (case and surrounding spaces ignored) suggests the types :attr:`class_hints` maps it to, or the
+        type it names; unknown classes and types the model lacks are ignored. However many detections carry them,
+        the hints count once: the types every hint suggests, or, where they disagree (``car`` and ``truck``), the
+        types any suggests.
+        """
+        lower = {t.lower(): t for t in self.types}
+        sets = []
         for hint in hints:
-            suggested = CLASS_HINTS.get(str(hint).lower())
-            if not suggested:
-                continue
-            inside = [t for t in self.types if t in suggested]
-            outside = [t for t in self.types if t not in suggested]
-            for t in inside:
-                logp[t] += np.log(self.hint_weight / len(inside))
-            for t in outside:
-                logp[t] += np.log((1 - self.hint_weight) / len(outside))
-        top = max(logp.values())
-        norm = top + np.log(sum(np.exp(v - top) for v in logp.values()))
+            name = str(hint).strip().lower()
+            named = (lower[name],) if name in lower else self.class_hints.get(name, ())
+            suggested = {lower[t.lower()] for t in named if t.lower() in lower}
+            if suggested:
+                sets.append(suggested)
+        if not sets:
+            return ()
+        common = set.intersection(*sets)
+        chosen = common or set.union(*sets)
+        return tuple(t for t in self.types if t in chosen)
+
+    def log_prior(self, hints=()) -> dict[str, float]:
+        """Body type -> log probability given the detections' class ``hints`` (:meth:`suggested_types`; normalised).
+
+        The suggested types share :attr:`hint_weight` of the probability (in proportion to
+        :attr:`prior_probability`), the others the rest: a hint, never a hard rule.
+        """
+        with np.errstate(divide="ignore"):
+            logp = {t: float(np.log(self.prior_probability[t])) for t in self.types}
+        suggested = self.suggested_types(hints)
+        if suggested and len(suggested) < len(self.types):
+            inside = _log_sum([logp[t] for t in suggested])
+            outside = _log_sum([logp[t] for t in self.types if t not in suggested])
+            for t in self.types:
+                logp[t] += (np.log(self.hint_weight) - inside if t in suggested
+                            else np.log(1.0 - self.hint_weight) - outside)
+        norm = _log_sum(list(logp.values()))
         return {t: float(v - norm) for t, v in logp.items()}
 
     def type_log_evidence(self, information: np.ndarray, eta: np.ndarray) -> dict[tuple[str, float], float]:
@@ -324,6 +424,17 @@ class ShapeModel:
             raise np.linalg.LinAlgError("the information plus a prior's precision is not positive definite")
         value = -0.5 * (constants - quadratic + logdet_A)
         return {key: float(v) for key, v in zip(keys, value)}
+
+
+def _log_sum(values) -> float:
+    """``log(sum(exp(values)))``, stably (-inf entries: probability 0)."""
+    values = np.asarray(values, dtype=float)
+    top = values.max()
+    return float(top + np.log(np.exp(values - top).sum())) if np.isfinite(top) else float(top)
+
+
+def _finite_number(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) and math.isfinite(value)
 
 
 def resolve_shape_prior(prior: "ShapePrior | ShapeModel | None",

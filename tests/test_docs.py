@@ -1,4 +1,4 @@
-"""The Python examples in README.md and docs/tutorial.md run as written."""
+"""The Python examples in README.md, docs/tutorial.md, docs/output-formats.md and docs/vehicles.md run as written."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ def python_blocks(path: Path) -> list[str]:
     return re.findall(r"```python\n(.*?)```", path.read_text(encoding="utf-8"), flags=re.S)
 
 
-@pytest.mark.parametrize("page", ["README.md", "docs/tutorial.md", "docs/output-formats.md"])
+@pytest.mark.parametrize("page", ["README.md", "docs/tutorial.md", "docs/output-formats.md", "docs/vehicles.md"])
 def test_examples_run(page, tmp_path, monkeypatch):
     path = ROOT / page
     if not path.exists():

@@ -15,7 +15,9 @@ from vfactor.sim.vehicles import within_hwc_bounds
 from vfactor.vehicle_library import (
     BODY_RULES,
     BODY_TYPES,
+    BodyRules,
     VehicleDimensions,
+    bounds_vehicles,
     keypoints_from_dimensions,
     library_ids,
     library_vehicle,
@@ -41,7 +43,7 @@ def test_every_library_vehicle_satisfies_every_hwc_condition():
     terms = hwc_terms(GraphConfig(), default_hwc_bounds())
     keys = KeyScheme().layer_keys(0)
     linear = [rectangle_factor(keys[0]), *(symmetry_factor(k) for k in keys)]
-    for v in vehicle_library().values():
+    for v in [*vehicle_library().values(), *bounds_vehicles().values()]:
         assert hwc_violation(v.wireframe, terms) == 0.0, v.id
         assert within_hwc_bounds(v.wireframe), v.id
         values = gtsam.Values()
@@ -114,3 +116,47 @@ def test_docs_list_every_vehicle_as_the_library_has_it():
 
     page = (Path(__file__).resolve().parents[1] / "docs" / "vehicles.md").read_text(encoding="utf-8")
     assert library_table() in page
+
+
+def test_the_bounds_span_the_roads_extremes_beyond_the_library():
+    """A 12 m city bus and a microcar are vehicles to HWC; the priors and the simulator never see them, and the
+    simulator's random cars keep the bounds of the cars and the library (so that seeds keep their scenes)."""
+    extremes = bounds_vehicles()
+    lengths = sorted(v.dimensions.length for v in extremes.values())
+    assert lengths[0] < 2.8 and lengths[-1] > 12.0
+    assert not set(extremes) & set(vehicle_library())
+    assert not set(extremes) & {v for t in default_shape_model().types for v in library_ids(t)}
+    cars = default_hwc_bounds(road_extremes=False)
+    assert not within_hwc_bounds(extremes["mercedes_citaro_o530_12m"].wireframe, cars)
+    for v in extremes.values():
+        assert v.dimensions.source, v.id
+
+
+def test_a_vehicle_of_a_body_type_of_ones_own_needs_rules_and_gets_a_clear_error_without():
+    """keypoints_from_dimensions with rules for a body type vfactor has none for raised KeyError 'bus' (the
+    overhang split looked the rules up by body type)."""
+    dims = VehicleDimensions(id="my_bus", make="x", model="y", generation="", variant="", body_type="bus",
+                             length=12.0, width=2.55, height=3.2, wheelbase=6.0, front_track=2.1, rear_track=1.85,
+                             tyre="275/70R22.5")
+    rules = BodyRules(0.45, 0.05, 0.75, 0.2, 0.03, 1.1, 0.12, 0.0, -2.6, 10.0, 0.15, 0.1, "end", 0.05, 0.4)
+    wireframe = keypoints_from_dimensions(dims, rules)
+    assert wireframe.vehicle_p_keypoints[0, 0] == pytest.approx(3.0)  # front hubs at half the wheelbase
+    assert dims.overhangs(rules) == pytest.approx((0.45 * 6.0, 0.55 * 6.0))
+    with pytest.raises(ValueError, match="no BodyRules for body type 'bus'"):
+        keypoints_from_dimensions(dims)
+
+
+def test_layer_offset_bounds_are_one_row_per_axis():
+    """[[x_min, x_max], [z_min, z_max]] as every reader takes them: they were stored transposed, which made the x
+    range [x_min, z_min] and the z range [x_max, z_max]."""
+    from vfactor.keypoints import LAYERS
+    from vfactor.shape_model import HwcBounds
+
+    shapes = [v.wireframe for v in vehicle_library().values()]
+    bounds = HwcBounds.from_wireframes(shapes, margin=0.0)
+    pts = np.array([w.vehicle_p_keypoints for w in shapes])
+    for name in ("light", "roof"):
+        off = pts[:, list(LAYERS[name])].mean(1) - pts[:, list(LAYERS["wheel"])].mean(1)
+        box = bounds.layer_offset[name]
+        np.testing.assert_allclose(box[0], [off[:, 0].min() - 0.1, off[:, 0].max() + 0.1])  # x (the 10 cm minimum)
+        np.testing.assert_allclose(box[1], [off[:, 2].min() - 0.1, off[:, 2].max() + 0.1])  # z

@@ -187,10 +187,29 @@ class HwcBounds:
             lo, hi = _widen(ratio.min(), ratio.max(), margin, 0.05)
             width_ratio[name] = (float(lo), float(hi))
             off = pts[:, list(LAYERS[name])].mean(1) - wheel_centroid
-            lo, hi = _widen(off[:, [0, 2]].min(0), off[:, [0, 2]].max(0), margin, 0.10)
-            layer_offset[name] = np.stack([lo, hi], axis=1)
+            # (2 axes, [min, max]); until 2026-12-07 stored transposed, which made the x range [x_min, z_min] and
+            # the z range [x_max, z_max] (tests/test_vehicle_library.py)
+            layer_offset[name] = _widen(off[:, [0, 2]].min(0), off[:, [0, 2]].max(0), margin, 0.10)
         distance.setflags(write=False)
         return cls(distance=distance, width_ratio=width_ratio, layer_offset=layer_offset)
+
+
+    def spanning(self, wireframes) -> "HwcBounds":
+        """These bounds extended just enough to admit ``wireframes`` too (5 cm on the distances, 0.05 on the width
+        ratios, 10 cm on the layer offsets beyond them): a few vehicles far from the sample (a city bus) widen the
+        bounds on their side only, where :meth:`from_wireframes`' margin, a share of each range, would also drop
+        the other side (a car squashed to a third of its height would pass)."""
+        other = HwcBounds.from_wireframes(wireframes, margin=0.0)
+
+        def union(a, b, pad):
+            a, b = np.asarray(a, float), np.asarray(b, float)
+            return np.stack([np.minimum(a[..., 0], b[..., 0] - pad), np.maximum(a[..., 1], b[..., 1] + pad)], axis=-1)
+
+        distance = union(self.distance, other.distance, 0.05)
+        distance.setflags(write=False)
+        width_ratio = {k: tuple(float(x) for x in union(v, other.width_ratio[k], 0.05)) for k, v in self.width_ratio.items()}
+        layer_offset = {k: union(v, other.layer_offset[k], 0.10) for k, v in self.layer_offset.items()}
+        return HwcBounds(distance=distance, width_ratio=width_ratio, layer_offset=layer_offset)
 
 
 def _widen(lo, hi, margin, minimum):
@@ -208,20 +227,28 @@ def _car_wireframes(exclude: frozenset = frozenset()) -> list[Wireframe]:
 
 @lru_cache(maxsize=64)
 @prebuilt.shipped("hwc_bounds")
-def default_hwc_bounds(exclude: frozenset = frozenset()) -> HwcBounds:
-    """HWC bounds spanning every vehicle of the library, the PASCAL3D+ cars at wheelbases 2.4-3.1 m and the presets.
+def default_hwc_bounds(exclude: frozenset = frozenset(), road_extremes: bool = True) -> HwcBounds:
+    """HWC bounds spanning every vehicle of the library, the PASCAL3D+ cars at wheelbases 2.4-3.1 m, the presets
+    and the road's extremes beyond the library (a 12 m city bus, a microcar:
+    :func:`vfactor.vehicle_library.bounds_vehicles`).
 
-    Widened by 50 % of each range (at least 5 cm, 10 cm for the layer offsets)
-    so that a vehicle outside the sample (a longer van, a lower sports car) is
-    still a vehicle to HWC.
+    The cars' and the library's ranges widened by 50 % (at least 5 cm, 10 cm
+    for the layer offsets) so that a vehicle outside the sample is still a
+    vehicle to HWC, then extended to admit the extremes (:meth:`HwcBounds.spanning`).
+    HWC says what is physically a vehicle: without the extremes a 12 m bus was
+    held to a 7 m shape and solved 1.8 m off, `converged` (docs/vehicles.md).
 
     Args:
         exclude: library ids and ``pascal3d_<index>`` ids left out (leave-one-model-out evaluation).
+        road_extremes: span the road's extremes too (False: the bounds of the cars and the library alone, which the
+            simulator's random PASCAL3D+ cars are drawn within, as before 2026-12-07, so that seeds keep their
+            scenes).
     """
-    from vfactor.vehicle_library import vehicle_library
+    from vfactor.vehicle_library import bounds_vehicles, vehicle_library
 
     wireframes = _car_wireframes(exclude) + [v.wireframe for v in vehicle_library().values() if v.id not in exclude]
-    return HwcBounds.from_wireframes(wireframes, margin=0.5)
+    bounds = HwcBounds.from_wireframes(wireframes, margin=0.5)
+    return bounds.spanning([v.wireframe for v in bounds_vehicles().values()]) if road_extremes else bounds
 
 
 @lru_cache(maxsize=1)

@@ -37,6 +37,7 @@ __all__ = [
     "tyre_radius",
     "keypoints_from_dimensions",
     "vehicle_library",
+    "bounds_vehicles",
     "library_vehicle",
     "library_ids",
     "library_table",
@@ -170,12 +171,21 @@ class VehicleDimensions:
         """Hub height above the road, metres (:func:`tyre_radius` of ``tyre``)."""
         return tyre_radius(self.tyre)
 
-    def overhangs(self) -> tuple[float, float]:
-        """(front, rear) overhang, metres: the published ones, else ``length - wheelbase`` split by body type."""
+    def overhangs(self, rules: "BodyRules | None" = None) -> tuple[float, float]:
+        """(front, rear) overhang, metres: the published ones, else ``length - wheelbase`` split by ``rules``
+        (default: the body type's :data:`BODY_RULES`).
+
+        Raises:
+            ValueError: neither overhang is published and there are no rules for the body type.
+        """
         extra = self.length - self.wheelbase
         front, rear = self.front_overhang, self.rear_overhang
         if front is None and rear is None:
-            front = BODY_RULES[self.body_type].front_overhang_share * extra
+            rules = rules or BODY_RULES.get(self.body_type)
+            if rules is None:
+                raise ValueError(f"VehicleDimensions {self.id!r}: no overhang published and no BodyRules for body "
+                                 f"type {self.body_type!r} (give front_overhang or rules)")
+            front = rules.front_overhang_share * extra
         if front is None:
             front = extra - rear
         return float(front), float(extra - front)
@@ -219,10 +229,13 @@ def keypoints_from_dimensions(dims: VehicleDimensions, rules: BodyRules | None =
         dims: the vehicle's dimensions.
         rules: placement rules (default: ``BODY_RULES[dims.body_type]``).
     """
-    rules = rules or BODY_RULES[dims.body_type]
+    rules = rules or BODY_RULES.get(dims.body_type)
+    if rules is None:
+        raise ValueError(f"keypoints_from_dimensions: no BodyRules for body type {dims.body_type!r} of "
+                         f"{dims.id!r}; give rules (BodyRules: where its lamps and window tops sit)")
     r = dims.wheel_radius
     half_wb, half_w = dims.wheelbase / 2, dims.width / 2
-    front_oh, rear_oh = dims.overhangs()
+    front_oh, rear_oh = dims.overhangs(rules)
     x_front, x_rear = half_wb + front_oh, -(half_wb + rear_oh)
 
     def height(h: float) -> float:  # height above the road -> body z
@@ -287,6 +300,27 @@ def vehicle_library() -> dict[str, LibraryVehicle]:
         if dims.id in out:
             raise ValueError(f"vehicle_dimensions.json vehicles[{i}].id: duplicate {dims.id!r}")
         out[dims.id] = LibraryVehicle(dims, keypoints_from_dimensions(dims))
+    return out
+
+
+@lru_cache(maxsize=1)
+def bounds_vehicles() -> dict[str, LibraryVehicle]:
+    """Road vehicles beyond the library's body types (a 12 m city bus, a microcar), by id: the HWC bounds span
+    them (:func:`vfactor.shape_model.default_hwc_bounds`: what is physically a vehicle); neither the priors nor
+    the simulator use them (``vfactor/data/vehicle_dimensions.json``, ``bounds_vehicles``; docs/vehicles.md)."""
+    with resources.files("vfactor.data").joinpath("vehicle_dimensions.json").open("r", encoding="utf-8") as f:
+        data = json.load(f)
+    out = {}
+    for i, entry in enumerate(data.get("bounds_vehicles", [])):
+        where = f"vehicle_dimensions.json bounds_vehicles[{i}]"
+        dims = _dimensions(entry, where)
+        rules = None
+        if entry.get("rules") is not None:
+            try:
+                rules = BodyRules(**entry["rules"])
+            except TypeError as exc:
+                raise ValueError(f"{where}.rules: {exc}") from None
+        out[dims.id] = LibraryVehicle(dims, keypoints_from_dimensions(dims, rules))
     return out
 
 

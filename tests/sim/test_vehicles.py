@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from vfactor.keypoints import LAYERS, MIRROR_PERMUTATION
+from vfactor.shape_model import car_hwc_bounds
 from vfactor.sim import (
     RandomShape,
     footprint,
@@ -49,9 +50,13 @@ def test_random_wireframe_is_deterministic():
 
 
 def test_within_hwc_bounds_rejects_a_squashed_car():
+    """The car bounds (15 % margins) refuse a car at 60 % of its height; the default bounds (50 % of each range,
+    spanning vans and a bus) one at 20 %. (At 30 % it was refused only while the layer offsets were stored
+    transposed, which held the roof at least 0.68 m above the hubs instead of 0.26 m.)"""
     w = PRESETS["lincoln_mkz"].wireframe()
-    assert within_hwc_bounds(w)
-    assert not within_hwc_bounds(Wireframe(w.vehicle_p_keypoints * [1.0, 1.0, 0.3]))
+    assert within_hwc_bounds(w) and within_hwc_bounds(w, car_hwc_bounds())
+    assert not within_hwc_bounds(Wireframe(w.vehicle_p_keypoints * [1.0, 1.0, 0.6]), car_hwc_bounds())
+    assert not within_hwc_bounds(Wireframe(w.vehicle_p_keypoints * [1.0, 1.0, 0.2]))
 
 
 def test_vehicle_shape_gives_presets_and_random_cars():

@@ -13,7 +13,9 @@ the centroid of the four wheel hubs (docs/conventions.md), so the origin lies
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
+from functools import lru_cache
 
 import gtsam
 import numpy as np
@@ -71,7 +73,7 @@ def random_wireframe(
     """A random car: one PASCAL3D+ model times a random wheelbase, jittered (the hubs kept level), symmetrised.
 
     The shape is re-centred on its wheel-hub centroid and redrawn until it lies
-    within the HWC ``bounds`` (default :func:`default_hwc_bounds`).
+    within the HWC ``bounds`` (default: the region random cars have always been drawn in, ``_draw_bounds``).
 
     Args:
         rng: random generator (the only source of randomness).
@@ -86,7 +88,7 @@ def random_wireframe(
 
 def _random_pascal3d(rng: np.random.Generator, spec: RandomShape, bounds: HwcBounds | None) -> tuple[Wireframe, int]:
     """:func:`random_wireframe` and the index of the PASCAL3D+ model drawn."""
-    bounds = default_hwc_bounds() if bounds is None else bounds
+    bounds = _draw_bounds() if bounds is None else bounds
     shapes = pascal3d_shapes()
     for _ in range(spec.max_tries):
         index = int(rng.integers(len(shapes)))
@@ -101,6 +103,16 @@ def _random_pascal3d(rng: np.random.Generator, spec: RandomShape, bounds: HwcBou
         if within_hwc_bounds(wireframe, bounds):
             return wireframe, index
     raise RuntimeError(f"random_wireframe: no shape within the HWC bounds after {spec.max_tries} draws")
+
+
+@lru_cache(maxsize=1)
+def _draw_bounds() -> HwcBounds:
+    """Where random PASCAL3D+ cars are drawn: the bounds of the cars and the library alone
+    (``default_hwc_bounds(road_extremes=False)``) with their layer offsets as :class:`HwcBounds` stored them until
+    2026-12-07 (transposed: the x range ``[x_min, z_min]``, the z range ``[x_max, z_max]``), so that every seed
+    keeps its scene."""
+    bounds = default_hwc_bounds(road_extremes=False)
+    return dataclasses.replace(bounds, layer_offset={k: np.asarray(v).T.copy() for k, v in bounds.layer_offset.items()})
 
 
 def within_hwc_bounds(wireframe: Wireframe, bounds: HwcBounds | None = None) -> bool:

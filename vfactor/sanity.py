@@ -14,6 +14,9 @@ finds its estimate
   docs/conventions.md; no vehicle in traffic is upside down, and a solution
   that is explains its pixels with the wheels where the roof is, from a start
   turned over: batch smoothing of ``tracks_3veh`` seed 169 at hard noise),
+* tilted less than :data:`MAX_TILT_DEG` from the world's up (else ``poor_fit``, its estimate kept: no road is that
+  steep; a two-camera rig given ``camera_T_world`` for ``world_T_camera`` fits its keypoints with a vehicle tilted
+  35-49 degrees, 11-13 m above the road, about as well as their sigmas say),
 * with its front hubs ahead of its back hubs (body x forward: a shape turned
   front to back explains the same pixels, :mod:`vfactor.factors.body_frame`;
   the solvers turn such a solution back, so this catches what they could not), and
@@ -42,13 +45,16 @@ from vfactor.camera import Camera
 from vfactor.factors.body_frame import turned_front_to_back, upright
 from vfactor.result import Status, VehicleResult
 
-__all__ = ["MAX_DISTANCE", "check_estimate", "checked", "summarise_error", "one_line"]
+__all__ = ["MAX_DISTANCE", "MAX_TILT_DEG", "check_estimate", "checked", "summarise_error", "one_line"]
 
 #: Farthest a solved vehicle may be from the nearest camera that sees it, metres. Fixed traffic
 #: cameras see vehicles at tens of metres; at 1 km a 4.5 m car spans about 4 pixels at a focal
 #: length of 900 px, too few to place keypoints, so an estimate farther away is not a measurement.
 MAX_DISTANCE = 1000.0
 
+#: Largest angle, degrees, between a solved vehicle's up (body z) and the world's (z) that is not reported
+#: ``poor_fit``: the steepest public roads climb about 19 degrees (35 %), a banked curve leans a few.
+MAX_TILT_DEG = 30.0
 _MESSAGE_LIMIT = 300
 _ESCAPES = re.compile(r"\x1b\[[0-?]*[ -/]*[@-~]|\x1b\][^\x07\x1b]*(?:\x07|\x1b\\)?|\x1b.?")
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]+")
@@ -114,6 +120,12 @@ def check_estimate(result: VehicleResult, cameras: Iterable[Camera], covariance:
     if turned_front_to_back(world_p[:4].ravel()):
         return Status.FAILED, ("the shape is turned front to back (its front hubs behind its back hubs): the views "
                                "did not tell the vehicle's front from its back")
+    tilted = None
+    tilt = float(np.degrees(np.arccos(np.clip(T[2, 2], -1.0, 1.0))))
+    if tilt > MAX_TILT_DEG:
+        tilted = (f"the estimate is tilted {tilt:.0f} deg from the world's up (no road is that steep; more than "
+                  f"{MAX_TILT_DEG:g} deg): check each camera's world_T_camera (camera_T_world given for it?) and "
+                  "that the world's z is up")
     world_p = world_p @ T[:3, :3].T + T[:3, 3]
     centre = world_p.mean(axis=0)
     cameras = list(cameras)
@@ -132,15 +144,19 @@ def check_estimate(result: VehicleResult, cameras: Iterable[Camera], covariance:
         return Status.DEGENERATE, f"no pose covariance ({summarise_error(why)})"
     if covariance and not np.all(np.isfinite(result.pose_covariance)):
         return Status.DEGENERATE, "the pose covariance is not finite: the views do not constrain the pose"
+    if tilted:
+        return Status.POOR_FIT, f"{message}; {tilted}" if message else tilted
     return result.status, message
 
 
 def checked(result: VehicleResult, cameras: Iterable[Camera], covariance: bool = False,
             max_distance: float = MAX_DISTANCE) -> VehicleResult:
     """``result`` after :func:`check_estimate`: unchanged but for a one-line message when it
-    passes; a ``degenerate`` or ``failed`` result without pose, shape or covariances when not."""
+    passes; ``poor_fit`` with its estimate when tilted; a ``degenerate`` or ``failed`` result without pose, shape or
+    covariances when not."""
     status, message = check_estimate(result, cameras, covariance, max_distance)
-    if status == result.status:
-        return result if message == result.message else dataclasses.replace(result, message=message)
+    if status == result.status or status == Status.POOR_FIT:
+        return result if (status, message) == (result.status, result.message) else dataclasses.replace(
+            result, status=status, message=message)
     return VehicleResult(result.id, status, iterations=result.iterations, final_error=result.final_error,
                          message=message)

@@ -793,3 +793,21 @@ def test_a_two_camera_rig_given_camera_T_world_is_not_converged(tmp_path):
             assert result.status in (Status.POOR_FIT, Status.FAILED, Status.DEGENERATE), result.status
             if result.status == Status.POOR_FIT and "tilted" in result.message:
                 assert "world_T_camera" in result.message
+
+
+def test_one_cameras_scores_on_another_scale_get_a_noise_scale_of_their_own(two_camera_frames):
+    """Both cameras' keypoints equally precise, one camera's scores ten times lower: one noise scale for both made
+    the other camera's keypoints too sharp (pose NEES 11-116 where the same keypoints at full scores gave 3-18).
+    Each camera's sigmas are now put on one scale where their noise differs beyond chance."""
+    from vfactor.solve import solve_vehicle
+
+    scene, cases = two_camera_frames
+    for detections in cases:
+        reference = solve_vehicle(detections, scene.cameras)
+        low = [dataclasses.replace(detections[0], confidence=detections[0].confidence / 10), *detections[1:]]
+        result = solve_vehicle(low, scene.cameras)
+        factors = result.extras["camera_noise_factors"]
+        assert factors[detections[0].camera] / factors[detections[1].camera] < 0.3
+        ratio = np.sqrt(np.diag(result.pose_covariance) / np.diag(reference.pose_covariance))
+        assert np.all((ratio > 0.6) & (ratio < 1.5)), ratio
+        assert "camera_noise_factors" not in reference.extras

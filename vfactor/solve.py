@@ -47,9 +47,9 @@ from vfactor.observations import Detection, Frame, Scene
 from vfactor.parallel import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
-from vfactor.shape_evidence import (NOISE_SCALE_RANGE, choose_body_type, covariance_inflation,
-                                    covariance_upper_bound, inlier_noise_scale, linearise, noise_scale, sandwich_covariance,
-                                    shape_information)
+from vfactor.shape_evidence import (NOISE_SCALE_RANGE, camera_noise_factors, choose_body_type, covariance_inflation,
+                                    covariance_upper_bound, inlier_noise_scale, linearise, noise_scale,
+                                    sandwich_covariance, shape_information)
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
 from vfactor.wireframe import Wireframe
 
@@ -395,7 +395,8 @@ def solve_observations(
     if options.covariance:
         try:
             covariance_graph, inflation, inliers, covariance_scale = _covariance_graph(
-                graph, obs, nominal, float(extras.get("noise_scale", 1.0)), estimate, keys, options)
+                graph, obs, _camera_scaled(nominal, extras.get("camera_noise_factors")),
+                float(extras.get("noise_scale", 1.0)), estimate, keys, options)
             linear = covariance_graph.linearize(estimate)  # once: the marginals and the sandwich's residuals
             marginal = pose_shape_covariance(gtsam.Marginals(linear, estimate), keys)
             joint = inflation * marginal
@@ -500,6 +501,13 @@ SCALE_CANDIDATE_BOUND = 4.0 * INLIER_BOUND
 MIN_SCALE_CANDIDATES = 6
 
 
+def _camera_scaled(obs: KeypointObservations, factors: dict | None) -> KeypointObservations:
+    """``obs`` with each camera's sigmas times its factor (camera name -> factor; None: as they are)."""
+    if not factors:
+        return obs
+    return obs.scaled(np.array([factors.get(obs.cameras[int(c)].name, 1.0) for c in obs.camera_index]))
+
+
 def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservations, nominal: KeypointObservations,
                       scale: float, estimate: gtsam.Values, keys: KeyScheme,
                       options: SolveOptions) -> tuple[gtsam.NonlinearFactorGraph, float, KeypointObservations, float]:
@@ -524,7 +532,9 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
       ``min_pixel_sigma`` (clean keypoints are sharper than the solve's floor),
       and the factor is :func:`~vfactor.shape_evidence.covariance_inflation` of
       that scale's degrees of freedom (the Student t of an estimated scale);
-      else the solve's sigmas and 1.
+      else the solve's sigmas and 1. ``nominal`` are the detector's sigmas with
+      each camera's factor of the refinement where the cameras' noise differed
+      (``extras["camera_noise_factors"]``).
     * **Calibrated sigmas are a floor.** An observation whose covariance is
       calibrated against the detector's true errors (``obs.calibrated``: the
       keypoint network's) keeps at least its nominal sigmas: a scale below 1
@@ -684,7 +694,10 @@ def _refine(first, obs: KeypointObservations, options: SolveOptions, model: Shap
     """The refining solves: noise scale and body type read off the solution, then LM from it.
 
     Each pass linearises the graph at the current solution, estimates the noise
-    scale (:func:`~vfactor.shape_evidence.noise_scale`) and, with a model, the
+    scale (:func:`~vfactor.shape_evidence.noise_scale`; in all passes but the
+    last, where the cameras' noise differs beyond chance, each camera's sigmas
+    are first put on one scale, :func:`~vfactor.shape_evidence.camera_noise_factors`,
+    ``extras["camera_noise_factors"]``: each camera's factor) and, with a model, the
     body type and prior spread (:func:`~vfactor.shape_evidence.choose_body_type`,
     with the prior of the graph removed from the information), and solves
     again from there with them. Passes stop when the scale moves by less than
@@ -711,13 +724,21 @@ def _refine(first, obs: KeypointObservations, options: SolveOptions, model: Shap
         prior_factor = shape_prior_factor(keys.layer_keys(0), prior, options.graph.shape_prior_weight,
                                           options.graph.shape_prior_loss)
         lin = linearise(graph, graph.at(0), prior_factor, estimate, keys)
-        new_scale, new_prior = scale, prior
+        new_scale, new_prior, cameras = scale, prior, None
         if options.estimate_noise:
             world_T_vehicle = estimate.atPose3(keys.pose_key())
             points = wireframe_from_values(estimate, keys).vehicle_p_keypoints
-            relative, p_eff = noise_scale(whitened_residuals(scaled, world_T_vehicle, points), lin)
+            whitened = whitened_residuals(scaled, world_T_vehicle, points)
+            relative, p_eff = noise_scale(whitened, lin)
             new_scale = float(np.clip(scale * relative, *NOISE_SCALE_RANGE))
             extras.update(effective_parameters=p_eff)
+            cameras = camera_noise_factors(whitened, lin, obs.camera_index, relative) if k < passes - 1 else None
+            if cameras is not None:  # the cameras' noise differs beyond chance: each camera's sigmas put on one scale
+                obs = obs.scaled(cameras[0])
+                found = extras.setdefault("camera_noise_factors", {})
+                for c in np.unique(obs.camera_index):
+                    name = obs.cameras[int(c)].name
+                    found[name] = found.get(name, 1.0) * float(cameras[0][obs.camera_index == c][0])
         if model is not None:
             information, eta = shape_information(lin, (scale / new_scale) ** 2)
             choice = choose_body_type(model, information, eta, hints)
@@ -725,7 +746,8 @@ def _refine(first, obs: KeypointObservations, options: SolveOptions, model: Shap
             extras.update(body_type=choice.body_type, body_type_probability=choice.probability,
                           body_type_posterior=choice.posterior, prior_spread=choice.spread,
                           shape_information=(information, eta))
-        if k > 0 and _same_prior(new_prior, prior) and abs(np.log(new_scale / scale)) < np.log(1.1):
+        if (k > 0 and cameras is None and _same_prior(new_prior, prior)
+                and abs(np.log(new_scale / scale)) < np.log(1.1)):
             break
         scale, prior = new_scale, new_prior
         scaled = obs.scaled(scale)

@@ -811,3 +811,26 @@ def test_one_cameras_scores_on_another_scale_get_a_noise_scale_of_their_own(two_
         ratio = np.sqrt(np.diag(result.pose_covariance) / np.diag(reference.pose_covariance))
         assert np.all((ratio > 0.6) & (ratio < 1.5)), ratio
         assert "camera_noise_factors" not in reference.extras
+
+
+def test_messages_of_a_wrong_camera_frame_point_at_the_cameras():
+    """Two cameras, one turned by 20 deg: the message blamed the camera that was right (two cameras cannot tell);
+    every camera in OpenGL's frame (y up, z backwards): 'the best camera sees 12 keypoints (PnP needs 4) and too few
+    keypoints triangulate', which contradicts itself."""
+    from vfactor.sim import simulate
+    from vfactor.solve import solve_vehicle
+
+    sim = simulate("intersection_2cam_gaussian", seed=5, num_frames=2)
+    cameras = dict(sim.scene.cameras)
+    cameras["cam1"] = dataclasses.replace(cameras["cam1"], world_T_camera=turned(cameras["cam1"].world_T_camera,
+                                                                                  20.0, (0.0, 1.0, 0.0)))
+    opengl = {n: dataclasses.replace(c, world_T_camera=np.asarray(c.world_T_camera) @ np.diag([1.0, -1.0, -1.0, 1.0]))
+              for n, c in sim.scene.cameras.items()}
+    for frame in sim.scene.frames:
+        for vid in frame.vehicle_ids():
+            result = solve_vehicle(frame.detections_of(vid), cameras)
+            assert result.status == Status.FAILED
+            assert "cameras 'cam0' and 'cam1' disagree (two cameras cannot tell which one is off" in result.message
+            result = solve_vehicle(frame.detections_of(vid), opengl)
+            assert result.status == Status.DEGENERATE
+            assert "upside down or behind a camera: check that each camera's world_T_camera" in result.message

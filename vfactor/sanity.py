@@ -116,7 +116,8 @@ def check_estimate(result: VehicleResult, cameras: Iterable[Camera], covariance:
         return Status.FAILED, "the estimate is not finite (NaN or infinity in the pose or the shape)"
     if not upright(T[:3, :3]):
         return Status.FAILED, ("the estimate is upside down (its roof below its wheels in the world frame, whose z "
-                               "is up): the views did not tell the vehicle's top from its bottom")
+                               "is up): the views did not tell the vehicle's top from its bottom, or the cameras' "
+                               "frames are not OpenCV's (x right, y down, z forward) or the world's z is not up")
     if turned_front_to_back(world_p[:4].ravel()):
         return Status.FAILED, ("the shape is turned front to back (its front hubs behind its back hubs): the views "
                                "did not tell the vehicle's front from its back")

@@ -286,13 +286,15 @@ def solve_observations(
                 best, best_inliers = outcome, _inlier_share(obs, outcome[0], keys, options)
     if best is None and tried == 0 and initial is None:
         per_view = np.bincount(obs.camera_index, minlength=len(obs.cameras)).max()
-        return VehicleResult(
-            vehicle_id, Status.DEGENERATE,
-            message=(
-                f"no initial pose: the best camera sees {per_view} keypoints (PnP needs "
-                f"{options.min_keypoints_in_one_view}) and too few keypoints triangulate"
-            ),
-        )
+        if per_view >= max(4, options.min_keypoints_in_one_view):  # PnP had its keypoints: no start was upright
+            message = (f"no initial pose: every PnP start (the best camera sees {per_view} keypoints) puts the "
+                       "vehicle upside down or behind a camera: check that each camera's world_T_camera maps "
+                       "OpenCV's camera frame (x right, y down, z forward) to the world, whose z is up "
+                       "(docs/conventions.md)")
+        else:
+            message = (f"no initial pose: the best camera sees {per_view} keypoints (PnP needs "
+                       f"{options.min_keypoints_in_one_view}) and too few keypoints triangulate")
+        return VehicleResult(vehicle_id, Status.DEGENERATE, message=message)
     if best is None:
         return VehicleResult(vehicle_id, Status.FAILED, message=f"optimisation failed: {failure}")
     swaps, as_given, left_out, fit_scale, hypotheses, resized = [], obs, None, None, None, None
@@ -1035,7 +1037,15 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
             if d != c and (obs.camera_index == d).any() and np.median(other.to_camera(world)[:, 2]) <= 0:
                 details.append(f"as camera '{obs.cameras[c].name}' sees it, the vehicle lies behind camera "
                                f"'{other.name}'")
-    text = f"the keypoints of camera(s) {', '.join(repr(n) for n in rejected)} disagree with the other cameras"
+    seeing = [camera.name for c, camera in enumerate(obs.cameras)
+              if (obs.camera_index == c).sum() >= options.min_keypoints_in_one_view]
+    if len(seeing) == 2:  # two cameras cannot tell which of them is off: both are named
+        text = (f"the keypoints of cameras {seeing[0]!r} and {seeing[1]!r} disagree (two cameras cannot tell "
+                f"which one is off; the joint solve followed {[n for n in seeing if n not in rejected][0]!r})"
+                if len(rejected) == 1 else
+                f"the keypoints of camera(s) {', '.join(repr(n) for n in rejected)} disagree with the other cameras")
+    else:
+        text = f"the keypoints of camera(s) {', '.join(repr(n) for n in rejected)} disagree with the other cameras"
     if details:
         text += "; " + "; ".join(details)
     return text + ": check the cameras' world_T_camera", rejected, cut

@@ -822,8 +822,9 @@ def test_messages_of_a_wrong_camera_frame_point_at_the_cameras():
 
     sim = simulate("intersection_2cam_gaussian", seed=5, num_frames=2)
     cameras = dict(sim.scene.cameras)
+    own_y = np.asarray(cameras["cam1"].world_T_camera)[:3, 1]  # turned about its own y axis (panned)
     cameras["cam1"] = dataclasses.replace(cameras["cam1"], world_T_camera=turned(cameras["cam1"].world_T_camera,
-                                                                                  20.0, (0.0, 1.0, 0.0)))
+                                                                                  20.0, own_y))
     opengl = {n: dataclasses.replace(c, world_T_camera=np.asarray(c.world_T_camera) @ np.diag([1.0, -1.0, -1.0, 1.0]))
               for n, c in sim.scene.cameras.items()}
     for frame in sim.scene.frames:

@@ -112,7 +112,8 @@ def linearise(graph: gtsam.NonlinearFactorGraph, projection: gtsam.NonlinearFact
     return Linearisation(H, eta, Hp, eta_p, Hs, eta_s, shape, np.asarray(A), np.ravel(b))
 
 
-def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -> tuple[float, float]:
+def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8,
+                groups: np.ndarray | None = None) -> tuple[float, float, np.ndarray | None]:
     """Robust scale of the whitened keypoint residuals, studentised by the fit's leverages: the solve's noise scale.
 
     With ``e_i`` the 2-vector whitened residuals at the current sigmas and
@@ -139,27 +140,34 @@ def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -
         lin: the linearisation at the solution (current sigmas).
         iterations: at most this many fixed-point iterations of ``s``, ``p`` and the
             residuals (they stop when ``s`` moves by less than 0.1 %).
+        groups: (n,) each observation's camera: the cameras' noise is then compared too
+            (:func:`camera_noise_factors`, from the last iteration's studentised residuals).
 
     Returns:
-        (scale, p): the noise scale (multiplies the sigmas) and the effective
-        number of parameters at that scale.
+        (scale, p, factors): the noise scale (multiplies the sigmas), the effective
+        number of parameters at that scale, and (n,) each observation's camera's own
+        scale relative to it where the cameras' noise differs beyond chance (else None).
 
     Raises:
         numpy.linalg.LinAlgError: the residuals or the linearisation are not finite.
     """
     scale, p = 1.0, 0.0
     if not len(whitened):
-        return scale, p
+        return scale, p, None
     fit = _ScaledFit(whitened, lin)
     for _ in range(iterations):
         previous = scale
         p, q, _ = fit.at(scale)
         if q is None:
-            return scale, p
+            return scale, p, None
         scale = float(np.clip(np.sqrt(max(_median(q) / _CHI2_2_MEDIAN, 0.0)), *NOISE_SCALE_RANGE))
         if abs(scale - previous) <= 1e-3 * previous:
             break
-    return scale, p
+    factors = None
+    if groups is not None and fit.last is not None:  # the last fit's residuals, studentised at ``previous``
+        factors = camera_noise_factors(*fit.last, groups, previous)
+        factors = None if factors is None else factors[0] * (previous / scale)
+    return scale, p, factors
 
 
 def inlier_noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8) -> tuple[float, float, float]:
@@ -230,74 +238,73 @@ def inlier_noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int
     return scale, p, nu
 
 
-def camera_noise_factors(whitened: np.ndarray, lin: Linearisation, groups: np.ndarray, scale: float,
+def camera_noise_factors(q: np.ndarray, freedom: np.ndarray, groups: np.ndarray, scale: float,
                          level: float = 0.999, min_ratio: float = 3.0,
                          min_freedom: float = 4.0) -> tuple[np.ndarray, float] | None:
-    """Each camera's inliers' noise scale relative to the pooled ``scale`` (:func:`inlier_noise_scale`'s), where the
-    cameras' noise differs beyond chance; None where it does not (or cannot be told).
+    """Each camera's noise scale relative to the pooled ``scale``, where the cameras' noise differs beyond chance;
+    None where it does not (or cannot be told).
 
     A detector's confidences may be on another scale in one camera than in another (one camera's scores lower for
-    keypoints as precise): one scale for all then makes one camera's keypoints too sharp and the covariances too
-    narrow (a user's audit, 2026-12-07: pose NEES 2.5x with one camera's scores at 0.3, 6x at 0.1). At ``scale``,
-    each camera ``c`` with inliers (``q_i`` below the 99 % point of its own median's ``s^2 chi2(2)``) has
-    ``s_c^2 = mean(q_i) / E[chi2(2) | chi2(2) < 99 % point]`` on ``nu_c = sum tr(I - M_i)`` degrees of freedom;
-    under one noise for all, ``s_c^2 / s_rest^2`` follows ``F(nu_c, nu_rest)``. Where some camera's ratio lies
-    outside the two-sided ``level`` interval and its ``s_c / s_rest`` is beyond ``min_ratio`` (or below its
-    inverse), every camera with at least ``min_freedom`` degrees of freedom gets its own factor ``s_c / scale``
-    (the others 1). ``level`` and ``min_ratio`` were chosen on fresh ``library_2cam`` seeds 579-598 (the
-    simulator's noise, the same in every camera): at 0.99 and no ratio the factors were applied to 1.5 % of the
-    vehicles at paper-like noise and 6.3 % at hard noise (outliers that fall in one camera), which cost a little
-    accuracy and consistency there (keypoints 15.11 -> 15.28 cm, pose under the chi2 bound 93.6 -> 92.7 %); at
-    0.999 and 2, 0.4 % and 2.3 %; at 0.999 and 3, 0.2 % and 1.4 % (15.15 cm, 93.4 %).
+    keypoints as precise): one scale for all then weighs that camera too little and makes the other's keypoints
+    too sharp (a user's audit, 2026-12-07: pose NEES 11-116 with one camera's scores at 0.1, where the same
+    keypoints at full scores gave 1-18). With ``q_i`` the studentised squared residuals at ``scale``
+    (:func:`noise_scale`'s), each camera ``c`` with inliers (``q_i`` below the 99 % point of its own median's
+    ``s^2 chi2(2)``) has ``s_c^2 = mean(q_i) / E[chi2(2) | chi2(2) < 99 % point]`` on
+    ``nu_c = sum tr(I - M_i)`` degrees of freedom; under one noise for all, ``s_c^2 / s_rest^2`` follows
+    ``F(nu_c, nu_rest)``. Where some camera's ratio lies outside the two-sided ``level`` interval and its
+    ``s_c / s_rest`` is beyond ``min_ratio`` (or below its inverse), every camera with at least ``min_freedom``
+    degrees of freedom gets its own factor ``s_c / scale`` (the others 1). ``level`` and ``min_ratio`` were chosen
+    on fresh ``library_2cam`` seeds 579-598 (the simulator's noise, the same in every camera): at 0.99 and no ratio
+    the factors were applied to 1.5 % of the vehicles at paper-like noise and 6.3 % at hard noise (outliers that
+    fall in one camera), which cost a little accuracy and consistency there (keypoints 15.11 -> 15.28 cm, pose
+    under the chi2 bound 93.6 -> 92.7 %); at 0.999 and 2, 0.4 % and 2.3 %; at 0.999 and 3, 0.2 % and 1.4 %
+    (15.15 cm, 93.4 %).
 
     Args:
-        whitened, lin: as :func:`inlier_noise_scale`'s.
+        q, freedom: (n,) each observation's studentised squared residual at ``scale`` and its ``tr(I - M_i)``
+            (NaN: not usable).
         groups: (n,) each observation's camera.
         scale: the pooled scale.
 
     Returns:
         ((n,) factors, the smallest degrees of freedom among the cameras that got one) or None.
     """
-    groups = np.asarray(groups)
-    if len(np.unique(groups)) < 2 or not len(whitened):
+    q, freedom = np.asarray(q, float), np.asarray(freedom, float)
+    cameras, group = np.unique(np.asarray(groups), return_inverse=True)
+    if len(cameras) < 2:
         return None
-    fit = _ScaledFit(whitened, lin)
-    if not fit.has_system:
-        return None
-    n = len(whitened)
-    q, freedom = np.empty(n), np.empty(n)
-    if not np.isfinite(fit_at_scale_kernel(*fit.arrays, 1.0 / scale**2, _MAX_LEVERAGE, q, freedom)):
-        return None
-    usable = np.isfinite(q)
-    sums = {}  # camera -> (sum of the inliers' q, their count, their degrees of freedom)
-    for c in np.unique(groups):
-        rows = usable & (groups == c)
-        if not rows.any():
-            continue
-        s0 = _median(q[rows]) / _CHI2_2_MEDIAN
-        inlier = rows & (q < _CHI2_2_99 * s0) if s0 > 0 else rows
-        sums[c] = (float(q[inlier].sum()), int(inlier.sum()), float(freedom[inlier].sum()))
-    if len(sums) < 2:
+    usable = np.isfinite(q) & np.isfinite(freedom)
+    inlier = np.zeros(len(q), dtype=bool)
+    for c in range(len(cameras)):  # each camera's inliers, by its own median
+        rows = usable & (group == c)
+        if rows.any():
+            s0 = _median(q[rows]) / _CHI2_2_MEDIAN
+            inlier |= rows & (q < _CHI2_2_99 * s0) if s0 > 0 else rows
+    total = np.bincount(group[inlier], weights=q[inlier], minlength=len(cameras))
+    count = np.bincount(group[inlier], minlength=len(cameras)).astype(float)
+    nu = np.bincount(group[inlier], weights=freedom[inlier], minlength=len(cameras))
+    seen = count > 0
+    if seen.sum() < 2:
         return None
     differs = False
-    for c, (total, count, nu) in sums.items():
-        rest = [v for k, v in sums.items() if k != c]
-        rest_total, rest_count, rest_nu = (sum(v[i] for v in rest) for i in range(3))
-        if min(nu, rest_nu) < min_freedom or not (count and rest_count and rest_total > 0):
+    for c in np.flatnonzero(seen):
+        rest_total, rest_count, rest_nu = total.sum() - total[c], count.sum() - count[c], nu.sum() - nu[c]
+        if min(nu[c], rest_nu) < min_freedom or not rest_total > 0:
             continue
-        ratio = (total / count) / (rest_total / rest_count)
-        high = max(f_quantile(nu, rest_nu, 0.5 + level / 2), min_ratio ** 2)
-        low = min(1.0 / f_quantile(rest_nu, nu, 0.5 + level / 2), min_ratio ** -2)
+        ratio = (total[c] / count[c]) / (rest_total / rest_count)
+        if min_ratio ** -2 <= ratio <= min_ratio ** 2:
+            continue  # within the factor: no F quantile needed (they cost 0.3 ms each in plain Python)
+        high = max(f_quantile(nu[c], rest_nu, 0.5 + level / 2), min_ratio ** 2)
+        low = min(1.0 / f_quantile(rest_nu, nu[c], 0.5 + level / 2), min_ratio ** -2)
         differs |= not low <= ratio <= high
     if not differs:
         return None
-    factors, smallest = np.ones(n), np.inf
-    for c, (total, count, nu) in sums.items():
-        if nu >= min_freedom and total > 0:
-            own = np.sqrt(total / count / _CHI2_2_TRUNCATED_MEAN)
-            factors[groups == c] = float(np.clip(own, *NOISE_SCALE_RANGE)) / scale
-            smallest = min(smallest, nu)
-    return (factors, float(smallest)) if np.isfinite(smallest) else None
+    factors, smallest = np.ones(len(q)), np.inf
+    for c in np.flatnonzero(seen & (nu >= min_freedom) & (total > 0)):
+        own = np.sqrt(total[c] / count[c] / _CHI2_2_TRUNCATED_MEAN)
+        factors[group == c] = float(np.clip(own, *NOISE_SCALE_RANGE)) / scale
+        smallest = min(smallest, float(nu[c]))
+    return (factors, smallest) if np.isfinite(smallest) else None
 
 
 #: Leverage (the larger eigenvalue of an observation's hat block) above which it says nothing about the noise.
@@ -431,6 +438,7 @@ class _ScaledFit:
         if not (np.all(np.isfinite(whitened)) and np.all(np.isfinite(lin.total)) and np.all(np.isfinite(lin.projection))):
             raise np.linalg.LinAlgError("the residuals or the linearisation are not finite")
         self.whitened = np.asarray(whitened, dtype=float)
+        self.last = None  # (q, tr(I - M_i)) of every observation at the last scale evaluated
         n = len(whitened)
         self.has_system = lin.jacobian is not None and lin.jacobian.shape[0] == 2 * n
         m = len(lin.total)
@@ -446,6 +454,7 @@ class _ScaledFit:
         p = fit_at_scale_kernel(*self.arrays, 1.0 / scale**2, _MAX_LEVERAGE, q, freedom)
         if not np.isfinite(p):
             raise np.linalg.LinAlgError("the Hessian at this noise scale is not positive definite")
+        self.last = (q, freedom) if self.has_system else None  # every observation's (NaN: not usable), last scale
         if not self.has_system:  # an equal share of the parameters for every observation
             leverage = min(p / (2.0 * n), 0.95)
             if not leverage < _MAX_LEVERAGE:
@@ -558,7 +567,7 @@ def _moment_matched(model: ShapeModel, weights: dict, negligible: float = 1e-3) 
     for key, w in kept.items():
         d = np.asarray(priors[key].mean).ravel() - mean
         cov += w / total * (priors[key].covariance + np.outer(d, d))
-    return ShapePrior(mean=mean, covariance=0.5 * (cov + cov.T))
+    return ShapePrior.trusted(mean, 0.5 * (cov + cov.T))
 
 
 @dataclass(frozen=True)

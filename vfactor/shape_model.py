@@ -81,6 +81,17 @@ class ShapePrior:
                              ) from None
 
     @classmethod
+    def trusted(cls, mean: np.ndarray, covariance: np.ndarray) -> "ShapePrior":
+        """A prior made by vfactor from priors already checked (a type's at another spread, a mixture's moments):
+        read-only float copies without the checks of a prior built by hand (a Cholesky factor per solve)."""
+        prior = object.__new__(cls)
+        for name, value, shape in (("mean", mean, (12, 3)), ("covariance", covariance, (36, 36))):
+            value = np.array(value, dtype=float).reshape(shape)
+            value.setflags(write=False)
+            object.__setattr__(prior, name, value)
+        return prior
+
+    @classmethod
     def from_wireframes(cls, wireframes, floor_sigma=0.04, inflation: float = 1.5) -> "ShapePrior":
         """Mean and covariance of metric shapes, symmetrised.
 
@@ -373,7 +384,7 @@ class ShapeModel:
         key = (body_type, float(spread))
         if key not in self._variants:
             base = self.pooled if body_type == ANY else self.types[body_type]
-            self._variants[key] = base if spread == 1.0 else ShapePrior(mean=base.mean, covariance=base.covariance * spread)
+            self._variants[key] = base if spread == 1.0 else ShapePrior.trusted(base.mean, base.covariance * spread)
         return self._variants[key]
 
     def suggested_types(self, hints=()) -> tuple[str, ...]:

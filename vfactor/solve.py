@@ -47,7 +47,7 @@ from vfactor.observations import Detection, Frame, Scene
 from vfactor.parallel import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
-from vfactor.shape_evidence import (NOISE_SCALE_RANGE, camera_noise_factors, choose_body_type, covariance_inflation,
+from vfactor.shape_evidence import (NOISE_SCALE_RANGE, choose_body_type, covariance_inflation,
                                     covariance_upper_bound, inlier_noise_scale, linearise, noise_scale,
                                     sandwich_covariance, shape_information)
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
@@ -730,17 +730,16 @@ def _refine(first, obs: KeypointObservations, options: SolveOptions, model: Shap
         if options.estimate_noise:
             world_T_vehicle = estimate.atPose3(keys.pose_key())
             points = wireframe_from_values(estimate, keys).vehicle_p_keypoints
-            whitened = whitened_residuals(scaled, world_T_vehicle, points)
-            relative, p_eff = noise_scale(whitened, lin)
+            relative, p_eff, cameras = noise_scale(whitened_residuals(scaled, world_T_vehicle, points), lin,
+                                                   groups=obs.camera_index if k < passes - 1 else None)
             new_scale = float(np.clip(scale * relative, *NOISE_SCALE_RANGE))
             extras.update(effective_parameters=p_eff)
-            cameras = camera_noise_factors(whitened, lin, obs.camera_index, relative) if k < passes - 1 else None
             if cameras is not None:  # the cameras' noise differs beyond chance: each camera's sigmas put on one scale
-                obs = obs.scaled(cameras[0])
+                obs = obs.scaled(cameras)
                 found = extras.setdefault("camera_noise_factors", {})
                 for c in np.unique(obs.camera_index):
                     name = obs.cameras[int(c)].name
-                    found[name] = found.get(name, 1.0) * float(cameras[0][obs.camera_index == c][0])
+                    found[name] = found.get(name, 1.0) * float(cameras[obs.camera_index == c][0])
         if model is not None:
             information, eta = shape_information(lin, (scale / new_scale) ** 2)
             choice = choose_body_type(model, information, eta, hints)

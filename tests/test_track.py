@@ -989,3 +989,28 @@ def test_a_smoother_stalled_short_of_its_minimum_is_solved_again():
     assert again.atPose3(key).equals(track.smoother.calculateEstimate().atPose3(key), 1e-12)
     assert np.linalg.norm(again.atPose3(key).translation() - settled.atPose3(key).translation()) < 0.01
     assert graph.error(again) < 1.01 * graph.error(settled)
+
+
+def test_tracks_take_the_box_model_of_their_solve_options():
+    """SolveOptions.box_model was used by one-frame solves only: tracks (online and batch) drew their boxes with the
+    default model whatever the user gave (a user's audit, 2026-12-07)."""
+    import dataclasses as dc
+
+    from vfactor.box import default_box_model
+    from vfactor.sim import simulate
+    from vfactor.solve import SolveOptions
+    from vfactor.track import TrackOptions, smooth_scene, track_scene
+
+    base = default_box_model()
+    longer = dc.replace(base, mean={t: m + np.array([0.5, 0.0, 0.0, 0.0, 0.0]) for t, m in base.mean.items()})
+    scene = simulate("intersection_2cam_track", seed=0, num_frames=4).scene
+    def frames(out):  # track_scene's TrackRun or smooth_scene's frames
+        return out.frames if hasattr(out, "frames") else out
+
+    for run in (track_scene, smooth_scene):
+        plain = frames(run(scene, TrackOptions(covariance=False)))
+        mine = frames(run(scene, TrackOptions(covariance=False, solve=SolveOptions(box_model=longer))))
+        a = [v.box.size for f in plain for v in f.vehicles if v.box is not None]
+        b = [v.box.size for f in mine for v in f.vehicles if v.box is not None]
+        assert a and len(a) == len(b)
+        assert not np.allclose(a, b), run.__name__

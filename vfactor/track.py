@@ -527,7 +527,7 @@ class Tracker:
         result = VehicleResult(track.id, Status.CONVERGED, world_T_vehicle=pose, wireframe=wireframe,
                                pose_covariance=covariance, message=track.notes.get(key, message),
                                body_type=track.body_type, body_type_probability=track.body_type_probability,
-                               box=_box(pose, wireframe, track.body_type))
+                               box=_box(pose, wireframe, track.body_type, self.options.solve.box_model))
         result.extras["noise_scale"] = track.noise_scale
         hub = self._hub_key(track)
         if hub is not None and estimate.exists(hub):  # the wheel radius the track's poses share (a road plane given)
@@ -1730,7 +1730,8 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
             vid, Status.MAX_ITERATIONS if hit else Status.CONVERGED, world_T_vehicle=pose,
             wireframe=wireframe, pose_covariance=marginals.marginalCovariance(key) if marginals else None,
             iterations=optimizer.iterations(), final_error=graph.error(estimate),
-            body_type=body_type, body_type_probability=probability, box=_box(pose, wireframe, body_type))
+            body_type=body_type, body_type_probability=probability,
+            box=_box(pose, wireframe, body_type, options.solve.box_model))
         results[i].extras["noise_scale"] = scale
         results[i].extras["fit_noise_scale"] = fits[i]
         if hub is not None:  # the wheel radius the track's poses share
@@ -1823,6 +1824,7 @@ def _covariance_graph(factors: list, projections: list, estimate: gtsam.Values, 
     return out, values
 
 
-def _box(world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, body_type: str | None):
-    """A track's box, without sigmas (the tracker keeps the poses' covariances only)."""
-    return vehicle_box(world_T_vehicle, wireframe, None, {body_type: 1.0} if body_type else None)
+def _box(world_T_vehicle: gtsam.Pose3, wireframe: Wireframe, body_type: str | None, model=None):
+    """A track's box, without sigmas (the tracker keeps the poses' covariances only), with the box ``model``
+    (``SolveOptions.box_model``; None: the default one)."""
+    return vehicle_box(world_T_vehicle, wireframe, None, {body_type: 1.0} if body_type else None, model)

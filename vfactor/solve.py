@@ -1036,15 +1036,13 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
             if d != c and (obs.camera_index == d).any() and np.median(other.to_camera(world)[:, 2]) <= 0:
                 details.append(f"as camera '{obs.cameras[c].name}' sees it, the vehicle lies behind camera "
                                f"'{other.name}'")
+    text = f"the keypoints of camera(s) {', '.join(repr(n) for n in rejected)} disagree with the other cameras"
     seeing = [camera.name for c, camera in enumerate(obs.cameras)
               if (obs.camera_index == c).sum() >= options.min_keypoints_in_one_view]
-    if len(seeing) == 2:  # two cameras cannot tell which of them is off: both are named
+    if len(seeing) == 2 and len(rejected) == 1:  # two cameras cannot tell which of them is off: both are named
+        followed = seeing[1] if seeing[0] in rejected else seeing[0]
         text = (f"the keypoints of cameras {seeing[0]!r} and {seeing[1]!r} disagree (two cameras cannot tell "
-                f"which one is off; the joint solve followed {[n for n in seeing if n not in rejected][0]!r})"
-                if len(rejected) == 1 else
-                f"the keypoints of camera(s) {', '.join(repr(n) for n in rejected)} disagree with the other cameras")
-    else:
-        text = f"the keypoints of camera(s) {', '.join(repr(n) for n in rejected)} disagree with the other cameras"
+                f"which one is off; the joint solve followed {followed!r})")
     if details:
         text += "; " + "; ".join(details)
     return text + ": check the cameras' world_T_camera", rejected, cut

@@ -1577,6 +1577,8 @@ def _through_common(offsets: dict[str, int], obs: KeypointObservations, biased: 
 #: paper-like and hard noise) 9 frames did so, none of them in a wrong track (0.3-1.3 deg, 4-12 cm off), never three
 #: in one track (seeds 310-315, 108 tracks: none); of the two ids exchanged half way of an audit's scene, 40 of 79.
 _BATCH_SUSPECT_FRAMES = 3
+#: The fixed lag (seconds) of the tracker that looks for the jumps of a batch-smoothed track.
+_JUMP_SEARCH_LAG = 1.0
 
 
 def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
@@ -1614,7 +1616,10 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
 
     results, suspect = smoothed(set(notes))
     if suspect >= _BATCH_SUSPECT_FRAMES:  # the tracker's jumps: where the id follows another vehicle
-        tracker = Tracker(cameras, options, model or prior, bounds)
+        # with a fixed lag and no covariances: only its jumps are wanted, and a tracker that keeps every pose costs
+        # more with every frame (a 665-frame track took 484 s, 0.7 s a pose; a user's audit)
+        tracker = Tracker(cameras, dataclasses.replace(options, lag=_JUMP_SEARCH_LAG, covariance=False),
+                          model or prior, bounds)
         for i, frame in frames:
             tracker.add_frame(frame, i)
         jumps = {f: what for f, _, what in tracker.jumps.get(vid, []) if f not in notes}

@@ -1014,3 +1014,25 @@ def test_tracks_take_the_box_model_of_their_solve_options():
         b = [v.box.size for f in mine for v in f.vehicles if v.box is not None]
         assert a and len(a) == len(b)
         assert not np.allclose(a, b), run.__name__
+
+
+def test_batch_names_a_camera_whose_detections_follow_another_vehicle():
+    """cam0's 2D tracker swaps two vehicles' ids half way, cam1 keeps them: the robust loss outvoted cam0 and every
+    frame came out `converged` without a word (a user's audit). The frames now name the camera."""
+    import dataclasses as dc
+
+    from vfactor.sim import simulate
+    from vfactor.track import smooth_scene
+
+    scene = simulate("tracks_3veh", seed=2, num_frames=30).scene
+    swap = {"v1": "v3", "v3": "v1"}
+    swapped = dc.replace(scene, frames=[dc.replace(f, detections=[
+        dc.replace(d, vehicle=swap.get(d.vehicle, d.vehicle)) if d.camera == "cam0" and i >= 15 else d
+        for d in f.detections]) for i, f in enumerate(scene.frames)])
+    plain = smooth_scene(scene)
+    assert not any(v.extras.get("camera_fit_noise_scale") for f in plain for v in f.vehicles)
+    odd = smooth_scene(swapped)
+    for i in range(16, 29):
+        v1 = {v.id: v for v in odd[i].vehicles}["v1"]
+        assert set(v1.extras["camera_fit_noise_scale"]) == {"cam0"}, i
+        assert "the keypoints of camera 'cam0' fit the track" in v1.message

@@ -1723,8 +1723,9 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
     wireframe = wireframe_from_values(estimate, keys, index)
     hit = optimizer.iterations() >= options.solve.max_iterations
     points = wireframe.vehicle_p_keypoints
-    fits = {i: _fit_scale(_frame_residuals(obs, estimate, keys, index, i, frame_offsets, points))
-            for _, i, obs, frame_offsets in projections}
+    residuals = {i: (obs, _frame_residuals(obs, estimate, keys, index, i, frame_offsets, points))
+                 for _, i, obs, frame_offsets in projections}
+    fits = {i: _fit_scale(r) for i, (_, r) in residuals.items()}
     own = {i: first.extras.get("fit_noise_scale") for (i, _), first in zip(frames, firsts)
            if first is not None and first.ok}  # against the nominal sigmas; the track's fits at scale times them
     suspect = sum(bool(own.get(i)) and own[i] < POOR_FIT_SCALE and fits[i] * scale >= POOR_FIT_SCALE * own[i]
@@ -1745,7 +1746,32 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
             results[i].extras["swapped_keypoints"] = swaps[i]
         if marginals:
             results[i].extras["covariance"] = "smoothed"
+        if i in residuals:
+            odd = _cameras_at_odds(*residuals[i], scale)
+            if odd:
+                results[i].extras["camera_fit_noise_scale"] = odd
+                results[i].message = "; ".join(
+                    f"the keypoints of camera {name!r} fit the track {fit:.2g} times worse than their sigmas, the "
+                    "other cameras' within them: its detection there is another vehicle's (a 2D tracker's id "
+                    "swap) or mostly outliers"
+                    for name, fit in odd.items())
     return results, suspect
+
+
+def _cameras_at_odds(obs: KeypointObservations, residuals: np.ndarray, scale: float) -> dict[str, float]:
+    """The cameras (name -> fit) whose keypoints of a frame fit a smoothed track at least
+    :data:`~vfactor.solve.POOR_FIT_SCALE` times worse than their nominal sigmas while another camera's fit within
+    them (its keypoints at least 4; ``residuals`` whitened at the track's sigmas, ``scale`` times the nominal ones):
+    a 2D tracker that gave one camera's detections of another vehicle this id (a user's audit: 11 frames whose one
+    camera fit 10-83 times worse, all `converged` without a word while the robust loss outvoted that camera)."""
+    fit = {}
+    for c, camera in enumerate(obs.cameras):
+        rows = obs.camera_index == c
+        if rows.sum() >= 4:
+            fit[camera.name] = _fit_scale(residuals[rows]) * scale
+    if not any(f < POOR_FIT_SCALE for f in fit.values()):
+        return {}
+    return {name: f for name, f in fit.items() if f >= POOR_FIT_SCALE}
 
 
 def _frame_residuals(obs: KeypointObservations, values: gtsam.Values, keys: KeyScheme, index: int, frame: int,

@@ -1050,3 +1050,27 @@ def test_a_fixed_lag_track_does_not_drift():
     assert len(late) > 100
     assert np.mean([r["translation_cm"] for r in late]) < 7.0
     assert np.mean([r["pose_nees"] < 12.59 for r in late]) > 0.95
+
+
+def test_batch_gives_each_camera_its_noise_scale_where_the_cameras_differ():
+    """Both cameras' keypoints equally precise, one camera's scores ten times lower: batch smoothing weighed that
+    camera too little and the other too much (pose NEES 10.4 where equal scores gave 4.0, a user's audit). Over a
+    track each camera's keypoints say their own scale: where they differ threefold the track is smoothed again
+    with each camera's (here 6.0)."""
+    import dataclasses as dc
+
+    from vfactor.sim import simulate
+    from vfactor.track import smooth_scene
+
+    plain = simulate("intersection_2cam_track", seed=2, num_frames=12).scene
+    low = dc.replace(plain, frames=[dc.replace(f, detections=[
+        dc.replace(d, confidence=d.confidence / 10) if d.camera == "cam1" else d for d in f.detections])
+        for f in plain.frames])
+    equal, smoothed = smooth_scene(plain), smooth_scene(low)
+    assert not any("camera_noise_factors" in v.extras for f in equal for v in f.vehicles)
+    factors = [v.extras["camera_noise_factors"] for f in smoothed for v in f.vehicles if v.ok]
+    assert factors and all(f["cam1"] / f["cam0"] < 0.3 for f in factors)
+    for a, b in zip(equal, smoothed):  # the poses' sigmas as with equal scores
+        for u, v in zip(a.vehicles, b.vehicles):
+            ratio = np.sqrt(np.diag(v.pose_covariance) / np.diag(u.pose_covariance))
+            assert np.all((ratio > 0.8) & (ratio < 1.3)), ratio  # one scale for all: 0.68-1.54

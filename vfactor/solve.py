@@ -397,7 +397,7 @@ def solve_observations(
     if options.covariance:
         try:
             covariance_graph, inflation, inliers, covariance_scale = _covariance_graph(
-                graph, obs, _camera_scaled(nominal, extras.get("camera_noise_factors")),
+                graph, obs, nominal.camera_scaled(extras.get("camera_noise_factors")),
                 float(extras.get("noise_scale", 1.0)), estimate, keys, options)
             linear = covariance_graph.linearize(estimate)  # once: the marginals and the sandwich's residuals
             marginal = pose_shape_covariance(gtsam.Marginals(linear, estimate), keys)
@@ -501,13 +501,6 @@ INLIER_BOUND = 2.0 * np.log(100.0)
 SCALE_CANDIDATE_BOUND = 4.0 * INLIER_BOUND
 #: ... where at least this many are; else on all of them.
 MIN_SCALE_CANDIDATES = 6
-
-
-def _camera_scaled(obs: KeypointObservations, factors: dict | None) -> KeypointObservations:
-    """``obs`` with each camera's sigmas times its factor (camera name -> factor; None: as they are)."""
-    if not factors:
-        return obs
-    return obs.scaled(np.array([factors.get(obs.cameras[int(c)].name, 1.0) for c in obs.camera_index]))
 
 
 def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservations, nominal: KeypointObservations,

@@ -1640,7 +1640,7 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
 
 
 def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: TrackOptions, model, prior, bounds,
-                  piece: list) -> tuple[dict[int, VehicleResult], int]:
+                  piece: list, camera_factors: dict | None = None) -> tuple[dict[int, VehicleResult], int]:
     """One piece of a track (``[((frame index, frame), its one-frame solve or None), ...]``) smoothed by
     Levenberg-Marquardt from its frames' own solves, each keypoint's sigma sized by the vehicle its frame's solve
     found (:func:`vfactor.graph.sized_observations`, as the one-frame solve sizes them; a frame whose solve failed
@@ -1648,6 +1648,11 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
     how many of its frames' keypoints fit a vehicle of their own at least :data:`~vfactor.solve.POOR_FIT_SCALE`
     times better than the smoothed track (each result's ``extras["fit_noise_scale"]``: how they fit the track,
     against their sigmas at the track's noise scale).
+
+    Where the cameras' keypoints fit the smoothed track at scales :data:`_CAMERA_SCALE_RATIO` or more apart (a
+    detector's scores on another scale in one camera; each camera's median over all the piece's frames), the piece
+    is smoothed again with each camera's sigmas times its own factor (``camera_factors``, camera name -> factor;
+    the results' ``extras["camera_noise_factors"]``): one scale for all made the other cameras' keypoints too sharp.
     """
     keys = KeyScheme()
     config = options.solve.graph
@@ -1677,7 +1682,8 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
         trusted = solved and (first.status != Status.POOR_FIT or not posed)  # a poor fit starts no pose but the first
         guess = first.world_T_vehicle if trusted else values.atPose3(posed[-1][2])
         shape_at = first.wireframe if trusted else wireframe_from_values(values, keys, index)
-        obs = sized_observations(frame.detections, cameras, config, guess, shape_at).scaled_above_calibrated(scale)
+        obs = sized_observations(frame.detections, cameras, config, guess, shape_at).camera_scaled(
+            camera_factors).scaled_above_calibrated(scale)
         if trusted and first.extras.get("swapped_keypoints"):
             swaps[i] = first.extras["swapped_keypoints"]
             obs = apply_swaps(obs, swaps[i])
@@ -1731,6 +1737,16 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
     points = wireframe.vehicle_p_keypoints
     residuals = {i: (obs, _frame_residuals(obs, estimate, keys, index, i, frame_offsets, points))
                  for _, i, obs, frame_offsets in projections}
+    if camera_factors is None:  # the cameras' own scales over the piece's frames, where they differ that much
+        own = _camera_fit_scales(residuals.values())
+        if len(own) >= 2 and max(own.values()) >= _CAMERA_SCALE_RATIO * min(own.values()):
+            pooled = _fit_scale(np.concatenate([r for _, r in residuals.values()]))
+            factors = {name: fit / pooled for name, fit in own.items()}
+            again, suspect_again = _smooth_piece(vid, index, cameras, options, model, prior, bounds, piece, factors)
+            for result in again.values():
+                if result.ok:
+                    result.extras["camera_noise_factors"] = factors
+            return again, suspect_again
     fits = {i: _fit_scale(r) for i, (_, r) in residuals.items()}
     own = {i: first.extras.get("fit_noise_scale") for (i, _), first in zip(frames, firsts)
            if first is not None and first.ok}  # against the nominal sigmas; the track's fits at scale times them
@@ -1753,7 +1769,7 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
         if marginals:
             results[i].extras["covariance"] = "smoothed"
         if i in residuals:
-            odd = _cameras_at_odds(*residuals[i], scale)
+            odd = _cameras_at_odds(*residuals[i], scale, camera_factors)
             if odd:
                 results[i].extras["camera_fit_noise_scale"] = odd
                 results[i].message = "; ".join(
@@ -1764,17 +1780,40 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
     return results, suspect
 
 
-def _cameras_at_odds(obs: KeypointObservations, residuals: np.ndarray, scale: float) -> dict[str, float]:
+#: A batch-smoothed track's cameras get a noise scale each where their keypoints' scales over the track differ by
+#: this factor or more (:func:`_smooth_piece`; the one-frame solve's rule, ``camera_noise_factors``, has far fewer
+#: degrees of freedom per camera and asks the F test too).
+_CAMERA_SCALE_RATIO = 3.0
+#: ... and each such camera has at least this many keypoints over the track.
+_CAMERA_SCALE_MIN_KEYPOINTS = 20
+
+
+def _camera_fit_scales(frames) -> dict[str, float]:
+    """Camera name -> the scale of its whitened residuals over frames of ``(observations, residuals)``
+    (:func:`_fit_scale`), for the cameras with at least :data:`_CAMERA_SCALE_MIN_KEYPOINTS` keypoints."""
+    rows: dict[str, list] = {}
+    for obs, residuals in frames:
+        for c, camera in enumerate(obs.cameras):
+            mine = residuals[obs.camera_index == c]
+            if len(mine):
+                rows.setdefault(camera.name, []).append(mine)
+    stacked = {name: np.concatenate(parts) for name, parts in rows.items()}
+    return {name: _fit_scale(r) for name, r in stacked.items() if len(r) >= _CAMERA_SCALE_MIN_KEYPOINTS}
+
+
+def _cameras_at_odds(obs: KeypointObservations, residuals: np.ndarray, scale: float,
+                     camera_factors: dict | None = None) -> dict[str, float]:
     """The cameras (name -> fit) whose keypoints of a frame fit a smoothed track at least
     :data:`~vfactor.solve.POOR_FIT_SCALE` times worse than their nominal sigmas while another camera's fit within
-    them (its keypoints at least 4; ``residuals`` whitened at the track's sigmas, ``scale`` times the nominal ones):
+    them (its keypoints at least 4; ``residuals`` whitened at the track's sigmas, ``scale`` times the nominal ones,
+    and each camera's ``camera_factors`` where the track has them):
     a 2D tracker that gave one camera's detections of another vehicle this id (a user's audit: 11 frames whose one
     camera fit 10-83 times worse, all `converged` without a word while the robust loss outvoted that camera)."""
     fit = {}
     for c, camera in enumerate(obs.cameras):
         rows = obs.camera_index == c
         if rows.sum() >= 4:
-            fit[camera.name] = _fit_scale(residuals[rows]) * scale
+            fit[camera.name] = _fit_scale(residuals[rows]) * scale * (camera_factors or {}).get(camera.name, 1.0)
     if not any(f < POOR_FIT_SCALE for f in fit.values()):
         return {}
     return {name: f for name, f in fit.items() if f >= POOR_FIT_SCALE}

@@ -211,6 +211,13 @@ class KeypointObservations:
         return self._with(sqrt_information=L / factor[:, None, None],
                           _sigma_table=np.where(truncated[:, None], self._sigma_table * factor[:, None], 1.0))
 
+    def camera_scaled(self, factors: dict | None) -> "KeypointObservations":
+        """:meth:`scaled` by each camera's factor (camera name -> factor; a camera not named, or None: 1): a noise
+        scale per camera (``extras["camera_noise_factors"]`` of a solve)."""
+        if not factors:
+            return self
+        return self.scaled(np.array([factors.get(self.cameras[int(c)].name, 1.0) for c in self.camera_index]))
+
     def scaled_above_calibrated(self, noise_scale: float) -> "KeypointObservations":
         """:meth:`scaled` by ``noise_scale``, except that a scale below 1 leaves the calibrated observations
         (:attr:`calibrated`: the detector's covariances calibrated against its true errors) at their sigmas: an

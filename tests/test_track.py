@@ -1025,14 +1025,15 @@ def test_batch_names_a_camera_whose_detections_follow_another_vehicle():
     from vfactor.track import smooth_scene
 
     scene = simulate("tracks_3veh", seed=2, num_frames=30).scene
+    scene = dc.replace(scene, frames=scene.frames[8:])  # v1 and v3 in both cameras
     swap = {"v1": "v3", "v3": "v1"}
     swapped = dc.replace(scene, frames=[dc.replace(f, detections=[
-        dc.replace(d, vehicle=swap.get(d.vehicle, d.vehicle)) if d.camera == "cam0" and i >= 15 else d
+        dc.replace(d, vehicle=swap.get(d.vehicle, d.vehicle)) if d.camera == "cam0" and i >= 7 else d
         for d in f.detections]) for i, f in enumerate(scene.frames)])
     plain = smooth_scene(scene)
     assert not any(v.extras.get("camera_fit_noise_scale") for f in plain for v in f.vehicles)
     odd = smooth_scene(swapped)
-    for i in range(16, 29):
+    for i in range(8, 21):
         v1 = {v.id: v for v in odd[i].vehicles}["v1"]
         assert set(v1.extras["camera_fit_noise_scale"]) == {"cam0"}, i
         assert "the keypoints of camera 'cam0' fit the track" in v1.message
@@ -1041,13 +1042,13 @@ def test_batch_names_a_camera_whose_detections_follow_another_vehicle():
 def test_a_fixed_lag_track_does_not_drift():
     """With iSAM2's dogleg (the default until 2026-12-07) a fixed-lag track fell behind: long_track with a 1 s lag,
     its online poses 12-18 cm off and their pose NEES 2-5x after 6 s (41-69 % under the chi2 95 % bound), where
-    Gauss-Newton keeps 4-5 cm and 98-100 % (a user's audit found it over minutes of a stream)."""
+    Gauss-Newton keeps 4-5 cm and 98-100 % (a user's audit found it over minutes of a stream); 14 s here."""
     from vfactor.evaluation import held_out_scene_model, pose_rows
 
-    sim = simulate("long_track", seed=1, num_frames=200)
+    sim = simulate("long_track", seed=1, num_frames=140)
     run = track_scene(sim.scene, TrackOptions(lag=1.0), prior=held_out_scene_model(sim))
     late = [r for r in pose_rows(sim, run.online) if r["frame"] >= 60 and "rotation_deg" in r]
-    assert len(late) > 100
+    assert len(late) > 70
     assert np.mean([r["translation_cm"] for r in late]) < 7.0
     assert np.mean([r["pose_nees"] < 12.59 for r in late]) > 0.95
 

@@ -136,15 +136,16 @@ class TrackOptions:
             ``detector_offsets`` is ``False``, with or without a plane. Off, the smoothed covariances still consider
             each camera's offset (a variable at the identity in the covariances' graph only, docs/factors.md,
             "Covariances of tracks"): the estimate does without it, the covariances do not.
-        optimizer: iSAM2's step: ``"gn"`` (Gauss-Newton, the default) or
-            ``"dogleg"`` (Powell's dogleg, a trust region). The dogleg was the
-            default until 2026-12-07 (Gauss-Newton steps had diverged when a
-            weakly constrained track was suddenly well seen, before young tracks
-            were re-solved by LM): with a fixed lag its steps fell behind and the
-            marginals of the poses let go froze that (``long_track``, 1000
+        optimizer: iSAM2's step: ``"auto"`` (the default: Powell's dogleg while
+            the track is young, Gauss-Newton from then on), ``"dogleg"`` or
+            ``"gn"`` (Gauss-Newton) throughout. The dogleg throughout was the
+            default until 2026-12-07: with a fixed lag its steps fell behind and
+            the marginals of the poses let go froze that (``long_track``, 1000
             frames, a 1 s lag: online rotation 1.6 -> 3.3 deg and pose NEES
             2.3x -> 14.9x over the run, where Gauss-Newton stays at 0.9 deg and
-            0.65x-0.72x; docs/reliability.md).
+            0.65x-0.72x); Gauss-Newton throughout diverges by metres to tens of
+            metres at some young tracks at hard noise, which the dogleg's trust
+            region holds (docs/reliability.md, "Long tracks with a fixed lag drifted").
         dogleg_delta: initial trust-region radius of the dogleg.
     """
 
@@ -158,7 +159,7 @@ class TrackOptions:
     relinearize_threshold: float = 1e-4
     covariance: bool = True
     detector_offsets: bool | None = None
-    optimizer: str = "gn"
+    optimizer: str = "auto"
     dogleg_delta: float = 1.0
 
     def __post_init__(self):  # every field, as SolveOptions and GraphConfig check theirs
@@ -174,8 +175,8 @@ class TrackOptions:
                 raise ValueError(f"TrackOptions.{name}: expected a {kind.__name__}, got {getattr(self, name)!r}")
         if not isinstance(self.covariance, bool):
             raise ValueError(f"TrackOptions.covariance: expected True or False, got {self.covariance!r}")
-        if self.optimizer not in ("dogleg", "gn"):
-            raise ValueError(f"TrackOptions.optimizer: expected 'dogleg' or 'gn', got {self.optimizer!r}")
+        if self.optimizer not in ("auto", "dogleg", "gn"):
+            raise ValueError(f"TrackOptions.optimizer: expected 'auto', 'dogleg' or 'gn', got {self.optimizer!r}")
         if not isinstance(self.max_updates, int) or self.max_updates < 0:
             raise ValueError(f"TrackOptions.max_updates: expected an integer >= 0, got {self.max_updates!r}")
         if not isinstance(self.shape_prior_loss, RobustLoss):
@@ -514,9 +515,10 @@ class Tracker:
             self._next_index += 1
         return self._tracks[vid]
 
-    def _new_smoother(self) -> gtsam.IncrementalFixedLagSmoother:
+    def _new_smoother(self, young: bool = False) -> gtsam.IncrementalFixedLagSmoother:
+        """A smoother with the steps of ``options.optimizer`` (``"auto"``: the dogleg for a ``young`` track)."""
         params = gtsam.ISAM2Params()
-        if self.options.optimizer == "dogleg":
+        if self.options.optimizer == "dogleg" or (self.options.optimizer == "auto" and young):
             dogleg = gtsam.ISAM2DoglegParams()
             dogleg.setInitialDelta(self.options.dogleg_delta)
             params.setOptimizationParams(dogleg)
@@ -567,7 +569,7 @@ class Tracker:
         # the track's graph keeps the first frame's keypoints as the detector sized them: sized by the vehicle the
         # frame's solve found, a vehicle re-drawn under an id that jumped was merged worse (intersection_multi)
         self._rechoose(track, [first])  # the prior and noise scale the frame's own solve used
-        track.smoother = self._new_smoother()
+        track.smoother = self._new_smoother(young=True)
         track.poses, track.hwc_added = [], False
         key = self.keys.pose_key(track.index, frame_index)
         if first.extras.get("swapped_keypoints"):  # the track's graph takes the labels the frame's solve settled on
@@ -679,6 +681,7 @@ class Tracker:
         held = _held(track)  # its poses stay at least until this re-solve has been read (a fixed lag)
         if not all(estimate.exists(k) for k in self._young_graph(track).keyVector()):  # poses marginalised (lag)
             track.young, track.young_frames = False, []
+            self._mature(track, t)
             return
         graph, solved = self._solved_young(track, track.young_frames, estimate, [k for *_, k in track.poses],
                                            fresh=not track.reanchored)
@@ -712,11 +715,24 @@ class Tracker:
                           t: float, held: bool) -> None:
         """A new smoother for the track from a whole-graph solution; with ``held`` every pose is stamped ``t``, so
         that a fixed lag keeps it until this solution has been read."""
-        track.smoother = self._new_smoother()
+        track.smoother = self._new_smoother(track.young)
         stamps = {key: t if held else stamp for _, stamp, key in track.poses}
         stamps.update({k: t for k in self._shape_keys(track)})
         stamps.update({k: t for k in track.offset_priors if solved.exists(k)})
         track.smoother.update(graph, solved, stamps)
+
+    def _mature(self, track: _TrackState, t: float) -> None:
+        """A track no longer young: with ``optimizer="auto"`` its smoother restarts with Gauss-Newton steps from its
+        own graph (the marginals of the poses it let go included) and estimate (where a re-solve ends the young
+        phase, :meth:`_restart_smoother` makes the new smoother so already)."""
+        if self.options.optimizer != "auto" or track.smoother is None:
+            return
+        factors = track.smoother.getFactors()
+        graph = gtsam.NonlinearFactorGraph()
+        for j in range(factors.size()):
+            if factors.at(j) is not None:
+                graph.add(factors.at(j))
+        self._restart_smoother(track, graph, track.smoother.calculateEstimate(), t, _held(track))
 
     def _unstuck(self, track: _TrackState, key: int, t: float, estimate: gtsam.Values,
                  wireframe: Wireframe) -> tuple[gtsam.Values, Wireframe]:
@@ -1112,6 +1128,7 @@ class Tracker:
                 # one camera only for longer than the window holds a young track: its first poses are gone, so it
                 # can no longer be re-solved whole (and a stream's memory stays bounded)
                 track.young, track.young_frames = False, []
+                self._mature(track, t)
         return self._finish(track, key, t)
 
     def _turned(self, track: _TrackState, obs: KeypointObservations, guess: gtsam.Pose3, estimate: gtsam.Values,

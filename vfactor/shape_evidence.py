@@ -27,7 +27,7 @@ from vfactor.keys import KeyScheme
 from vfactor.shape_model import ANY, ShapeModel, ShapePrior
 from vfactor.stats import chi2_quantile, f_quantile
 
-__all__ = ["Linearisation", "linearise", "noise_scale", "inlier_noise_scale", "camera_noise_factors",
+__all__ = ["Linearisation", "linearise", "median_scale", "noise_scale", "inlier_noise_scale", "camera_noise_factors",
            "covariance_inflation", "sandwich_covariance",
            "covariance_upper_bound", "symmetric_eigen", "shape_information", "BodyTypeChoice", "choose_body_type",
            "TrackShape", "track_shape", "NOISE_SCALE_RANGE"]
@@ -47,6 +47,12 @@ def _median(q: np.ndarray) -> float:
         return float(np.median(q))
     q, half = np.sort(q), len(q) // 2
     return float(q[half]) if len(q) % 2 else float((q[half - 1] + q[half]) / 2)
+
+
+def median_scale(squared: np.ndarray) -> float:
+    """``sqrt(median(q) / median chi2(2))`` of squared 2-vector residuals ``q`` (whitened): how many times their
+    sigmas they are, robustly (up to half of them outliers)."""
+    return float(np.sqrt(_median(squared) / _CHI2_2_MEDIAN))
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass, field
 from functools import lru_cache
 from itertools import combinations
@@ -25,6 +24,7 @@ import numpy as np
 from vfactor import prebuilt
 from vfactor._kernels import log_evidence_kernel
 from vfactor.errors import InputError
+from vfactor.jsonio import is_number
 from vfactor.keypoints import LAYERS
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes, symmetrised
 
@@ -218,7 +218,8 @@ class HwcBounds:
 
         distance = union(self.distance, other.distance, 0.05)
         distance.setflags(write=False)
-        width_ratio = {k: tuple(float(x) for x in union(v, other.width_ratio[k], 0.05)) for k, v in self.width_ratio.items()}
+        width_ratio = {k: tuple(float(x) for x in union(v, other.width_ratio[k], 0.05))
+                       for k, v in self.width_ratio.items()}
         layer_offset = {k: union(v, other.layer_offset[k], 0.10) for k, v in self.layer_offset.items()}
         return HwcBounds(distance=distance, width_ratio=width_ratio, layer_offset=layer_offset)
 
@@ -472,7 +473,7 @@ def _log_sum(values) -> float:
 
 
 def _finite_number(value) -> bool:
-    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) and math.isfinite(value)
+    return is_number(value) and math.isfinite(value)
 
 
 def resolve_shape_prior(prior: "ShapePrior | ShapeModel | None",

@@ -64,7 +64,7 @@ from vfactor.observations import Detection, Frame, Scene
 from vfactor.parallel import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
-from vfactor.shape_evidence import track_shape
+from vfactor.shape_evidence import median_scale, track_shape
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
 from vfactor.solve import GROSS_OUTLIER_SIGMAS, INLIER_BOUND, POOR_FIT_SCALE, SolveOptions, solve_observations
 from vfactor.wireframe import Wireframe
@@ -727,12 +727,8 @@ class Tracker:
         phase, :meth:`_restart_smoother` makes the new smoother so already)."""
         if self.options.optimizer != "auto" or track.smoother is None:
             return
-        factors = track.smoother.getFactors()
-        graph = gtsam.NonlinearFactorGraph()
-        for j in range(factors.size()):
-            if factors.at(j) is not None:
-                graph.add(factors.at(j))
-        self._restart_smoother(track, graph, track.smoother.calculateEstimate(), t, _held(track))
+        self._restart_smoother(track, _smoother_graph(track.smoother), track.smoother.calculateEstimate(), t,
+                               _held(track))
 
     def _unstuck(self, track: _TrackState, key: int, t: float, estimate: gtsam.Values,
                  wireframe: Wireframe) -> tuple[gtsam.Values, Wireframe]:
@@ -758,11 +754,7 @@ class Tracker:
         loss = self.options.solve.graph.loss
         if not len(obs) or np.sum(loss.rho(np.linalg.norm(residuals, axis=1))) <= _STUCK_COST * len(obs):
             return estimate, wireframe
-        factors = smoother.getFactors()
-        graph = gtsam.NonlinearFactorGraph()
-        for j in range(factors.size()):
-            if factors.at(j) is not None:
-                graph.add(factors.at(j))
+        graph = _smoother_graph(smoother)
         try:
             solved = gtsam.LevenbergMarquardtOptimizer(graph, estimate, self.options.solve.lm_params()).optimize()
         except RuntimeError:
@@ -1852,12 +1844,22 @@ def _frame_residuals(obs: KeypointObservations, values: gtsam.Values, keys: KeyS
 
 
 def _fit_scale(residuals: np.ndarray) -> float:
-    """How many times worse than their sigmas keypoints fit: ``sqrt(median |e_i|^2 / median chi2(2))`` of their
-    whitened residuals, the one-frame solve's ``fit_noise_scale`` without its leverages (a track's frames share the
-    shape, so each frame's own leverage is small); 0 without any."""
+    """How many times worse than their sigmas keypoints fit: :func:`~vfactor.shape_evidence.median_scale` of their
+    whitened residuals' squares, the one-frame solve's ``fit_noise_scale`` without its leverages (a track's frames
+    share the shape, so each frame's own leverage is small); 0 without any."""
     if not len(residuals):
         return 0.0
-    return float(np.sqrt(np.median(np.sum(residuals ** 2, axis=1)) / (2.0 * np.log(2.0))))
+    return median_scale(np.sum(residuals ** 2, axis=1))
+
+
+def _smoother_graph(smoother) -> gtsam.NonlinearFactorGraph:
+    """A smoother's factors (the marginals of the poses it let go included) as one graph, for LM or a restart."""
+    factors = smoother.getFactors()
+    graph = gtsam.NonlinearFactorGraph()
+    for j in range(factors.size()):
+        if factors.at(j) is not None:
+            graph.add(factors.at(j))
+    return graph
 
 
 def _covariance_graph(factors: list, projections: list, estimate: gtsam.Values, keys: KeyScheme, index: int,

@@ -288,12 +288,17 @@ def _dimensions(entry: dict, where: str) -> VehicleDimensions:
     return VehicleDimensions(**fields)
 
 
+def _dimensions_file() -> dict:
+    """``vfactor/data/vehicle_dimensions.json``, parsed."""
+    with resources.files("vfactor.data").joinpath("vehicle_dimensions.json").open("r", encoding="utf-8") as f:
+        return json.load(f)
+
+
 @lru_cache(maxsize=1)
 @prebuilt.shipped("vehicle_library")
 def vehicle_library() -> dict[str, LibraryVehicle]:
     """Every library vehicle by id, in the file's order (``vfactor/data/vehicle_dimensions.json``)."""
-    with resources.files("vfactor.data").joinpath("vehicle_dimensions.json").open("r", encoding="utf-8") as f:
-        data = json.load(f)
+    data = _dimensions_file()
     out = {}
     for i, entry in enumerate(data["vehicles"]):
         dims = _dimensions(entry, f"vehicle_dimensions.json vehicles[{i}]")
@@ -308,10 +313,8 @@ def bounds_vehicles() -> dict[str, LibraryVehicle]:
     """Road vehicles beyond the library's body types (a 12 m city bus, a microcar), by id: the HWC bounds span
     them (:func:`vfactor.shape_model.default_hwc_bounds`: what is physically a vehicle); neither the priors nor
     the simulator use them (``vfactor/data/vehicle_dimensions.json``, ``bounds_vehicles``; docs/vehicles.md)."""
-    with resources.files("vfactor.data").joinpath("vehicle_dimensions.json").open("r", encoding="utf-8") as f:
-        data = json.load(f)
     out = {}
-    for i, entry in enumerate(data.get("bounds_vehicles", [])):
+    for i, entry in enumerate(_dimensions_file().get("bounds_vehicles", [])):
         where = f"vehicle_dimensions.json bounds_vehicles[{i}]"
         dims = _dimensions(entry, where)
         rules = None

@@ -16,7 +16,7 @@ from vfactor.shape_evidence import choose_body_type, track_shape
 from vfactor.shape_model import ShapePrior, default_shape_model, pascal3d_wireframes
 from vfactor.sim import load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations, solve_vehicle
-from vfactor.vehicle_library import BODY_TYPES, library_ids, vehicle_library
+from vfactor.vehicle_library import BODY_TYPES, LIGHT_TYPES, library_ids, vehicle_library
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +46,28 @@ def test_consistency_with_clean_keypoints_for_every_body_type(clean):
         if body_type in BODY_TYPES:
             assert result.body_type == body_type, truth.preset
             assert result.body_type_probability > 0.5
-    assert seen == {*BODY_TYPES, "pascal3d"}
+    assert seen == {*LIGHT_TYPES, "pascal3d"}
+
+
+def test_buses_with_clean_keypoints_come_out_near_the_known_shape_reference():
+    """Issue 10 on buses (library_bus_2cam: two cameras, each bus held out of the model): with noise 0.3 % of the
+    box (4 cm on a bus's box) a bus is a bus, within 2.5 times the error of the solve given its true shape, as the
+    light vehicles are (about 2x); the default model made a 12 m bus a 9 m van before it had buses."""
+    from vfactor.baselines import known_shape
+
+    sim = simulate(noise_variant(load_scenario("library_bus_2cam"), **NOISE_LEVELS["clean"]), seed=3, num_frames=6)
+    errors, references = [], []
+    for f in range(len(sim.scene.frames)):
+        result, truth = solve_held_out(sim, f)
+        assert result.status.value == "converged" and result.body_type == "bus", truth.preset
+        errors.append(pose_errors(result.world_T_vehicle, result.keypoints_world, truth.world_T_vehicle,
+                                  truth.keypoints_world)["mean_keypoint_cm"])
+        frame = sim.scene.frames[f]
+        obs = observations_from_detections(frame.detections_of(frame.vehicle_ids()[0]), sim.scene.cameras)
+        reference = known_shape(obs, truth.world_T_vehicle, truth.wireframe)
+        references.append(pose_errors(reference.world_T_vehicle, reference.keypoints_world, truth.world_T_vehicle,
+                                      truth.keypoints_world)["mean_keypoint_cm"])
+    assert np.mean(errors) < 2.5 * np.mean(references) and max(errors) < 8.0, (errors, references)
 
 
 def test_noise_scale_follows_the_keypoint_noise(clean):
@@ -290,34 +311,39 @@ def test_a_prior_built_by_hand_is_checked(mean, covariance, field, problem):
 
 def test_class_hints_count_once_and_reach_a_models_own_types():
     """A hint was applied once per detection ('car' from three cameras: 94 % on the car types, where the docs say
-    80 %), a type of the user's own could not be hinted ('bus' went to the vans), and ' car' was ignored."""
+    80 %), a type of the user's own could not be hinted ('bus' went to the vans before the model had buses), and
+    ' car' was ignored."""
     model = default_shape_model()
     one = model.log_prior(("car",))
     assert sum(np.exp(one[t]) for t in ("sedan", "hatchback", "estate", "suv")) == pytest.approx(0.8)
     assert model.log_prior(("car", "car", " CAR ")) == pytest.approx(one)
-    assert model.log_prior(("car", "truck")) == pytest.approx(model.log_prior(()))  # they disagree: no suggestion
+    light = model.log_prior(("car", "truck"))  # they disagree: the types either suggests, never a bus
+    assert sum(np.exp(light[t]) for t in LIGHT_TYPES) == pytest.approx(0.8)
     assert np.exp(model.log_prior(("car", "sedan"))["sedan"]) == pytest.approx(0.8)  # the types both suggest
     assert model.log_prior(("motorcycle",)) == pytest.approx(model.log_prior(()))
-    bus = ShapePrior.from_wireframes([vehicle_library()[v].wireframe.scaled(2.0) for v in library_ids("van")[:3]],
-                                     0.05)
-    mine = dataclasses.replace(model, types={**model.types, "bus": bus},
-                               prior_probability={**model.prior_probability, "bus": model.prior_probability["van"]})
-    assert np.exp(mine.log_prior(("bus",))["bus"]) == pytest.approx(0.8)  # names a type of the model
-    assert mine.suggested_types(("truck",)) == ("pickup", "van")
-    trucks = dataclasses.replace(mine, class_hints={**mine.class_hints, "truck": ("pickup", "van", "bus")})
-    assert trucks.suggested_types(("truck",)) == ("pickup", "van", "bus")
+    assert np.exp(model.log_prior(("bus",))["bus"]) == pytest.approx(0.8)
+    truck = ShapePrior.from_wireframes([vehicle_library()[v].wireframe.scaled(1.6) for v in library_ids("van")[:3]],
+                                       0.05)
+    mine = dataclasses.replace(model, types={**model.types, "truck": truck},
+                               prior_probability={**model.prior_probability, "truck": model.prior_probability["van"]})
+    assert np.exp(mine.log_prior(("truck",))["truck"]) == pytest.approx(0.8)  # names a type of the model
+    assert mine.suggested_types(("truck",)) == ("truck",)
+    assert model.suggested_types(("truck",)) == ("pickup", "van")
+    vans = dataclasses.replace(mine, class_hints={**mine.class_hints, "lorry": ("van", "truck")})
+    assert vans.suggested_types(("lorry",)) == ("van", "truck")
 
 
-def test_a_city_bus_is_a_vehicle_to_hwc():
-    """A 12 m bus with exact keypoints in three cameras: the HWC bounds of the library held it to a 7 m shape, 1.8 m
-    off and `converged`; the bounds span the road's extremes now (docs/vehicles.md)."""
+def test_a_city_bus_is_a_bus():
+    """A 12 m bus with exact keypoints in three cameras: the HWC bounds of the light vehicles held it to a 7 m shape,
+    1.8 m off and `converged`; with the road's extremes a van 0.4 m off; the model has buses now (this one held out
+    of it; docs/vehicles.md)."""
+    from vfactor.evaluation import held_out_model
     from vfactor.metrics import pose_errors
     from vfactor.observations import Detection
     from vfactor.sim import intersection_rig, road_pose
     from vfactor.sim.visibility import self_occluded
-    from vfactor.vehicle_library import bounds_vehicles
 
-    bus = bounds_vehicles()["mercedes_citaro_o530_12m"]
+    bus = vehicle_library()["mercedes_citaro_c2_12m"]
     cameras = intersection_rig(3, distance=28.0, height=9.0, hfov_deg=60.0, image_size=(1920, 1080))
     for yaw in (0.3, 1.7):
         world_T_vehicle = road_pose(0.0, 0.0, yaw, bus.wheel_radius)
@@ -330,15 +356,8 @@ def test_a_city_bus_is_a_vehicle_to_hwc():
                                                                 bus.wheel_radius), 0.45, 0.9), 0.0)
             detections.append(Detection(name, "bus", keypoints=np.where(seen[:, None], uv, np.nan),
                                         confidence=confidence))
-        result = solve_vehicle(detections, cameras)  # no bus type: the vans' prior pulls it a little smaller
+        result = solve_vehicle(detections, cameras, prior=held_out_model(bus.id))
         errors = pose_errors(result.world_T_vehicle, result.keypoints_world, world_T_vehicle, keypoints_world)
-        assert result.status.value == "converged" and errors["mean_keypoint_cm"] < 60.0, errors  # was 180
-        assert result.box.size[0] == pytest.approx(bus.dimensions.length, abs=0.3)  # was 7.2 m
-        # a bus type of its own (docs/vehicles.md): learnt from other buses (the Citaro scaled)
-        buses = [bus.wireframe.scaled(k) for k in (0.85, 0.92, 1.08, 1.15)]
-        model = default_shape_model()
-        mine = dataclasses.replace(model, types={**model.types, "bus": ShapePrior.from_wireframes(buses, 0.08)},
-                                   prior_probability={**model.prior_probability, "bus": 1 / 6})
-        result = solve_vehicle(detections, cameras, prior=mine)
-        errors = pose_errors(result.world_T_vehicle, result.keypoints_world, world_T_vehicle, keypoints_world)
-        assert result.body_type == "bus" and errors["mean_keypoint_cm"] < 2.0, errors
+        assert result.status.value == "converged" and result.body_type == "bus", result.message
+        assert errors["mean_keypoint_cm"] < 2.0, errors  # was 180 cm, then 40 as a van
+        assert result.box.size[0] == pytest.approx(bus.dimensions.length, abs=0.05)  # was 7.2 m

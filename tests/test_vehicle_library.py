@@ -118,31 +118,35 @@ def test_docs_list_every_vehicle_as_the_library_has_it():
     assert library_table() in page
 
 
-def test_the_bounds_span_the_roads_extremes_beyond_the_library():
-    """A 12 m city bus and a microcar are vehicles to HWC; the priors and the simulator never see them, and the
-    simulator's random cars keep the bounds of the cars and the library (so that seeds keep their scenes)."""
+def test_the_bounds_span_the_buses_and_the_roads_extremes_beyond_the_library():
+    """The library's buses, a microcar and the largest two-axle bus EU rules allow are vehicles to HWC; the priors
+    and the simulator never see the extremes, and the simulator's random cars keep the bounds of the cars and the
+    light vehicles (so that seeds keep their scenes), which admit no bus."""
     extremes = bounds_vehicles()
     lengths = sorted(v.dimensions.length for v in extremes.values())
-    assert lengths[0] < 2.8 and lengths[-1] > 12.0
+    assert lengths[0] < 2.8 and lengths[-1] >= 13.5
     assert not set(extremes) & set(vehicle_library())
     assert not set(extremes) & {v for t in default_shape_model().types for v in library_ids(t)}
-    cars = default_hwc_bounds(road_extremes=False)
-    assert not within_hwc_bounds(extremes["mercedes_citaro_o530_12m"].wireframe, cars)
+    light = default_hwc_bounds(road_extremes=False)
+    assert not within_hwc_bounds(extremes["eu_maximum_two_axle_bus"].wireframe, light)
+    buses = [library_vehicle(v).wireframe for v in library_ids("bus")]
+    assert len(buses) >= 5 and not any(within_hwc_bounds(w, light) for w in buses)
+    assert all(within_hwc_bounds(w, default_hwc_bounds()) for w in [*buses, *(v.wireframe for v in extremes.values())])
     for v in extremes.values():
         assert v.dimensions.source, v.id
 
 
 def test_a_vehicle_of_a_body_type_of_ones_own_needs_rules_and_gets_a_clear_error_without():
-    """keypoints_from_dimensions with rules for a body type vfactor has none for raised KeyError 'bus' (the
-    overhang split looked the rules up by body type)."""
-    dims = VehicleDimensions(id="my_bus", make="x", model="y", generation="", variant="", body_type="bus",
+    """keypoints_from_dimensions with rules for a body type vfactor has none for raised KeyError (the overhang
+    split looked the rules up by body type; a bus was the example until the library had buses)."""
+    dims = VehicleDimensions(id="my_truck", make="x", model="y", generation="", variant="", body_type="truck",
                              length=12.0, width=2.55, height=3.2, wheelbase=6.0, front_track=2.1, rear_track=1.85,
                              tyre="275/70R22.5")
     rules = BodyRules(0.45, 0.05, 0.75, 0.2, 0.03, 1.1, 0.12, 0.0, -2.6, 10.0, 0.15, 0.1, "end", 0.05, 0.4)
     wireframe = keypoints_from_dimensions(dims, rules)
     assert wireframe.vehicle_p_keypoints[0, 0] == pytest.approx(3.0)  # front hubs at half the wheelbase
     assert dims.overhangs(rules) == pytest.approx((0.45 * 6.0, 0.55 * 6.0))
-    with pytest.raises(ValueError, match="no BodyRules for body type 'bus'"):
+    with pytest.raises(ValueError, match="no BodyRules for body type 'truck'"):
         keypoints_from_dimensions(dims)
 
 

@@ -3,8 +3,8 @@
 * :func:`default_shape_prior`: the paper's car prior, learnt from the nine
   PASCAL3D+ car CAD models scaled to metres by a wheelbase (the baselines use it).
 * :class:`ShapeModel` / :func:`default_shape_model`: one Gaussian prior per body
-  type (sedan, hatchback, estate, SUV, pickup, van) and a pooled prior over all
-  of them, learnt from the vehicle library (:mod:`vfactor.vehicle_library`),
+  type (sedan, hatchback, estate, SUV, pickup, van, bus) and a pooled prior over
+  the light vehicles (all but the bus), learnt from the vehicle library (:mod:`vfactor.vehicle_library`),
   optionally without some vehicles (leave-one-model-out evaluation). The solver
   picks the body type by its Laplace evidence (:meth:`ShapeModel.type_log_evidence`).
 * :func:`default_hwc_bounds`: bounds spanning every library vehicle, the
@@ -205,12 +205,18 @@ class HwcBounds:
         return cls(distance=distance, width_ratio=width_ratio, layer_offset=layer_offset)
 
 
-    def spanning(self, wireframes) -> "HwcBounds":
+    def spanning(self, wireframes, margin: float = 0.0) -> "HwcBounds":
         """These bounds extended just enough to admit ``wireframes`` too (5 cm on the distances, 0.05 on the width
         ratios, 10 cm on the layer offsets beyond them): a few vehicles far from the sample (a city bus) widen the
         bounds on their side only, where :meth:`from_wireframes`' margin, a share of each range, would also drop
-        the other side (a car squashed to a third of its height would pass)."""
-        other = HwcBounds.from_wireframes(wireframes, margin=0.0)
+        the other side (a car squashed to a third of its height would pass).
+
+        Args:
+            wireframes: the vehicles to admit, body frame, metres.
+            margin: their own ranges widened by this share first (:meth:`from_wireframes`), so that a vehicle
+                like them but not among them passes too (the library's buses: 0.5, as for the light vehicles).
+        """
+        other = HwcBounds.from_wireframes(wireframes, margin=margin)
 
         def union(a, b, pad):
             a, b = np.asarray(a, float), np.asarray(b, float)
@@ -244,9 +250,11 @@ def default_hwc_bounds(exclude: frozenset = frozenset(), road_extremes: bool = T
     and the road's extremes beyond the library (a 12 m city bus, a microcar:
     :func:`vfactor.vehicle_library.bounds_vehicles`).
 
-    The cars' and the library's ranges widened by 50 % (at least 5 cm, 10 cm
+    The ranges of the cars and of the library's light vehicles
+    (:data:`~vfactor.vehicle_library.LIGHT_TYPES`) widened by 50 % (at least 5 cm, 10 cm
     for the layer offsets) so that a vehicle outside the sample is still a
-    vehicle to HWC, then extended to admit the extremes (:meth:`HwcBounds.spanning`).
+    vehicle to HWC, then extended to admit the library's heavy vehicles (buses) and the extremes
+    (:meth:`HwcBounds.spanning`: on their own side only).
     HWC says what is physically a vehicle: without the extremes a 12 m bus was
     held to a 7 m shape and solved 1.8 m off, `converged` (docs/vehicles.md).
 
@@ -256,11 +264,17 @@ def default_hwc_bounds(exclude: frozenset = frozenset(), road_extremes: bool = T
             simulator's random PASCAL3D+ cars are drawn within, as before 2026-12-07, so that seeds keep their
             scenes).
     """
-    from vfactor.vehicle_library import bounds_vehicles, vehicle_library
+    from vfactor.vehicle_library import LIGHT_TYPES, bounds_vehicles, vehicle_library
 
-    wireframes = _car_wireframes(exclude) + [v.wireframe for v in vehicle_library().values() if v.id not in exclude]
+    library = [v for v in vehicle_library().values() if v.id not in exclude]
+    wireframes = _car_wireframes(exclude) + [v.wireframe for v in library if v.body_type in LIGHT_TYPES]
     bounds = HwcBounds.from_wireframes(wireframes, margin=0.5)
-    return bounds.spanning([v.wireframe for v in bounds_vehicles().values()]) if road_extremes else bounds
+    if not road_extremes:
+        return bounds
+    heavy = [v.wireframe for v in library if v.body_type not in LIGHT_TYPES]
+    if len(heavy) >= 2:
+        bounds = bounds.spanning(heavy, margin=0.5)
+    return bounds.spanning(heavy + [v.wireframe for v in bounds_vehicles().values()])
 
 
 @lru_cache(maxsize=1)
@@ -281,7 +295,7 @@ ANY = "any"
 CLASS_HINTS: dict[str, tuple[str, ...]] = {
     "car": ("sedan", "hatchback", "estate", "suv"),
     "truck": ("pickup", "van"),
-    "bus": ("van",),
+    "bus": ("bus",),
     "sedan": ("sedan",),
     "hatchback": ("hatchback",),
     "estate": ("estate",),
@@ -294,12 +308,13 @@ CLASS_HINTS: dict[str, tuple[str, ...]] = {
 
 @dataclass(frozen=True)
 class ShapeModel:
-    """One shape prior per body type, a pooled prior over all of them, and the HWC bounds.
+    """One shape prior per body type, a pooled prior, and the HWC bounds.
 
     Attributes:
         types: body type -> :class:`ShapePrior` (metres).
-        pooled: the prior of all types' vehicles together (the first solve's, and
-            the mean shape that initialisation aligns).
+        pooled: a broad prior over vehicles of several types together (the first solve's,
+            and the mean shape that initialisation aligns; the default model's: the light
+            vehicles').
         bounds: the HWC bounds.
         prior_probability: body type -> probability before any observation.
         hint_weight: probability mass that a detection's ``class`` puts on the
@@ -316,8 +331,8 @@ class ShapeModel:
             pooled prior instead of a wrong type's.
         class_hints: a 2D detector's class name (lower case) -> the body types it
             suggests (:data:`CLASS_HINTS` by default; a model with a body type of
-            its own maps its detector's classes to it: ``{**CLASS_HINTS, "bus":
-            ("bus",)}``). A class that names one of :attr:`types` suggests that type.
+            its own maps its detector's classes to it: ``{**CLASS_HINTS, "truck":
+            ("truck",)}``). A class that names one of :attr:`types` suggests that type.
     """
 
     types: dict
@@ -387,6 +402,15 @@ class ShapeModel:
             base = self.pooled if body_type == ANY else self.types[body_type]
             self._variants[key] = base if spread == 1.0 else ShapePrior.trusted(base.mean, base.covariance * spread)
         return self._variants[key]
+
+    def far_from_pooled(self, body_type: str) -> bool:
+        """Whether ``body_type``'s mean shape lies beyond the pooled prior's 99.9 % region (chi2, 36 dof): a solve
+        that starts from the pooled mean shape and prior starts far from such a vehicle (a bus, to the light
+        vehicles' pooled prior: squared Mahalanobis distance 1417 against at most 3 for the light types), and
+        :func:`vfactor.solve.solve_observations` solves it again from its type's own."""
+        if body_type == ANY or body_type not in self.types:
+            return False
+        return _mahalanobis2(self.pooled, Wireframe(self.types[body_type].mean)) > _CHI2_36_999
 
     def suggested_types(self, hints=()) -> tuple[str, ...]:
         """The body types a vehicle's detections' class ``hints`` suggest together (empty: no suggestion).
@@ -503,6 +527,15 @@ def pascal3d_wireframes() -> dict[str, Wireframe]:
     return out
 
 
+#: The default model's prior probability of a heavy body type (a bus) against a light one's: buses are a small
+#: share of road traffic (of the order of one vehicle in a hundred); the views' evidence for a bus outweighs this
+#: many times over (docs/vehicles.md).
+HEAVY_PRIOR_WEIGHT = 0.1
+
+#: The 99.9 % point of chi2 with 36 degrees of freedom (a shape's 12 x 3 coordinates).
+_CHI2_36_999 = 67.985
+
+
 def _mahalanobis2(prior: ShapePrior, wireframe: Wireframe) -> float:
     r = prior.sqrt_information() @ (wireframe.vehicle_p_keypoints.ravel() - np.asarray(prior.mean).ravel())
     return float(r @ r)
@@ -511,7 +544,10 @@ def _mahalanobis2(prior: ShapePrior, wireframe: Wireframe) -> float:
 @prebuilt.shipped("shape_model")
 def default_shape_model(exclude=frozenset(), hub_sigma: float = 0.02, rule_sigma: float = 0.08,
                         inflation: float = 1.5) -> ShapeModel:
-    """The body-type shape model learnt from the vehicle library and the PASCAL3D+ cars, uniform over the types.
+    """The body-type shape model learnt from the vehicle library and the PASCAL3D+ cars.
+
+    The light body types are equally likely before the views, a bus :data:`HEAVY_PRIOR_WEIGHT` times as likely as
+    one of them; the pooled prior is the light vehicles' (:data:`~vfactor.vehicle_library.LIGHT_TYPES`).
 
     Each body type's prior is learnt from the library's vehicles of that type
     and from the PASCAL3D+ car CAD models nearest to it (Mahalanobis distance
@@ -535,19 +571,21 @@ def default_shape_model(exclude=frozenset(), hub_sigma: float = 0.02, rule_sigma
 @lru_cache(maxsize=128)
 def _shape_model(exclude: frozenset, hub_sigma: float, rule_sigma: float, inflation: float) -> ShapeModel:
     """:func:`default_shape_model`, made once per set of arguments."""
-    from vfactor.vehicle_library import BODY_TYPES, vehicle_library
+    from vfactor.vehicle_library import BODY_TYPES, LIGHT_TYPES, vehicle_library
 
     floor_sigma = np.array([hub_sigma] * 4 + [rule_sigma] * 8)
     shapes = {t: [] for t in BODY_TYPES}
     for v in vehicle_library().values():
         if v.id not in exclude:
             shapes[v.body_type].append(v.wireframe)
-    library_only = {t: ShapePrior.from_wireframes(w, floor_sigma, inflation) for t, w in shapes.items() if len(w) >= 2}
+    library_only = {t: ShapePrior.from_wireframes(shapes[t], floor_sigma, inflation) for t in LIGHT_TYPES
+                    if len(shapes[t]) >= 2}
     for cad_id, wireframe in pascal3d_wireframes().items():
         if cad_id not in exclude and library_only:
             nearest = min(library_only, key=lambda t: _mahalanobis2(library_only[t], wireframe))
             shapes[nearest].append(wireframe)
     types = {t: ShapePrior.from_wireframes(w, floor_sigma, inflation) for t, w in shapes.items() if len(w) >= 2}
-    pooled = ShapePrior.from_wireframes([w for ws in shapes.values() for w in ws], floor_sigma, inflation)
+    pooled = ShapePrior.from_wireframes([w for t in LIGHT_TYPES for w in shapes[t]], floor_sigma, inflation)
+    weight = {t: 1.0 if t in LIGHT_TYPES else HEAVY_PRIOR_WEIGHT for t in types}
     return ShapeModel(types=types, pooled=pooled, bounds=default_hwc_bounds(exclude),
-                      prior_probability={t: 1.0 / len(types) for t in types})
+                      prior_probability={t: w / sum(weight.values()) for t, w in weight.items()})

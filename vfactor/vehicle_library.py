@@ -1,9 +1,10 @@
 """A library of production vehicles: published dimensions and the 12 keypoints derived from them.
 
 ``vfactor/data/vehicle_dimensions.json`` holds the manufacturers' published
-exterior dimensions of production vehicles of six body types (:data:`BODY_TYPES`):
-overall length, width, height, wheelbase, front and rear track, tyre size,
-overhangs and, for pickups, the bed length, each with its source.
+exterior dimensions of production vehicles of seven body types (:data:`BODY_TYPES`:
+six of light vehicles and the single-deck bus): overall length, width, height,
+wheelbase, front and rear track, tyre size, overhangs and, for pickups, the bed
+length, each with its source.
 :func:`keypoints_from_dimensions` turns one vehicle's dimensions into its 12
 keypoints in the body frame (x forward, y left, z up, origin at the centroid
 of the four wheel hubs, metres) by the rules documented in docs/vehicles.md;
@@ -30,6 +31,8 @@ from vfactor.wireframe import Wireframe
 
 __all__ = [
     "BODY_TYPES",
+    "LIGHT_TYPES",
+    "HEAVY_TYPES",
     "BodyRules",
     "BODY_RULES",
     "VehicleDimensions",
@@ -44,7 +47,16 @@ __all__ = [
 ]
 
 #: The body types of the library, in table order.
-BODY_TYPES: tuple[str, ...] = ("sedan", "hatchback", "estate", "suv", "pickup", "van")
+BODY_TYPES: tuple[str, ...] = ("sedan", "hatchback", "estate", "suv", "pickup", "van", "bus")
+
+#: The light vehicles' body types (cars, SUVs, pickups, vans): the pooled prior, the HWC bounds' ranges and the
+#: keypoint network's rendered training vehicles are theirs.
+LIGHT_TYPES: tuple[str, ...] = ("sedan", "hatchback", "estate", "suv", "pickup", "van")
+
+#: The heavy vehicles' body types (single-deck rigid buses and coaches): a body-type prior each, and the HWC bounds
+#: span them on their own side (:func:`vfactor.shape_model.default_hwc_bounds`); they would widen the pooled prior
+#: and the bounds' ranges several times over for every car.
+HEAVY_TYPES: tuple[str, ...] = ("bus",)
 
 
 @dataclass(frozen=True)
@@ -76,6 +88,10 @@ class BodyRules:
         rear_window_drop: rear-window top below the overall height.
         rear_window_max_height: the rear-window top is at most this high.
         bed_length: a pickup's bed length when none is published.
+        windshield_setback: when given, the windshield top sits this far behind the
+            front end instead (a bus's, at the front edge of its roof, whatever
+            its front overhang); ``windshield_behind_axle`` and
+            ``windshield_fixed`` are then not used.
     """
 
     front_overhang_share: float
@@ -95,6 +111,7 @@ class BodyRules:
     rear_window_drop: float
     rear_window_max_height: float = 10.0
     bed_length: float = 1.70
+    windshield_setback: float | None = None
 
 
 #: Per body type: the placement rules of the keypoints that no specification gives
@@ -106,6 +123,8 @@ BODY_RULES: dict[str, BodyRules] = {
     "suv": BodyRules(0.47, 0.22, 0.82, 0.22, 0.08, 1.06, 0.17, 0.33, 0.0, 10.0, 0.08, 0.27, "end", 0.30, 0.12),
     "pickup": BodyRules(0.42, 0.16, 1.00, 0.22, 0.05, 0.98, 0.09, 0.10, 0.75, 10.0, 0.08, 0.27, "cab", 0.15, 0.10),
     "van": BodyRules(0.46, 0.14, 0.92, 0.20, 0.04, 1.00, 0.08, 0.0, 0.58, 2.05, 0.10, 0.20, "end", 0.08, 0.15, 2.20),
+    "bus": BodyRules(0.44, 0.06, 0.90, 0.20, 0.04, 1.15, 0.12, 0.0, 0.0, 10.0, 0.25, 0.10, "end", 0.06, 0.45,
+                     windshield_setback=0.15),
 }
 
 _TYRE = re.compile(r"^(?:LT|P)?(\d{3})/(\d{2})Z?R(\d{2}(?:\.\d)?)C?$")
@@ -248,7 +267,10 @@ def keypoints_from_dimensions(dims: VehicleDimensions, rules: BodyRules | None =
     z_bl = height(min(rules.back_light_height, 0.7 * dims.height))
     y_bl = half_w - rules.back_light_inset
 
-    x_ws = half_wb - rules.windshield_behind_axle * dims.wheelbase - rules.windshield_fixed
+    if rules.windshield_setback is not None:
+        x_ws = x_front - rules.windshield_setback
+    else:
+        x_ws = half_wb - rules.windshield_behind_axle * dims.wheelbase - rules.windshield_fixed
     z_ws = height(min(dims.height - rules.roof_gap, rules.windshield_max_height))
     if rules.rear_window == "axle":
         x_rw = -half_wb + rules.rear_window_offset

@@ -73,8 +73,10 @@ from vfactor.result import FrameResult
 __all__ = ["KITTI_TYPES", "KITTI_DEFAULT_TYPE", "LABEL_FRAMES", "NEAR", "kitti_label_frame", "kitti_lines",
            "write_kitti", "read_kitti"]
 
-#: vfactor body type -> KITTI type. KITTI's Car / Van / Truck; a pickup is a (light) truck, as nuScenes files it.
-KITTI_TYPES = {"sedan": "Car", "hatchback": "Car", "estate": "Car", "suv": "Car", "van": "Van", "pickup": "Truck"}
+#: vfactor body type -> KITTI type. KITTI's Car / Van / Truck; a pickup is a (light) truck, as nuScenes files it;
+#: KITTI has no bus class, and a bus is a large vehicle as its trucks are.
+KITTI_TYPES = {"sedan": "Car", "hatchback": "Car", "estate": "Car", "suv": "Car", "van": "Van", "pickup": "Truck",
+               "bus": "Truck"}
 #: KITTI type of a vehicle without a body type (solved with one prior) or with one the map lacks.
 KITTI_DEFAULT_TYPE = "Car"
 #: Values of ``frame``.

@@ -61,8 +61,10 @@ __all__ = ["NUSCENES_NAMES", "NUSCENES_DEFAULT_NAME", "MOVING_SPEED", "DEFAULT_M
            "nuscenes_dict", "write_nuscenes", "read_nuscenes"]
 
 #: vfactor body type -> nuScenes detection class (docs/instructions_nuscenes.md of the devkit: "vehicle.car:
-#: sedans, hatch-backs, wagons, vans, mini-vans, SUVs"; "vehicle.truck: ... including pick-ups").
-NUSCENES_NAMES = {"sedan": "car", "hatchback": "car", "estate": "car", "suv": "car", "van": "car", "pickup": "truck"}
+#: sedans, hatch-backs, wagons, vans, mini-vans, SUVs"; "vehicle.truck: ... including pick-ups"; "vehicle.bus.rigid",
+#: the detection class ``bus``).
+NUSCENES_NAMES = {"sedan": "car", "hatchback": "car", "estate": "car", "suv": "car", "van": "car", "pickup": "truck",
+                  "bus": "bus"}
 #: Class of a vehicle without a body type or with one the map lacks.
 NUSCENES_DEFAULT_NAME = "car"
 #: Speed above which a vehicle is ``vehicle.moving`` (m/s).

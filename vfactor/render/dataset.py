@@ -11,7 +11,7 @@ self-occluded ones too, as the paper does.
 The held-out split (:data:`HELD_OUT`) uses shapes, colours and viewpoints that
 the training split (:data:`TRAIN`) never draws: other presets, other
 PASCAL3D+ models and the other half of the vehicle library's models
-(:func:`library_split`: every body type in both halves), and interleaved bins
+(:func:`library_split`: every light body type in both halves), and interleaved bins
 of paint hue / grey level, of the
 camera's azimuth around the vehicle and of its elevation angle (see
 :class:`SplitSpec`). Held-out viewpoints therefore lie between training
@@ -52,7 +52,7 @@ from vfactor.render.renderer import Ground, Light, Renderer, VehicleInstance, ke
 from vfactor.sim.rig import intrinsics_from_hfov, look_at
 from vfactor.sim.vehicles import (RandomShape, draw_vehicle, footprint, footprints_overlap, road_pose, symmetrised,
                                   within_hwc_bounds)
-from vfactor.vehicle_library import BODY_TYPES, library_ids, vehicle_library
+from vfactor.vehicle_library import BODY_TYPES, LIGHT_TYPES, library_ids, vehicle_library
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes
 
 __all__ = [
@@ -159,9 +159,10 @@ class SplitSpec:
 
 
 def library_split(parity: int) -> tuple[str, ...]:
-    """Half of the vehicle library's models: of each body type's ids (in the library's order), those at even
-    (``parity`` 0: the network's training half) or odd (1: its held-out half) positions."""
-    return tuple(v for t in BODY_TYPES for i, v in enumerate(library_ids(t)) if i % 2 == parity)
+    """Half of the vehicle library's light vehicles: of each light body type's ids (in the library's order), those
+    at even (``parity`` 0: the network's training half) or odd (1: its held-out half) positions. The buses are in
+    neither: the shipped network was trained on light vehicles (and these splits keep its training data)."""
+    return tuple(v for t in LIGHT_TYPES for i, v in enumerate(library_ids(t)) if i % 2 == parity)
 
 
 #: The training split: five presets (the paper's three cars, the pickup and the van), PASCAL3D+ models 0-6 and half

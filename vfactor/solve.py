@@ -233,9 +233,10 @@ def solve_observations(
             Only with the refinement (a shape model or ``options.estimate_noise``).
         start_prior: the first solve's prior and the mean shape its starts align, in place of the model's pooled
             prior. Where the refinement chooses a body type far from the pooled prior
-            (:meth:`~vfactor.shape_model.ShapeModel.far_from_pooled`: a bus), the vehicle is solved again with
-            that type's prior here, and the better fit (the lower ``fit_noise_scale``) is returned
-            (``extras["typed_start"]``: the type, where it is the second solve).
+            (:meth:`~vfactor.shape_model.ShapeModel.far_from_pooled`: a bus), or the solution is ``poor_fit`` or
+            has no estimate, the vehicle is solved again with such a type's prior here, and the better fit (the
+            lower ``fit_noise_scale``) is returned (``extras["typed_start"]``: the type whose start gave it, where
+            it is the second; the poor fit's only with ``options.poor_fit_restarts`` above 0).
     """
     given = obs  # as the caller gave them: a restart (_restarted) solves them again
     model, single, bounds = resolve_shape_prior(prior, bounds)
@@ -431,26 +432,34 @@ def solve_observations(
     final = checked(result, [as_given.cameras[c] for c in np.unique(as_given.camera_index)], options.covariance)
     if search is not None and options.poor_fit_restarts > 0 and (final.status == Status.POOR_FIT or not final.ok):
         restarted = _restarted(given, options, vehicle_id, prior, bounds, hints, resize, search, reached,
-                               world_T_vehicle, fit_scale if final.ok else None)
+                               world_T_vehicle, fit_scale if final.ok else None, start_prior)
         if restarted is not None:
             final = restarted
-    if start_prior is None and model is not None and final.body_type is not None \
-            and model.far_from_pooled(final.body_type):
-        return _typed_start(final, given, options, vehicle_id, prior, bounds, initial, hints, resize, model)
+    if start_prior is None and model is not None:
+        far = [t for t in model.types if model.far_from_pooled(t)]
+        if final.body_type in far:
+            far = [final.body_type]
+        elif (final.ok and final.status != Status.POOR_FIT) or options.poor_fit_restarts == 0:
+            far = []  # a poor fit's typed start is one more restart
+        for body_type in far:
+            final = _typed_start(final, body_type, given, options, vehicle_id, prior, bounds, initial, hints, resize,
+                                 model)
     return final
 
 
-def _typed_start(first: VehicleResult, obs: KeypointObservations, options: SolveOptions, vehicle_id: str, prior,
-                 bounds, initial, hints, resize, model: ShapeModel) -> VehicleResult:
-    """``first``, whose body type lies far from the model's pooled prior, solved again from that type's own prior and
-    mean shape (:func:`solve_observations`' ``start_prior``); the better fit of the two (the lower
+def _typed_start(first: VehicleResult, body_type: str, obs: KeypointObservations, options: SolveOptions,
+                 vehicle_id: str, prior, bounds, initial, hints, resize, model: ShapeModel) -> VehicleResult:
+    """The vehicle solved again from ``body_type``'s own prior and mean shape (:func:`solve_observations`'
+    ``start_prior``), a type far from the model's pooled prior; the better fit of ``first`` and that one (the lower
     ``fit_noise_scale``, a sane one before one that is not).
 
     A bus started from the light vehicles' pooled mean shape and prior: its first solve, held near a car's shape,
     can lead LM into another basin that the bus's prior then keeps (on `library_bus_2cam` at hard noise, seed 1:
-    one bus 87 cm off with the pooled start, 37 cm from its own; docs/results.md).
+    one bus 87 cm off with the pooled start, 37 cm from its own), or to a van or pickup that fits its keypoints
+    poorly (seeds 10-29: 9 of 480 buses `poor_fit` at fit scales 2.4-4.0 and 1.7-5.7 m off, each 0.2-0.6 m off
+    from the buses' start at fit scales 0.7-1.5; docs/results.md). So a type far from the pooled prior is tried
+    where it was chosen or where the solution fits poorly (``poor_fit``) or has no estimate.
     """
-    body_type = first.body_type
     again = solve_observations(obs, options, vehicle_id, prior, bounds, initial, hints, resize,
                                start_prior=model.prior(body_type))
     if not again.ok:
@@ -476,7 +485,7 @@ FURTHER_START_INLIERS = 0.6
 
 def _restarted(obs: KeypointObservations, options: SolveOptions, vehicle_id: str, prior, bounds, hints, resize,
                search: StartSearch, reached: list[gtsam.Pose3], solution: gtsam.Pose3,
-               fit_scale: float | None) -> VehicleResult | None:
+               fit_scale: float | None, start_prior: ShapePrior | None = None) -> VehicleResult | None:
     """The vehicle solved again from further starts when its solution fits poorly or is not sane; None when no
     start gives a better one.
 
@@ -489,7 +498,7 @@ def _restarted(obs: KeypointObservations, options: SolveOptions, vehicle_id: str
     where the first solution had one (``fit_scale``: its ``fit_noise_scale``; None: it was not sane), lies in
     another basin (:func:`vfactor.init.distinct_poses` from ``solution``) and fits better. Its
     ``extras["restarted"]``: the first solution's ``fit_noise_scale`` (None where it was not sane), the start's
-    source and how many starts were solved.
+    source and how many starts were solved. ``start_prior``: the first solve's (:func:`solve_observations`).
     """
     best, tried, reached = None, 0, reached + [solution]
     for candidate in search.best(None, ransac=True):
@@ -500,7 +509,7 @@ def _restarted(obs: KeypointObservations, options: SolveOptions, vehicle_id: str
         tried += 1
         reached.append(candidate.world_T_vehicle)
         result = solve_observations(obs, options, vehicle_id, prior, bounds,
-                                    (candidate.world_T_vehicle, candidate.wireframe), hints, resize)
+                                    (candidate.world_T_vehicle, candidate.wireframe), hints, resize, start_prior)
         if not result.ok:
             continue
         reached.append(result.world_T_vehicle)

@@ -347,6 +347,7 @@ class ShapeModel:
     # original's and served the original's priors, and wrote its own into the original's)
     _variants: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     _evidence_stack: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    _far: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self):
         """Checks a model built by hand (the one place a user's priors enter the solve).
@@ -410,7 +411,9 @@ class ShapeModel:
         :func:`vfactor.solve.solve_observations` solves it again from its type's own."""
         if body_type == ANY or body_type not in self.types:
             return False
-        return _mahalanobis2(self.pooled, Wireframe(self.types[body_type].mean)) > _CHI2_36_999
+        if body_type not in self._far:  # once per model and type
+            self._far[body_type] = _mahalanobis2(self.pooled, Wireframe(self.types[body_type].mean)) > _CHI2_36_999
+        return self._far[body_type]
 
     def suggested_types(self, hints=()) -> tuple[str, ...]:
         """The body types a vehicle's detections' class ``hints`` suggest together (empty: no suggestion).

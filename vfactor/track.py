@@ -714,27 +714,32 @@ class Tracker:
         return graph, solved
 
     def _young_starts(self, track: _TrackState, frames: list) -> dict[int, gtsam.Pose3]:
-        """Frame index -> the pose a young track's re-solve starts from: each frame's own solve, but a poor fit's
-        (its pose may be turned over) and, where the track's body type and the frame's differ and one of them lies
-        far from the model's pooled prior (a bus track whose frame came out a car, or the reverse), the frame's:
-        such a frame is often the bus taken for a smaller vehicle along the cameras' rays, metres off. Those start
-        from the nearest frame that starts from its own pose (none where no frame does).
+        """Frame index -> the pose a young track's re-solve starts from: each frame's own solve (none for a poor
+        fit's, whose pose may be turned over, or a failed one's: the smoother's estimate stays), but where the
+        track's body type and the frame's differ and one of them lies far from the model's pooled prior (a bus
+        track whose frame came out a car, or the reverse), the pose of the nearest frame whose own solve is of the
+        track's kind: such a frame is often the bus taken for a smaller vehicle along the cameras' rays, metres
+        off.
 
         A bus seen by two cameras (``library_bus_tracks_2cam`` seed 13): two of its first five frames solved alone
         were an estate 19 m off and a van 3.4 m off; started there, the re-solve kept the track 135 degrees and
         16 m off for ten frames (docs/results.md)."""
         far = self.model.far_from_pooled if self.model is not None else (lambda body_type: False)
 
-        def own(alone: VehicleResult) -> bool:
-            if not alone.ok or alone.status == Status.POOR_FIT:
-                return False
-            return not (alone.body_type != track.body_type and None not in (alone.body_type, track.body_type)
-                        and (far(alone.body_type) or far(track.body_type)))
+        def usable(alone: VehicleResult) -> bool:
+            return alone.ok and alone.status != Status.POOR_FIT
 
-        good = [(index, alone.world_T_vehicle) for index, _, _, alone, _ in frames if own(alone)]
-        if not good:
-            return {}
-        return {index: min(good, key=lambda g: abs(g[0] - index))[1] for index, *_ in frames}
+        def other_kind(alone: VehicleResult) -> bool:
+            return (alone.body_type != track.body_type and None not in (alone.body_type, track.body_type)
+                    and (far(alone.body_type) or far(track.body_type)))
+
+        own = {index: alone.world_T_vehicle for index, _, _, alone, _ in frames
+               if usable(alone) and not other_kind(alone)}
+        starts = dict(own)
+        for index, _, _, alone, _ in frames:
+            if usable(alone) and other_kind(alone) and own:
+                starts[index] = own[min(own, key=lambda i: abs(i - index))]
+        return starts
 
     def _restart_smoother(self, track: _TrackState, graph: gtsam.NonlinearFactorGraph, solved: gtsam.Values,
                           t: float, held: bool) -> None:

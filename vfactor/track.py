@@ -250,10 +250,12 @@ _RESUME_FRAMES = 5
 _TAKE_BACK_POSES = _REJOIN_POSES
 #: What a track's segment is (Tracker._resume holds them for a few frames after a jump ends a segment).
 _SEGMENT_STATE = ("smoother", "poses", "hwc_added", "young", "young_frames", "multiview_frames", "reanchored", "prior",
-                  "body_type", "body_type_probability", "noise_scale", "offsets", "offset_priors", "observed")
+                  "body_type", "body_type_probability", "noise_scale", "camera_factors", "offsets", "offset_priors",
+                  "observed")
 #: What a re-solve with a frame that does not join changes and Tracker._rejoined puts back: the shape choice and
 #: the detector offsets made for that frame.
-_REJOIN_STATE = ("prior", "noise_scale", "body_type", "body_type_probability", "offsets", "offset_priors", "observed")
+_REJOIN_STATE = ("prior", "noise_scale", "camera_factors", "body_type", "body_type_probability", "offsets",
+                 "offset_priors", "observed")
 #: With a fixed lag, a young track's poses stay in its smoother (re-stamped with each new frame) while it has fewer
 #: than this many young frames, so that re-anchoring and re-joining can still re-solve them all.
 _YOUNG_HOLD_FRAMES = 30
@@ -294,6 +296,7 @@ class _TrackState:
     body_type: str | None = None
     body_type_probability: float | None = None
     noise_scale: float = 1.0  # multiplies the detections' pixel sigmas
+    camera_factors: dict | None = None  # camera name -> its own factor on top (Tracker._camera_factors), or None
     notes: dict = field(default_factory=dict)  # pose key -> message of every result of it (a new segment)
     swaps: dict = field(default_factory=dict)  # pose key -> the frame's relabelled left/right pairs (vfactor.label_swaps)
     jumps: list = field(default_factory=list)  # (frame index, t, what) of each jump beyond the motion model
@@ -537,6 +540,8 @@ class Tracker:
                                body_type=track.body_type, body_type_probability=track.body_type_probability,
                                box=_box(pose, wireframe, track.body_type, self.options.solve.box_model))
         result.extras["noise_scale"] = track.noise_scale
+        if track.camera_factors:
+            result.extras["camera_noise_factors"] = dict(track.camera_factors)
         hub = self._hub_key(track)
         if hub is not None and estimate.exists(hub):  # the wheel radius the track's poses share (a road plane given)
             result.extras["hub_height"] = float(estimate.atVector(hub)[0])
@@ -645,7 +650,7 @@ class Tracker:
             graph.add(hub_prior(self._hub_key(track), config))
         used = set()
         for frame_index, obs, motion, _, offsets in track.young_frames if frames is None else frames:
-            scaled = obs.scaled_above_calibrated(track.noise_scale)
+            scaled = _track_scaled(obs, track.noise_scale, track.camera_factors)
             add_observation_factor(graph, self.keys, scaled, track.index, frame_index, config, offsets)
             if len(scaled):  # the keypoints as this graph holds them, for the smoothed covariances (_marginals)
                 track.observed[self.keys.pose_key(track.index, frame_index)] = (frame_index, scaled, offsets)
@@ -664,6 +669,8 @@ class Tracker:
         shape = track_shape(alone, self.model, self.prior)
         track.prior, track.noise_scale = shape.prior, shape.noise_scale
         track.body_type, track.body_type_probability = shape.body_type, shape.probability
+        # a first frame's own cameras' factors (the one-frame rule); over several frames the re-solve's (_solved_young)
+        track.camera_factors = alone[0].extras.get("camera_noise_factors") if len(alone) == 1 else None
 
     def _reanchor(self, track: _TrackState, t: float) -> None:
         """Re-solves a young track by Levenberg-Marquardt over its whole graph.
@@ -711,6 +718,16 @@ class Tracker:
         turned = canonical_gauge(solved, pose_keys, self.keys.layer_keys(track.index), track.offset_priors)
         if turned is not None:  # the body frame turned front to back (vfactor.factors.body_frame): on from the convention's
             solved = gtsam.LevenbergMarquardtOptimizer(graph, turned, self.options.solve.lm_params()).optimize()
+        points = self._wireframe(solved, track).vehicle_p_keypoints
+        factors = _camera_factors(
+            ((scaled, _frame_residuals(scaled, solved, self.keys, track.index, index, offsets, points))
+             for index, scaled, offsets in ((index, _track_scaled(obs, track.noise_scale, None), offsets)
+                                            for index, obs, _, _, offsets in frames) if len(scaled)),
+            _YOUNG_CAMERA_FRAME_SHARE)
+        if factors is not None:  # the cameras' keypoints fit at scales far apart: each camera's sigmas its own
+            track.camera_factors = factors
+            graph = self._young_graph(track, frames)
+            solved = gtsam.LevenbergMarquardtOptimizer(graph, solved, self.options.solve.lm_params()).optimize()
         return graph, solved
 
     def _young_starts(self, track: _TrackState, frames: list) -> dict[int, gtsam.Pose3]:
@@ -870,10 +887,10 @@ class Tracker:
             return
         loss = self.options.solve.graph.loss
         now = track.smoother.calculateEstimate()
-        cost_now = cross_projection_cost(raw.scaled_above_calibrated(track.noise_scale),
+        cost_now = cross_projection_cost(_track_scaled(raw, track.noise_scale, track.camera_factors),
                                          self._predict(track.poses, now, t), self._wireframe(now, track), loss)
         before = previous["smoother"].calculateEstimate()  # the held segment (same keys' characters and index)
-        cost_before = cross_projection_cost(raw.scaled_above_calibrated(previous["noise_scale"]),
+        cost_before = cross_projection_cost(_track_scaled(raw, previous["noise_scale"], previous["camera_factors"]),
                                             self._predict(previous["poses"], before, t), self._wireframe(before, track),
                                             loss)
         if not cost_before < _RESUME_COST_RATIO * cost_now:
@@ -944,8 +961,9 @@ class Tracker:
                 _add_pose_factors(motion, merged[:i], merged[i][2], merged[i][1], self.options,
                                   self._hub_key(track))
                 frames[i] = (*frames[i][:2], motion, *frames[i][3:])
-        scale, wireframe = track.noise_scale, self._wireframe(estimate, track)  # costs at the segment's noise scale
-        cost_before = sum(cross_projection_cost(obs.scaled_above_calibrated(scale), estimate.atPose3(key), wireframe,
+        scale, factors = track.noise_scale, track.camera_factors  # costs at the segment's noise scale
+        wireframe = self._wireframe(estimate, track)
+        cost_before = sum(cross_projection_cost(_track_scaled(obs, scale, factors), estimate.atPose3(key), wireframe,
                                                 loss)
                           for (_, obs, *_), (_, _, key) in zip(track.young_frames, track.poses) if len(obs))
         estimate.insert(values)
@@ -959,14 +977,14 @@ class Tracker:
         shape = self._wireframe(solved, track)
 
         def cost(obs, key):
-            return cross_projection_cost(obs.scaled_above_calibrated(scale), solved.atPose3(key), shape, loss)
+            return cross_projection_cost(_track_scaled(obs, scale, factors), solved.atPose3(key), shape, loss)
 
         if not cost_before > 0 or sum(cost(obs, key) for (_, obs, *_), (_, _, key) in zip(
                 frames[len(old_poses):], track.poses) if len(obs)) > _REJOIN_COST_RATIO * cost_before:
             return
         for (_, obs, *_), (_, _, key) in zip(frames, old_poses):
             if len(obs):
-                starts = best_candidates(obs.scaled_above_calibrated(scale), shape, loss, 1,
+                starts = best_candidates(_track_scaled(obs, scale, factors), shape, loss, 1,
                                          min_keypoints_in_one_view=self.options.solve.min_keypoints_in_one_view)
                 if not starts or cost(obs, key) > _REJOIN_COST_RATIO * starts[0].cost:
                     return
@@ -1005,7 +1023,8 @@ class Tracker:
             graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
             for (index, obs, motion, *_), (_, _, key) in zip(frames, old_poses):
                 if len(obs):
-                    add_observation_factor(graph, self.keys, obs.scaled_above_calibrated(track.noise_scale),
+                    add_observation_factor(graph, self.keys, _track_scaled(obs, track.noise_scale,
+                                                                           track.camera_factors),
                                            track.index, index, config)
                 graph.push_back(motion)
                 values.insert(key, track.retired[(index, track.id)].world_T_vehicle)
@@ -1049,7 +1068,7 @@ class Tracker:
             return self._start(track, frame_index, t, given, detections)
         if track.previous is not None:
             self._resume(track, t, obs)
-        raw, obs = obs, obs.scaled_above_calibrated(track.noise_scale)
+        raw, obs = obs, _track_scaled(obs, track.noise_scale, track.camera_factors)
         options = self.options.solve
         # once both motion factors fix the pose any keypoint helps, as in smooth_scene; a younger track needs three
         fixed_by_motion = _acceleration_applies(track.poses, t, self.options)
@@ -1121,7 +1140,7 @@ class Tracker:
         raw = turn_cameras(sized_observations(detections, self.cameras, options.graph, guess, wireframe), turned)
         if kept is not None:
             raw = raw.subset(kept)
-        obs = raw.scaled_above_calibrated(track.noise_scale)
+        obs = _track_scaled(raw, track.noise_scale, track.camera_factors)
         if options.relabel_swaps:  # left/right pairs that the track's shape at the prediction says are swapped
             obs, swaps = relabel_swaps(obs, guess, wireframe.vehicle_p_keypoints, loss)
             if swaps:
@@ -1721,8 +1740,8 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
         trusted = solved and (first.status != Status.POOR_FIT or not posed)  # a poor fit starts no pose but the first
         guess = first.world_T_vehicle if trusted else values.atPose3(posed[-1][2])
         shape_at = first.wireframe if trusted else wireframe_from_values(values, keys, index)
-        obs = sized_observations(frame.detections, cameras, config, guess, shape_at).camera_scaled(
-            camera_factors).scaled_above_calibrated(scale)
+        obs = _track_scaled(sized_observations(frame.detections, cameras, config, guess, shape_at), scale,
+                            camera_factors)
         if trusted and first.extras.get("swapped_keypoints"):
             swaps[i] = first.extras["swapped_keypoints"]
             obs = apply_swaps(obs, swaps[i])
@@ -1777,10 +1796,8 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
     residuals = {i: (obs, _frame_residuals(obs, estimate, keys, index, i, frame_offsets, points))
                  for _, i, obs, frame_offsets in projections}
     if camera_factors is None:  # the cameras' own scales over the piece's frames, where they differ that much
-        own = _camera_fit_scales(residuals.values())
-        if len(own) >= 2 and max(own.values()) >= _CAMERA_SCALE_RATIO * min(own.values()):
-            pooled = _fit_scale(np.concatenate([r for _, r in residuals.values()]))
-            factors = {name: fit / pooled for name, fit in own.items()}
+        factors = _camera_factors(residuals.values())
+        if factors is not None:
             again, suspect_again = _smooth_piece(vid, index, cameras, options, model, prior, bounds, piece, factors)
             for result in again.values():
                 if result.ok:
@@ -1825,6 +1842,42 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
 _CAMERA_SCALE_RATIO = 3.0
 #: ... and each such camera has at least this many keypoints over the track.
 _CAMERA_SCALE_MIN_KEYPOINTS = 20
+#: A young track's re-solve gives its cameras their own factors only where their scales lie that far apart in at
+#: least this share of its frames (:func:`_camera_factors`): over a few frames, a camera's keypoints of another
+#: vehicle in three of them would otherwise pass for a camera of its own noise level (tests/test_track.py).
+_YOUNG_CAMERA_FRAME_SHARE = 0.8
+
+
+def _track_scaled(obs: KeypointObservations, noise_scale: float, camera_factors: dict | None) -> KeypointObservations:
+    """A track's keypoints at its sigmas: each camera's times its own factor (where the track has them), all times
+    the track's noise scale (above the calibrated ones)."""
+    return obs.camera_scaled(camera_factors).scaled_above_calibrated(noise_scale)
+
+
+def _camera_factors(frames, frame_share: float = 0.0) -> dict[str, float] | None:
+    """Camera name -> its noise factor over frames of ``(observations, whitened residuals)`` at a track's sigmas
+    (its fit scale over the pooled one), where the cameras' fit scales (:func:`_camera_fit_scales`) lie
+    :data:`_CAMERA_SCALE_RATIO` or more apart, and, with ``frame_share``, where they do in at least that share of
+    the frames in which each of those cameras has 4 keypoints or more (a camera's scale that is its own, not a few
+    frames' gross errors); else None. Batch smoothing (:func:`_smooth_piece`, over a whole track) and a young
+    track's re-solve (:meth:`Tracker._solved_young`, over its first frames: :data:`_YOUNG_CAMERA_FRAME_SHARE`) take
+    it."""
+    frames = list(frames)
+    own = _camera_fit_scales(frames)
+    if len(own) < 2 or max(own.values()) < _CAMERA_SCALE_RATIO * min(own.values()):
+        return None
+    if frame_share > 0:
+        low, high = min(own, key=own.get), max(own, key=own.get)
+        apart = []
+        for obs, residuals in frames:
+            fit = {obs.cameras[c].name: _fit_scale(residuals[obs.camera_index == c]) for c in range(len(obs.cameras))
+                   if np.sum(obs.camera_index == c) >= 4}
+            if low in fit and high in fit:
+                apart.append(fit[high] >= _CAMERA_SCALE_RATIO * fit[low])
+        if not apart or np.mean(apart) < frame_share:
+            return None
+    pooled = _fit_scale(np.concatenate([r for _, r in frames]))
+    return {name: fit / pooled for name, fit in own.items()}
 
 
 def _camera_fit_scales(frames) -> dict[str, float]:

@@ -29,7 +29,8 @@ from vfactor.keypoints import LAYERS
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes, symmetrised
 
 __all__ = ["ShapePrior", "ShapeModel", "HwcBounds", "default_shape_prior", "default_shape_model", "default_hwc_bounds",
-           "car_hwc_bounds", "resolve_shape_prior", "pascal3d_wireframes", "PASCAL3D_WHEELBASE", "DISTANCE_PAIRS", "CLASS_HINTS", "ANY"]
+           "car_hwc_bounds", "resolve_shape_prior", "pascal3d_wireframes", "PASCAL3D_WHEELBASE", "DISTANCE_PAIRS",
+           "CLASS_HINTS", "ANY", "HEAVY_PRIOR_WEIGHT"]
 
 #: All 66 keypoint pairs (i < j) whose distance the HWC distance factor bounds.
 DISTANCE_PAIRS: np.ndarray = np.array(list(combinations(range(12), 2)))
@@ -247,7 +248,7 @@ def _car_wireframes(exclude: frozenset = frozenset()) -> list[Wireframe]:
 @prebuilt.shipped("hwc_bounds")
 def default_hwc_bounds(exclude: frozenset = frozenset(), road_extremes: bool = True) -> HwcBounds:
     """HWC bounds spanning every vehicle of the library, the PASCAL3D+ cars at wheelbases 2.4-3.1 m, the presets
-    and the road's extremes beyond the library (a 12 m city bus, a microcar:
+    and the road's extremes beyond the library (a microcar, the largest two-axle bus EU rules allow:
     :func:`vfactor.vehicle_library.bounds_vehicles`).
 
     The ranges of the cars and of the library's light vehicles
@@ -272,9 +273,9 @@ def default_hwc_bounds(exclude: frozenset = frozenset(), road_extremes: bool = T
     if not road_extremes:
         return bounds
     heavy = [v.wireframe for v in library if v.body_type not in LIGHT_TYPES]
-    if len(heavy) >= 2:
+    if len(heavy) >= 2:  # a range to widen: the buses and buses like them
         bounds = bounds.spanning(heavy, margin=0.5)
-    return bounds.spanning(heavy + [v.wireframe for v in bounds_vehicles().values()])
+    return bounds.spanning(heavy + [v.wireframe for v in bounds_vehicles().values()])  # each heavy one at least
 
 
 @lru_cache(maxsize=1)

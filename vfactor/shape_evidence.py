@@ -576,6 +576,25 @@ def _moment_matched(model: ShapeModel, weights: dict, negligible: float = 1e-3) 
     return ShapePrior.trusted(mean, 0.5 * (cov + cov.T))
 
 
+def mixed_kinds(results, model: ShapeModel | None) -> bool:
+    """Whether some of ``results`` (one-frame solves of one vehicle) chose a body type far from the model's pooled
+    prior (:meth:`~vfactor.shape_model.ShapeModel.far_from_pooled`: a bus) and others a type near it."""
+    if model is None:
+        return False
+    kinds = {model.far_from_pooled(r.body_type) for r in results if r is not None and r.ok and r.body_type}
+    return len(kinds) == 2
+
+
+def heavier_kind(results, model: ShapeModel) -> bool:
+    """Whether the one-frame solves of ``results`` that chose a type far from the model's pooled prior (a bus) have
+    probabilities adding up to more than those of the ones that chose a type near it."""
+    weight = {True: 0.0, False: 0.0}
+    for r in results:
+        if r is not None and r.ok and r.body_type:
+            weight[model.far_from_pooled(r.body_type)] += r.body_type_probability or 0.0
+    return weight[True] > weight[False]
+
+
 @dataclass(frozen=True)
 class TrackShape:
     """The shape prior and noise scale of a track (or of any vehicle seen in several frames).
@@ -593,13 +612,22 @@ class TrackShape:
     probability: float | None = None
 
 
-def track_shape(results, model: ShapeModel | None, fallback: ShapePrior | None = None) -> TrackShape:
+def track_shape(results, model: ShapeModel | None, fallback: ShapePrior | None = None,
+                far: bool | None = None) -> TrackShape:
     """The prior and noise scale of a vehicle seen in several frames, from its one-frame solves.
 
     The frames share one shape, so the observations' Gaussians on it
     (``extras["shape_information"]`` of each result of
     :func:`vfactor.solve.solve_observations`) add up, and the body type is
     chosen from their sum; the noise scale is the median of the frames'.
+    Where some frames' solves chose a type far from the model's pooled prior
+    (:meth:`~vfactor.shape_model.ShapeModel.far_from_pooled`: a bus) and others
+    a type near it, only the frames of the kind whose choices' probabilities add
+    up to more count: each Gaussian is linearised at its own frame's solution,
+    and a bus taken for a smaller vehicle along the cameras' rays, metres off,
+    gives one of a car (``library_bus_tracks_2cam`` seeds 1-2: two of the
+    young buses' frames a van or SUV 2-14 m off outweighed five or six bus
+    frames, and the tracks were reported vans).
     :func:`vfactor.track.smooth_scene`, the tracker (over a young track's
     frames) and a graph of your own (examples/infrastructure_graph.py) use it.
 
@@ -609,11 +637,16 @@ def track_shape(results, model: ShapeModel | None, fallback: ShapePrior | None =
         model: the shape model, or None to keep ``fallback``.
         fallback: the prior without a model or without a solved frame
             (default: the model's pooled prior).
+        far: where the frames are of both kinds (:func:`mixed_kinds`), count only those far from the pooled
+            prior (True) or near it (False); None: the kind whose choices' probabilities add up to more.
     """
     solved = [r for r in results if r is not None and r.ok]
     fallback = fallback if fallback is not None else (model.pooled if model is not None else None)
     if not solved:
         return TrackShape(fallback)
+    if mixed_kinds(solved, model):  # frames of one kind: far from the pooled prior (a bus) or near it
+        far = heavier_kind(solved, model) if far is None else far
+        solved = [r for r in solved if model.far_from_pooled(r.body_type) == far]
     scale = float(np.median([r.extras.get("noise_scale", 1.0) for r in solved]))
     informations = [r.extras["shape_information"] for r in solved if "shape_information" in r.extras]
     if model is None or not informations:

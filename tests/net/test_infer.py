@@ -44,6 +44,8 @@ def test_known_heatmaps_decode_to_image_pixels_through_the_roi():
     roi = (100, 50, 228, 146)  # 128 x 96 px: sx = 8, sy = 6 image px per heatmap px
     (kp,), heatmaps = det.detect(image, [roi], return_heatmaps=True)
     assert heatmaps.shape == (1, 12, H, H)
+    none, empty = det.detect(image, [], return_heatmaps=True)  # no box: (0, 12, 0, 0) before, not stackable
+    assert none == [] and empty.shape == (0, 12, H, H) and empty.dtype == np.float32
     np.testing.assert_allclose(kp.uv, heatmap_to_image(PEAKS, roi, (H, H)), atol=1e-6)
     J = np.diag([8.0, 6.0])
     np.testing.assert_allclose(kp.covariance, np.broadcast_to(J @ COV @ J.T, (12, 2, 2)), rtol=1e-6)

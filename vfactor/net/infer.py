@@ -153,7 +153,8 @@ class KeypointDetector:
         dets = self.detect_batch([image], [rois])[0]
         kps = [d.keypoints for d in dets]
         if return_heatmaps:
-            hm = np.stack([d.heatmaps for d in dets]) if dets else np.zeros((0, 12, 0, 0), np.float32)
+            size = self.input_size // 4  # the heatmaps' resolution, as detect_batch's empty batch has it
+            hm = np.stack([d.heatmaps for d in dets]) if dets else np.zeros((0, 12, size, size), np.float32)
             return kps, hm
         return kps
 

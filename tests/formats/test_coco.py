@@ -356,9 +356,13 @@ def test_import_command_writes_a_scene_that_solves_as_the_inline_one(tmp_path, s
                      "--no-covariance", "-q"]) == 0
     got, want = (poses(load_results(tmp_path / f"{n}_result.json")) for n in ("imported", "inline"))
     np.testing.assert_allclose(got, want, atol=1e-6)
-    # thresholds that leave detections out say so
-    assert main(args + ["--min-score", "0.9"]) == 0
-    assert "left out 4 detections: 4 score" in capsys.readouterr().err
+    # thresholds that leave every detection out are bad input (an empty scene was written, exit 0), and no file
+    empty = tmp_path / "empty.json"
+    assert main(args[:args.index("--out")] + ["--out", str(empty)] + args[args.index("--out") + 2:]
+                + ["--min-score", "0.9"]) == 2
+    err = capsys.readouterr().err
+    assert "--min-score: every detection was left out (4 score); no scene written" in err and not empty.exists()
+    assert len(err.strip().splitlines()) == 1
     assert main(args[:-2] + ["--results", "cam0"]) == 2
     assert "--results: expected CAMERA=FILE, got 'cam0'" in capsys.readouterr().err
 

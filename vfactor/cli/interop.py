@@ -38,9 +38,15 @@ def import_detections(args) -> int:
     out = check_out_file(args.out, "--out", [("cameras file --cameras", args.cameras),
                                              *((f"COCO file of {name}", path) for name, path in results.items())])
     skipped: dict[str, int] = {}
-    scene = import_coco(args.cameras, results, args.keypoints, out, values=args.values, min_score=args.min_score,
-                        min_confidence=args.min_confidence, frames=args.frames, images=images, fps=args.fps,
-                        pixel_origin=args.pixel_origin, track_ids=args.track_ids, skipped=skipped)
+    try:
+        scene = import_coco(args.cameras, results, args.keypoints, out, values=args.values, min_score=args.min_score,
+                            min_confidence=args.min_confidence, frames=args.frames, images=images, fps=args.fps,
+                            pixel_origin=args.pixel_origin, track_ids=args.track_ids, skipped=skipped)
+    except InputError as exc:  # the API's option names as the command's flags
+        flag = {"min_score": "--min-score", "min_confidence": "--min-confidence"}.get(exc.field)
+        if flag is None:
+            raise
+        raise InputError(flag, exc.problem) from None
     if skipped:
         note(f"left out {sum(skipped.values())} detections: " + ", ".join(
             f"{n} {reason}" for reason, n in skipped.items()) + " (crowd: iscrowd 1; score: under --min-score; "

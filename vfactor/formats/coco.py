@@ -223,8 +223,21 @@ def import_coco(cameras, results: Mapping[str, str | os.PathLike], keypoint_set:
 
     Returns:
         The scene written.
+
+    Raises:
+        SceneError, InputError: as :func:`coco_to_scene_dict`; and an
+            InputError where the files hold detections and the options leave
+            out every one (``field``: ``min_score`` or ``min_confidence``, the
+            one that left out the most): no scene file is written then.
     """
-    scene = coco_to_scene(cameras, results, keypoint_set, **options)
+    skipped = options.pop("skipped", None)
+    skipped = {} if skipped is None else skipped
+    scene = coco_to_scene(cameras, results, keypoint_set, skipped=skipped, **options)
+    by_option = {"min_score": skipped.get("score", 0), "min_confidence": skipped.get("no keypoint", 0)}
+    if any(by_option.values()) and not any(f.detections for f in scene.frames):
+        field_name = max(by_option, key=by_option.get)
+        left_out = ", ".join(f"{n} {why}" for why, n in skipped.items())
+        raise InputError(field_name, f"every detection was left out ({left_out}); no scene written")
     save_scene(scene, out)
     return scene
 

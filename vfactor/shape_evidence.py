@@ -625,9 +625,9 @@ def track_shape(results, model: ShapeModel | None, fallback: ShapePrior | None =
     a type near it, only the frames of the kind whose choices' probabilities add
     up to more count: each Gaussian is linearised at its own frame's solution,
     and a bus taken for a smaller vehicle along the cameras' rays, metres off,
-    gives one of a car (``library_bus_tracks_2cam`` seeds 1-2: two of the
-    young buses' frames a van or SUV 2-14 m off outweighed five or six bus
-    frames, and the tracks were reported vans).
+    gives one of a car (``library_bus_tracks_2cam`` seeds 1-2: such frames
+    outweighed the buses' and the tracks were reported vans; the tracker
+    also solves a young track of both kinds as each, ``Tracker._solved_as``).
     :func:`vfactor.track.smooth_scene`, the tracker (over a young track's
     frames) and a graph of your own (examples/infrastructure_graph.py) use it.
 

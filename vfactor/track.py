@@ -296,7 +296,7 @@ class _TrackState:
     body_type: str | None = None
     body_type_probability: float | None = None
     noise_scale: float = 1.0  # multiplies the detections' pixel sigmas
-    camera_factors: dict | None = None  # camera name -> its own factor on top (Tracker._camera_factors), or None
+    camera_factors: dict | None = None  # camera name -> its own factor on top (_camera_factors), or None
     notes: dict = field(default_factory=dict)  # pose key -> message of every result of it (a new segment)
     swaps: dict = field(default_factory=dict)  # pose key -> the frame's relabelled left/right pairs (vfactor.label_swaps)
     jumps: list = field(default_factory=list)  # (frame index, t, what) of each jump beyond the motion model
@@ -743,9 +743,9 @@ class Tracker:
         graph = self._young_graph(track, frames)
         solved = gtsam.LevenbergMarquardtOptimizer(graph, estimate, self.options.solve.lm_params()).optimize()
         turned = canonical_gauge(solved, pose_keys, self.keys.layer_keys(track.index), track.offset_priors)
-        if turned is not None:  # the body frame turned front to back (vfactor.factors.body_frame): on from the
+        if turned is not None:  # turned front to back (vfactor.factors.body_frame): again from the convention's gauge
             solved = gtsam.LevenbergMarquardtOptimizer(graph, turned, self.options.solve.lm_params()).optimize()
-        return graph, solved  # convention's
+        return graph, solved
 
     def _solved_as(self, track: _TrackState, frames: list, estimate: gtsam.Values, pose_keys: list, far: bool,
                    alone: list) -> tuple:

@@ -379,7 +379,8 @@ def solve_observations(
         if suspects:  # the joint solve followed a view the image border cuts: solve without it (the keypoints as given)
             kept = ~np.isin(as_given.camera_index,
                             [c for c, camera in enumerate(as_given.cameras) if camera.name in suspects])
-            alone = solve_observations(as_given.subset(kept), options, vehicle_id, prior, bounds, None, hints)
+            alone = solve_observations(as_given.subset(kept), options, vehicle_id, prior, bounds, None, hints,
+                                       start_prior=start_prior)
             if alone.ok:
                 note = (f"the keypoints of camera(s) {', '.join(repr(n) for n in suspects)}, whose view the image "
                         f"border cuts, disagree with those of camera(s) {', '.join(repr(n) for n in rejected)}: "

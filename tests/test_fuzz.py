@@ -74,7 +74,7 @@ def _base_result_text() -> str:
         path = Path(folder) / "scene.json"
         path.write_text(json.dumps(BASE_SCENE))
         results = solve_scene(load_scene(path), SolveOptions())
-        save_results(Path(folder) / "r.json", results)
+        save_results(results, Path(folder) / "r.json")
         return (Path(folder) / "r.json").read_text()
 
 

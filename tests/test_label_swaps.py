@@ -242,7 +242,7 @@ def test_swaps_round_trip_through_the_result_file_and_the_schema(sim, tmp_path):
     result = solve_observations(obs, SolveOptions(), vid, held_out_model(sim.truth[0][vid].preset))
     assert result.extras["swapped_keypoints"]
     path = tmp_path / "result.json"
-    save_results(path, [FrameResult(0.0, [result])])
+    save_results([FrameResult(0.0, [result])], path)
     data = results_to_dict(load_results(path))
     validate(data, "result")
     written = data["frames"][0]["vehicles"][0]["swapped_keypoints"]

@@ -586,7 +586,7 @@ def assert_results_equal(a: list[FrameResult], b: list[FrameResult]) -> None:
 def test_results_round_trip(tmp_path):
     results = make_results()
     path = tmp_path / "results.json"
-    save_results(path, results)
+    save_results(results, path)
     written = strict_json(path.read_text(encoding="utf-8"))
     v1, v2 = written["frames"][0]["vehicles"]
     assert list(v1) == [
@@ -790,7 +790,7 @@ def test_boxes_and_covariance_kinds_round_trip_through_the_result_file(tmp_path)
     tracked = track_scene(sim.scene, TrackOptions(lag=0.3)).frames
     for frames in (solved, tracked):
         path = tmp_path / "r.json"
-        save_results(path, frames)
+        save_results(frames, path)
         loaded = load_results(path)
         for a, b in zip(frames, loaded):
             for va, vb in zip(a.vehicles, b.vehicles):
@@ -841,9 +841,9 @@ def test_results_written_as_they_come(tmp_path):
 
     results = make_results()
     path = tmp_path / "streamed.json"
-    save_results(path, iter(results))
+    save_results(iter(results), path)
     assert path.read_text(encoding="utf-8") == _dumps(results_to_dict(results)) + "\n"
-    save_results(tmp_path / "empty.json", iter([]))
+    save_results(iter([]), tmp_path / "empty.json")
     assert strict_json((tmp_path / "empty.json").read_text(encoding="utf-8")) == {"frames": []}
 
     def failing():
@@ -851,8 +851,21 @@ def test_results_written_as_they_come(tmp_path):
         raise RuntimeError("solver crashed")
 
     with pytest.raises(RuntimeError, match="solver crashed"):
-        save_results(tmp_path / "partial.json", failing())
+        save_results(failing(), tmp_path / "partial.json")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.json", "streamed.json"]  # no partial file, no temp
+
+
+def test_save_results_takes_the_results_first_as_save_scene_takes_the_scene(tmp_path):
+    """save_results(path, frames) was the reverse of save_scene(scene, path): the old order still writes the same
+    file, with a DeprecationWarning."""
+    results = make_results()
+    save_results(results, tmp_path / "new.json")
+    with pytest.warns(DeprecationWarning, match=r"save_results\(frames, path\)"):
+        save_results(tmp_path / "old.json", results)
+    assert (tmp_path / "old.json").read_bytes() == (tmp_path / "new.json").read_bytes()
+    with pytest.warns(DeprecationWarning):
+        save_results(str(tmp_path / "old_str.json"), iter(results))
+    assert (tmp_path / "old_str.json").read_bytes() == (tmp_path / "new.json").read_bytes()
 
 
 def test_two_frames_at_one_time_are_refused(tmp_path):

@@ -748,16 +748,25 @@ def _vehicle_fields(det: Detection) -> dict:
 
 
 # ===================================================================== results
-def save_results(path: str | os.PathLike, frames: Iterable[FrameResult]) -> None:
+def save_results(frames: Iterable[FrameResult], path: str | os.PathLike) -> None:
     """Writes a result file (JSON, docs/scene-format.md and :func:`results_to_dict`), atomically.
 
+    The results first and the file second, as :func:`save_scene` takes them.
     ``frames`` may be an iterator (:func:`vfactor.solve.iter_solve_scene`): each
     frame is written as it comes, and the file appears when the last is in.
+    The order of vfactor 0.x before 2026-12-07, ``save_results(path, frames)``,
+    still works and warns (``DeprecationWarning``).
 
     Raises:
         SceneError: a result that the file cannot hold (e.g. a converged
             vehicle without a pose); ``field`` is its path in the file. The file is then not written.
     """
+    if isinstance(frames, (str, os.PathLike)) and not isinstance(path, (str, os.PathLike)):
+        import warnings
+
+        warnings.warn("save_results(path, frames) is deprecated: save_results(frames, path), as save_scene(scene, "
+                      "path)", DeprecationWarning, stacklevel=2)
+        frames, path = path, frames
     write_text_atomic(Path(path), _result_pieces(frames))
 
 

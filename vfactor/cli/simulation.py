@@ -88,7 +88,7 @@ def demo(args) -> int:
             cells = [_error_cells(e, widths) for e, widths in zip(errs, ((16, 9, 7), (18, 7, 7)))]
             echo(f"{f:>5} {vid:<8} {truth.preset:<13} {ours.status.value:<10} | {cells[0]} | {cells[1]}")
         results.append(FrameResult(frame.t, vehicles))
-    save_results(out / "result.json", results)
+    save_results(results, out / "result.json")
     for name, col in (("vfactor", 0), ("triangulation", 1)):
         ok = [r[col] for r in rows if r[col]]
         if ok:

@@ -71,7 +71,7 @@ def _write_vfactor(path, results, scene=None) -> WriteReport:
         if scene is not None and len(scene.frames) != len(seen):  # raised before the file is moved into place
             raise InputError("scene", f"the scene has {len(scene.frames)} frames but the results {len(seen)}")
 
-    save_results(path, frames())
+    save_results(frames(), path)
     return WriteReport("vfactor", [Path(path)], unsolved_of(seen), [])
 
 

@@ -5,11 +5,12 @@ shape model and box model are fixed functions of the packaged data and of the
 code that builds them. Built on a process's first solve they cost about 10 ms,
 as much as a warm solve (a new Dask worker or CLI call paid it on its first
 vehicle). ``vfactor/data/prebuilt_models.pickle`` holds them built, with the
-SHA-256 of every file they are built from (:data:`SOURCES`). A process loads
-the file (about 1 ms) only when that digest is its own files' digest and the
-file unpickles; otherwise every model is built as before, so an edited rule or
-data file is never served stale, and a NumPy that cannot read the pickle only
-costs the 10 ms.
+SHA-256 of every file they are built from (:data:`SOURCES`), each model pickled
+on its own. A process loads the file only when that digest is its own files'
+digest, and unpickles a model when it first uses it (a solve: the shape and box
+models, about 0.2 ms); otherwise, or where a model does not unpickle, it is built
+as before, so an edited rule or data file is never served stale, and a NumPy
+that cannot read the pickle only costs the 10 ms.
 
 ``python -m vfactor.prebuilt`` writes the file; ``tests/test_prebuilt.py``
 fails when the shipped file is not the one of the sources, and checks that what
@@ -22,6 +23,7 @@ import functools
 import hashlib
 import inspect
 import pickle
+from collections.abc import Mapping
 from pathlib import Path
 
 __all__ = ["SOURCES", "PATH", "source_digest", "shipped", "build", "write", "load", "get"]
@@ -80,27 +82,54 @@ def build() -> dict:
     finally:
         _building = False
     model = models["shape_model"]
-    for body_type, spread in model.components():  # each prior the evidence weighs, with its Cholesky factor
-        model.prior(body_type, spread).evidence_terms()
+    for body_type in {body_type for body_type, _ in model.components()}:  # each type's prior with its Cholesky
+        model.prior(body_type).evidence_terms()  # factor; the wider ones are derived from it on first use
     return models
 
 
 def write(path: Path | str = PATH) -> Path:
-    """Builds the models and writes them, with :func:`source_digest`, to ``path`` (default: the shipped file)."""
+    """Builds the models and writes them, with :func:`source_digest`, to ``path`` (default: the shipped file): each
+    model pickled on its own, so that a process unpickles only those it uses (:func:`load`)."""
     path = Path(path)
-    payload = {"digest": source_digest(), "models": build()}
-    path.write_bytes(pickle.dumps(payload, protocol=4))
+    models = {name: pickle.dumps(model, protocol=4) for name, model in build().items()}
+    path.write_bytes(pickle.dumps({"digest": source_digest(), "models": models}, protocol=4))
     return path
 
 
+class _Shipped(Mapping):
+    """The shipped models by name, each unpickled on first use (a solve uses the shape and box models: unpickling
+    the vehicle library too cost 0.6 ms of a fresh process's first solve); a model that does not unpickle is
+    missing (its builder builds it)."""
+
+    def __init__(self, pickled: dict):
+        self._pickled, self._models = dict(pickled), {}
+
+    def __getitem__(self, name):
+        if name not in self._models:
+            if name not in self._pickled:
+                raise KeyError(name)
+            try:
+                self._models[name] = pickle.loads(self._pickled[name])
+            except Exception:  # noqa: BLE001  any failure to read a model means: build it
+                raise KeyError(name) from None
+        return self._models[name]
+
+    def __iter__(self):
+        return iter(self._pickled)
+
+    def __len__(self):
+        return len(self._pickled)
+
+
 @functools.lru_cache(maxsize=1)
-def load() -> dict:
-    """The shipped models by name, or ``{}`` when the file is missing, stale or unreadable."""
+def load() -> Mapping:
+    """The shipped models by name (unpickled on first use), or an empty mapping when the file is missing, stale or
+    unreadable."""
     try:
         payload = pickle.loads(PATH.read_bytes())
-        if payload.get("digest") != source_digest():
+        if payload.get("digest") != source_digest() or not isinstance(payload.get("models"), dict):
             return {}
-        return dict(payload["models"])
+        return _Shipped(payload["models"])
     except Exception:  # noqa: BLE001  any failure to read the cache means: build the models
         return {}
 

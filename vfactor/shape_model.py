@@ -134,6 +134,19 @@ class ShapePrior:
             self.__dict__["_evidence_terms"] = cached
         return cached
 
+    def widened(self, spread: float) -> "ShapePrior":
+        """This prior with its covariance times ``spread``; its square-root information and evidence terms are this
+        one's scaled (``R / sqrt(spread)``, ``P / spread``, ``log|Sigma| + 36 log(spread)``), with no factorisation
+        (a body type's wider priors, :meth:`ShapeModel.prior`)."""
+        wide = ShapePrior.trusted(self.mean, self.covariance * spread)
+        R = self.sqrt_information() / math.sqrt(spread)
+        R.setflags(write=False)
+        wide.__dict__["_sqrt_information"] = R
+        P, Pmu, quadratic, logdet = self.evidence_terms()
+        wide.__dict__["_evidence_terms"] = (P / spread, Pmu / spread, quadratic / spread,
+                                            logdet + P.shape[0] * math.log(spread))
+        return wide
+
     def sqrt_information(self) -> np.ndarray:
         """(36, 36) upper-triangular R with ``R^T R = covariance^-1`` (computed once, read-only)."""
         cached = self.__dict__.get("_sqrt_information")
@@ -402,7 +415,7 @@ class ShapeModel:
         key = (body_type, float(spread))
         if key not in self._variants:
             base = self.pooled if body_type == ANY else self.types[body_type]
-            self._variants[key] = base if spread == 1.0 else ShapePrior.trusted(base.mean, base.covariance * spread)
+            self._variants[key] = base if spread == 1.0 else base.widened(spread)
         return self._variants[key]
 
     def far_from_pooled(self, body_type: str) -> bool:

@@ -371,3 +371,18 @@ def test_a_city_bus_is_a_bus():
         assert result.status.value == "converged" and result.body_type == "bus", result.message
         assert errors["mean_keypoint_cm"] < 2.0, errors  # was 180 cm, then 40 as a van
         assert result.box.size[0] == pytest.approx(bus.dimensions.length, abs=0.05)  # was 7.2 m
+
+
+@pytest.mark.parametrize("spread", [4.0, 16.0, 3.0])
+def test_a_wider_prior_derived_from_a_types_equals_one_factorised_anew(spread):
+    """ShapeModel.prior(type, spread) scales the type's square-root information and evidence terms (no Cholesky
+    factorisation on a fresh process's first solve, and none in the shipped file): the same as factorising the
+    wider covariance."""
+    base = default_shape_model().types["van"]
+    wide, fresh = base.widened(spread), ShapePrior.trusted(base.mean, base.covariance * spread)
+    np.testing.assert_array_equal(wide.covariance, fresh.covariance)
+    np.testing.assert_allclose(wide.sqrt_information(), fresh.sqrt_information(), rtol=1e-9, atol=1e-12)
+    for a, b in zip(wide.evidence_terms(), fresh.evidence_terms()):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
+    assert not wide.sqrt_information().flags.writeable
+    assert default_shape_model().prior("van", spread).covariance[0, 0] == pytest.approx(spread * base.covariance[0, 0])

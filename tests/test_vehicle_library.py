@@ -164,3 +164,18 @@ def test_layer_offset_bounds_are_one_row_per_axis():
         box = bounds.layer_offset[name]
         np.testing.assert_allclose(box[0], [off[:, 0].min() - 0.1, off[:, 0].max() + 0.1])  # x (the 10 cm minimum)
         np.testing.assert_allclose(box[1], [off[:, 2].min() - 0.1, off[:, 2].max() + 0.1])  # z
+
+
+def test_a_buses_windshield_top_is_at_the_front_of_its_roof_whatever_its_front_overhang():
+    """BodyRules.windshield_setback: the windshield top sits that far behind the front end (a bus's front overhangs
+    differ by 0.6 m across the library), not at a share of the wheelbase behind the front axle as a car's."""
+    from vfactor.vehicle_library import BODY_RULES
+
+    rules = BODY_RULES["bus"]
+    for vehicle_id in library_ids("bus"):
+        vehicle = library_vehicle(vehicle_id)
+        front, _ = vehicle.dimensions.overhangs()
+        x_front = vehicle.dimensions.wheelbase / 2 + front
+        points = vehicle.wireframe.vehicle_p_keypoints
+        np.testing.assert_allclose(points[8:10, 0], x_front - rules.windshield_setback, atol=1e-12)
+        assert points[8, 0] > points[4, 0] - 0.2  # near the front lamps, unlike a car's windshield

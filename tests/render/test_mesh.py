@@ -30,6 +30,11 @@ def _shapes():
         for _ in range(6):
             wf, r, source = random_vehicle(rng, split)
             shapes.append((source, wf, r))
+    from vfactor.vehicle_library import library_ids, library_vehicle
+
+    for vehicle_id in library_ids("bus"):  # a windshield at the front of the roof raised "overlap" before
+        bus = library_vehicle(vehicle_id)
+        shapes.append((vehicle_id, bus.wireframe, bus.wheel_radius))
     return shapes
 
 

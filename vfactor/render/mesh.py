@@ -378,6 +378,8 @@ def vehicle_geometry(wireframe: Wireframe, appearance: Appearance | None = None,
     tail = min(0.25, 0.1 * length)
     x_wb = wind[0] + (wind[2] - z_belt) / np.tan(np.radians(a.windshield_rake_deg))
     x_wb = float(np.clip(x_wb, wind[0] + 0.05, max(x_front - 0.35, wind[0] + 0.05)))
+    if x_wb >= x_front - nose:  # a windshield at the very front (a bus's top 0.15 m behind it): a shorter nose bevel
+        nose = 0.5 * (x_front - x_wb)
     deck = rear[0] - x_rear
     rear_rake = a.rear_rake_deg
     if rear_rake is None:

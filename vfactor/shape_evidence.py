@@ -172,7 +172,7 @@ def noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int = 8,
     factors = None
     if groups is not None and fit.last is not None:  # the last fit's residuals, studentised at ``previous``
         factors = camera_noise_factors(*fit.last, groups, previous)
-        factors = None if factors is None else factors[0] * (previous / scale)
+        factors = None if factors is None else factors * (previous / scale)
     return scale, p, factors
 
 
@@ -246,7 +246,7 @@ def inlier_noise_scale(whitened: np.ndarray, lin: Linearisation, iterations: int
 
 def camera_noise_factors(q: np.ndarray, freedom: np.ndarray, groups: np.ndarray, scale: float,
                          level: float = 0.999, min_ratio: float = 3.0,
-                         min_freedom: float = 4.0) -> tuple[np.ndarray, float] | None:
+                         min_freedom: float = 4.0) -> np.ndarray | None:
     """Each camera's noise scale relative to the pooled ``scale``, where the cameras' noise differs beyond chance;
     None where it does not (or cannot be told).
 
@@ -273,7 +273,7 @@ def camera_noise_factors(q: np.ndarray, freedom: np.ndarray, groups: np.ndarray,
         scale: the pooled scale.
 
     Returns:
-        ((n,) factors, the smallest degrees of freedom among the cameras that got one) or None.
+        (n,) each observation's camera's factor, or None.
     """
     q, freedom = np.asarray(q, float), np.asarray(freedom, float)
     cameras, group = np.unique(np.asarray(groups), return_inverse=True)
@@ -305,12 +305,14 @@ def camera_noise_factors(q: np.ndarray, freedom: np.ndarray, groups: np.ndarray,
         differs |= not low <= ratio <= high
     if not differs:
         return None
-    factors, smallest = np.ones(len(q)), np.inf
-    for c in np.flatnonzero(seen & (nu >= min_freedom) & (total > 0)):
-        own = np.sqrt(total[c] / count[c] / _CHI2_2_TRUNCATED_MEAN)
-        factors[group == c] = float(np.clip(own, *NOISE_SCALE_RANGE)) / scale
-        smallest = min(smallest, float(nu[c]))
-    return (factors, smallest) if np.isfinite(smallest) else None
+    own = np.flatnonzero(seen & (nu >= min_freedom) & (total > 0))
+    if not len(own):
+        return None
+    factors = np.ones(len(q))
+    for c in own:
+        factors[group == c] = float(np.clip(np.sqrt(total[c] / count[c] / _CHI2_2_TRUNCATED_MEAN),
+                                            *NOISE_SCALE_RANGE)) / scale
+    return factors
 
 
 #: Leverage (the larger eigenvalue of an observation's hat block) above which it says nothing about the noise.
@@ -576,23 +578,29 @@ def _moment_matched(model: ShapeModel, weights: dict, negligible: float = 1e-3) 
     return ShapePrior.trusted(mean, 0.5 * (cov + cov.T))
 
 
+def _kind_weights(results, model: ShapeModel | None) -> dict[bool, float]:
+    """Of the one-frame solves ``results`` that chose a body type, per kind (True: a type far from the model's
+    pooled prior, :meth:`~vfactor.shape_model.ShapeModel.far_from_pooled`, a bus; False: one near it) the sum of
+    their choices' probabilities; only the kinds chosen are keys."""
+    weights: dict[bool, float] = {}
+    for r in results:
+        if model is not None and r is not None and r.ok and r.body_type:
+            far = model.far_from_pooled(r.body_type)
+            weights[far] = weights.get(far, 0.0) + (r.body_type_probability or 0.0)
+    return weights
+
+
 def mixed_kinds(results, model: ShapeModel | None) -> bool:
     """Whether some of ``results`` (one-frame solves of one vehicle) chose a body type far from the model's pooled
-    prior (:meth:`~vfactor.shape_model.ShapeModel.far_from_pooled`: a bus) and others a type near it."""
-    if model is None:
-        return False
-    kinds = {model.far_from_pooled(r.body_type) for r in results if r is not None and r.ok and r.body_type}
-    return len(kinds) == 2
+    prior (a bus) and others a type near it."""
+    return len(_kind_weights(results, model)) == 2
 
 
 def heavier_kind(results, model: ShapeModel) -> bool:
     """Whether the one-frame solves of ``results`` that chose a type far from the model's pooled prior (a bus) have
     probabilities adding up to more than those of the ones that chose a type near it."""
-    weight = {True: 0.0, False: 0.0}
-    for r in results:
-        if r is not None and r.ok and r.body_type:
-            weight[model.far_from_pooled(r.body_type)] += r.body_type_probability or 0.0
-    return weight[True] > weight[False]
+    weights = _kind_weights(results, model)
+    return weights.get(True, 0.0) > weights.get(False, 0.0)
 
 
 @dataclass(frozen=True)

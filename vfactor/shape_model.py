@@ -25,6 +25,7 @@ from vfactor import prebuilt
 from vfactor._kernels import log_evidence_kernel
 from vfactor.errors import InputError
 from vfactor.jsonio import is_number
+from vfactor.stats import chi2_quantile
 from vfactor.keypoints import LAYERS
 from vfactor.wireframe import PRESETS, Wireframe, pascal3d_shapes, symmetrised
 
@@ -278,17 +279,17 @@ def default_hwc_bounds(exclude: frozenset = frozenset(), road_extremes: bool = T
             simulator's random PASCAL3D+ cars are drawn within, as before 2026-12-07, so that seeds keep their
             scenes).
     """
-    from vfactor.vehicle_library import LIGHT_TYPES, bounds_vehicles, vehicle_library
+    from vfactor.vehicle_library import HEAVY_TYPES, LIGHT_TYPES, bounds_vehicles, vehicle_library
 
     library = [v for v in vehicle_library().values() if v.id not in exclude]
     wireframes = _car_wireframes(exclude) + [v.wireframe for v in library if v.body_type in LIGHT_TYPES]
     bounds = HwcBounds.from_wireframes(wireframes, margin=0.5)
     if not road_extremes:
         return bounds
-    heavy = [v.wireframe for v in library if v.body_type not in LIGHT_TYPES]
-    if len(heavy) >= 2:  # a range to widen: the buses and buses like them
+    heavy = [v.wireframe for v in library if v.body_type in HEAVY_TYPES]
+    if heavy:  # the buses, and buses like them
         bounds = bounds.spanning(heavy, margin=0.5)
-    return bounds.spanning(heavy + [v.wireframe for v in bounds_vehicles().values()])  # each heavy one at least
+    return bounds.spanning([v.wireframe for v in bounds_vehicles().values()])
 
 
 @lru_cache(maxsize=1)
@@ -425,8 +426,9 @@ class ShapeModel:
         :func:`vfactor.solve.solve_observations` solves it again from its type's own."""
         if body_type == ANY or body_type not in self.types:
             return False
-        if body_type not in self._far:  # once per model and type
-            self._far[body_type] = _mahalanobis2(self.pooled, Wireframe(self.types[body_type].mean)) > _CHI2_36_999
+        if body_type not in self._far:  # once per model and type (36: a shape's 12 x 3 coordinates)
+            self._far[body_type] = (_mahalanobis2(self.pooled, Wireframe(self.types[body_type].mean))
+                                    > chi2_quantile(36, 0.999))
         return self._far[body_type]
 
     def suggested_types(self, hints=()) -> tuple[str, ...]:
@@ -548,10 +550,6 @@ def pascal3d_wireframes() -> dict[str, Wireframe]:
 #: share of road traffic (of the order of one vehicle in a hundred); the views' evidence for a bus outweighs this
 #: many times over (docs/vehicles.md).
 HEAVY_PRIOR_WEIGHT = 0.1
-
-#: The 99.9 % point of chi2 with 36 degrees of freedom (a shape's 12 x 3 coordinates).
-_CHI2_36_999 = 67.985
-
 
 def _mahalanobis2(prior: ShapePrior, wireframe: Wireframe) -> float:
     r = prior.sqrt_information() @ (wireframe.vehicle_p_keypoints.ravel() - np.asarray(prior.mean).ravel())

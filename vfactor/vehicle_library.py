@@ -53,10 +53,10 @@ BODY_TYPES: tuple[str, ...] = ("sedan", "hatchback", "estate", "suv", "pickup", 
 #: keypoint network's rendered training vehicles are theirs.
 LIGHT_TYPES: tuple[str, ...] = ("sedan", "hatchback", "estate", "suv", "pickup", "van")
 
-#: The heavy vehicles' body types (single-deck rigid buses and coaches): a body-type prior each, and the HWC bounds
-#: span them on their own side (:func:`vfactor.shape_model.default_hwc_bounds`); they would widen the pooled prior
-#: and the bounds' ranges several times over for every car.
-HEAVY_TYPES: tuple[str, ...] = ("bus",)
+#: The heavy vehicles' body types, the others (single-deck rigid buses and coaches): a body-type prior each, and the
+#: HWC bounds span them on their own side (:func:`vfactor.shape_model.default_hwc_bounds`); they would widen the
+#: pooled prior and the bounds' ranges several times over for every car.
+HEAVY_TYPES: tuple[str, ...] = tuple(t for t in BODY_TYPES if t not in LIGHT_TYPES)
 
 
 @dataclass(frozen=True)

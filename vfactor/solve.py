@@ -465,15 +465,17 @@ def _typed_start(first: VehicleResult, body_type: str, obs: KeypointObservations
                                start_prior=model.prior(body_type))
     if not again.ok:
         return first
-
-    def fit(result: VehicleResult) -> float:
-        scale = result.extras.get("fit_noise_scale")
-        return result.final_error if scale is None else scale
-
-    if first.ok and fit(first) <= fit(again):
+    if first.ok and _fit_score(first) <= _fit_score(again):
         return first
     again.extras["typed_start"] = body_type
     return again
+
+
+def _fit_score(result: VehicleResult) -> float:
+    """How well a solution fits its keypoints, to choose between solutions of one vehicle: its ``fit_noise_scale``,
+    or, where the solve estimates no noise scale (the sigmas as given, the same for all), its final error."""
+    scale = result.extras.get("fit_noise_scale")
+    return result.final_error if scale is None else scale
 
 
 #: A further start (up to ``SolveOptions.num_starts``) is optimised only while the best solution so far keeps fewer than
@@ -514,12 +516,11 @@ def _restarted(obs: KeypointObservations, options: SolveOptions, vehicle_id: str
         if not result.ok:
             continue
         reached.append(result.world_T_vehicle)
-        scale = result.extras.get("fit_noise_scale")  # None: the sigmas as given (no noise scale), the same for all
-        score = result.final_error if scale is None else scale
+        scale = result.extras.get("fit_noise_scale")
         better = fit_scale is None or (scale is not None and scale < fit_scale
                                        and distinct_poses(result.world_T_vehicle, solution))
-        if better and (best is None or score < best[0]):
-            best = score, result, candidate.source
+        if better and (best is None or _fit_score(result) < best[0]):
+            best = _fit_score(result), result, candidate.source
         if scale is not None and scale < POOR_FIT_SCALE:
             break
     if best is None:

@@ -252,10 +252,11 @@ _TAKE_BACK_POSES = _REJOIN_POSES
 _SEGMENT_STATE = ("smoother", "poses", "hwc_added", "young", "young_frames", "multiview_frames", "reanchored", "prior",
                   "body_type", "body_type_probability", "noise_scale", "camera_factors", "offsets", "offset_priors",
                   "observed")
+#: A track's shape choice (Tracker._rechoose): its prior, noise scale, each camera's factor and its body type.
+_SHAPE_STATE = ("prior", "noise_scale", "camera_factors", "body_type", "body_type_probability")
 #: What a re-solve with a frame that does not join changes and Tracker._rejoined puts back: the shape choice and
 #: the detector offsets made for that frame.
-_REJOIN_STATE = ("prior", "noise_scale", "camera_factors", "body_type", "body_type_probability", "offsets",
-                 "offset_priors", "observed")
+_REJOIN_STATE = (*_SHAPE_STATE, "offsets", "offset_priors", "observed")
 #: With a fixed lag, a young track's poses stay in its smoother (re-stamped with each new frame) while it has fewer
 #: than this many young frames, so that re-anchoring and re-joining can still re-solve them all.
 _YOUNG_HOLD_FRAMES = 30
@@ -662,11 +663,12 @@ class Tracker:
             graph.add(hwc_factor(self.keys, track.index, terms=self._terms))
         return graph
 
-    def _rechoose(self, track: _TrackState, alone: list[VehicleResult]) -> None:
-        """The prior, body type and noise scale of a young track from its frames solved alone (as :func:`smooth_scene` does)."""
+    def _rechoose(self, track: _TrackState, alone: list[VehicleResult], far: bool | None = None) -> None:
+        """The prior, body type and noise scale of a young track from its frames solved alone (as :func:`smooth_scene`
+        does; ``far``: of those of one kind, :func:`~vfactor.shape_evidence.track_shape`)."""
         if not any(r.ok for r in alone):
             return
-        shape = track_shape(alone, self.model, self.prior)
+        shape = track_shape(alone, self.model, self.prior, far=far)
         track.prior, track.noise_scale = shape.prior, shape.noise_scale
         track.body_type, track.body_type_probability = shape.body_type, shape.probability
         # a first frame's own cameras' factors (the one-frame rule); over several frames the re-solve's (_solved_young)
@@ -759,17 +761,13 @@ class Tracker:
 
         Each kind's frames' Gaussians on the shape are linearised at their own solutions, metres apart, so which
         kind explains the track is told by the joint solution, not by adding them up."""
-        shape = track_shape(alone, self.model, self.prior, far=far)
-        track.prior, track.noise_scale = shape.prior, shape.noise_scale
-        track.body_type, track.body_type_probability = shape.body_type, shape.probability
-        track.camera_factors = None
-        insert_vehicle_values(estimate, self.keys, None, Wireframe(shape.prior.mean), track.index)
+        self._rechoose(track, alone, far)
+        insert_vehicle_values(estimate, self.keys, None, Wireframe(track.prior.mean), track.index)
         graph, solved = self._young_lm(track, frames, estimate, pose_keys, True)
         points = self._wireframe(solved, track).vehicle_p_keypoints
         residuals = [_frame_residuals(obs, solved, self.keys, track.index, index, offsets, points)
                      for index, obs, _, _, offsets in frames if len(obs)]
-        state = {name: getattr(track, name)
-                 for name in ("prior", "noise_scale", "body_type", "body_type_probability", "camera_factors")}
+        state = {name: getattr(track, name) for name in _SHAPE_STATE}
         return _fit_scale(np.concatenate(residuals)) if residuals else np.inf, state, graph, solved
 
     def _young_starts(self, track: _TrackState, frames: list) -> dict[int, gtsam.Pose3]:
@@ -1917,8 +1915,7 @@ def _camera_factors(frames, frame_share: float = 0.0) -> dict[str, float] | None
         low, high = min(own, key=own.get), max(own, key=own.get)
         apart = []
         for obs, residuals in frames:
-            fit = {obs.cameras[c].name: _fit_scale(residuals[obs.camera_index == c]) for c in range(len(obs.cameras))
-                   if np.sum(obs.camera_index == c) >= 4}
+            fit = _frame_camera_fits(obs, residuals)
             if low in fit and high in fit:
                 apart.append(fit[high] >= _CAMERA_SCALE_RATIO * fit[low])
         if not apart or np.mean(apart) < frame_share:
@@ -1940,6 +1937,17 @@ def _camera_fit_scales(frames) -> dict[str, float]:
     return {name: _fit_scale(r) for name, r in stacked.items() if len(r) >= _CAMERA_SCALE_MIN_KEYPOINTS}
 
 
+def _frame_camera_fits(obs: KeypointObservations, residuals: np.ndarray) -> dict[str, float]:
+    """Camera name -> :func:`_fit_scale` of its keypoints' whitened ``residuals`` in one frame, for the cameras with
+    at least 4 of them."""
+    fits = {}
+    for c, camera in enumerate(obs.cameras):
+        rows = obs.camera_index == c
+        if rows.sum() >= 4:
+            fits[camera.name] = _fit_scale(residuals[rows])
+    return fits
+
+
 def _cameras_at_odds(obs: KeypointObservations, residuals: np.ndarray, scale: float,
                      camera_factors: dict | None = None) -> dict[str, float]:
     """The cameras (name -> fit) whose keypoints of a frame fit a smoothed track at least
@@ -1948,11 +1956,8 @@ def _cameras_at_odds(obs: KeypointObservations, residuals: np.ndarray, scale: fl
     and each camera's ``camera_factors`` where the track has them):
     a 2D tracker that gave one camera's detections of another vehicle this id (a user's audit: 11 frames whose one
     camera fit 10-83 times worse, all `converged` without a word while the robust loss outvoted that camera)."""
-    fit = {}
-    for c, camera in enumerate(obs.cameras):
-        rows = obs.camera_index == c
-        if rows.sum() >= 4:
-            fit[camera.name] = _fit_scale(residuals[rows]) * scale * (camera_factors or {}).get(camera.name, 1.0)
+    fit = {name: f * scale * (camera_factors or {}).get(name, 1.0)
+           for name, f in _frame_camera_fits(obs, residuals).items()}
     if not any(f < POOR_FIT_SCALE for f in fit.values()):
         return {}
     return {name: f for name, f in fit.items() if f >= POOR_FIT_SCALE}

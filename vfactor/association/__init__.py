@@ -79,7 +79,8 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
 
     Args:
         scene: the scene; frames whose detections are :data:`~vfactor.observations.UNASSIGNED` are associated.
-        options: the association's settings.
+        options: the association's settings; their solves take the scene's road plane where ``options.solve``
+            names none (as :func:`vfactor.solve.solve_scene` does).
         force: associate every frame, ignoring the vehicle ids the scene gives (ids that are not trusted).
         progress: called with (frames done, frames) after each frame.
 
@@ -90,6 +91,9 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
         InputError: a detection still waits for the keypoint network (it has no keypoints to associate by).
     """
     scene.require_detected()
+    # the scene's road plane in every solve: without it one camera's keypoints of a bus fit a van several metres
+    # nearer the camera and above the road just as well (the depth and the size trade off), and the track jumps
+    options = dataclasses.replace(options, solve=options.solve.for_scene(scene))
     # never an id the scene uses, even where they are ignored (force): the same id would name two vehicles to a reader
     taken = {d.vehicle for f in scene.frames for d in f.detections if d.vehicle != UNASSIGNED}
     linker = TrackLinker(options, taken=taken)

@@ -122,7 +122,8 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
                 elif method == "pnp":
                     result = pnp(obs, vehicle_id=vid)
                 else:
-                    result = known_shape(obs, truth.world_T_vehicle, truth.wireframe, options.graph, vid)
+                    result = known_shape(obs, truth.world_T_vehicle, truth.wireframe, options.graph, vid,
+                                         ground_plane=options.ground_plane, wheel_radius=truth.wheel_radius)
                 seconds = time.perf_counter() - t0
                 row = {"frame": f, "vehicle": vid, "preset": truth.preset, "body_type": body_type_of(truth.preset),
                        "chosen_type": result.body_type, "status": result.status.value, "seconds": seconds}

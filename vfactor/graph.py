@@ -60,7 +60,9 @@ __all__ = [
     "COMMON_OFFSET",
     "add_ground_factor",
     "ground_factor",
+    "hub_height",
     "hub_prior",
+    "DEFAULT_HUB_HEIGHT",
     "insert_vehicle_values",
     "build_vehicle_graph",
     "copy_graph",
@@ -111,7 +113,9 @@ class GraphConfig:
         trapezoid_sigma_rad, width_ratio_sigma: trapezoid parallel sides and width-ratio hinge.
         hinge_sigma: distance and layer-offset hinges beyond their bounds, metres.
         hub_height: height of the wheel hubs above the road (the ground-plane
-            factor, when a road plane is given), metres.
+            factor, when a road plane is given), metres; None (the default): the shape prior's
+            (:attr:`vfactor.shape_model.ShapePrior.hub_height`: in the default model each body type's mean wheel
+            radius, and the solve's mixture of them), or :data:`DEFAULT_HUB_HEIGHT` for a prior without one.
         ground_sigma_height: that height's sigma (it also covers the unknown wheel radius), metres.
         ground_sigma_road: the part of ``ground_sigma_height`` that is each pose's own (the road's unevenness, the
             body's bounce), metres; the rest, ``sqrt(ground_sigma_height^2 - ground_sigma_road^2)``, is the
@@ -167,7 +171,7 @@ class GraphConfig:
     trapezoid_sigma_rad: float = 0.05
     width_ratio_sigma: float = 0.02
     hinge_sigma: float = 0.01
-    hub_height: float = 0.34
+    hub_height: float | None = None
     ground_sigma_height: float = 0.06
     ground_sigma_road: float = 0.02
     ground_sigma_tilt: float = 0.03
@@ -181,9 +185,11 @@ class GraphConfig:
         check_numbers("GraphConfig", self, (
             "relative_pixel_sigma", "min_pixel_sigma", "covariance_min_pixel_sigma", "symmetry_sigma", "body_frame_sigma", "shape_prior_weight",
             "plane_sigma_m", "plane_sigma_rad", "rectangle_sigma", "trapezoid_sigma_rad", "width_ratio_sigma",
-            "hinge_sigma", "hwc_tolerance", "hub_height", "ground_sigma_height", "ground_sigma_road", "ground_sigma_tilt",
+            "hinge_sigma", "hwc_tolerance", "ground_sigma_height", "ground_sigma_road", "ground_sigma_tilt",
             "cut_view_sigma_factor",
         ))
+        if self.hub_height is not None:
+            check_numbers("GraphConfig", self, ("hub_height",))
         if self.ground_sigma_road >= self.ground_sigma_height:
             raise ValueError(f"GraphConfig.ground_sigma_road: expected less than ground_sigma_height "
                              f"({self.ground_sigma_height:g} m), got {self.ground_sigma_road!r}")
@@ -615,6 +621,20 @@ def detector_bias_prior(offset_key: int, bias_sigma) -> gtsam.NonlinearFactor:
 
 #: The least sigma (radians or metres) :func:`detector_bias_prior` gives a coordinate of a track's common offset.
 MIN_BIAS_SIGMA = 1e-4
+#: The hubs' height above the road (metres) for a shape prior that gives none (:func:`hub_height`): about a car's
+#: wheel radius.
+DEFAULT_HUB_HEIGHT = 0.34
+
+
+def hub_height(config: GraphConfig = GraphConfig(), prior: ShapePrior | None = None) -> float:
+    """The hubs' height above the road (metres) that the ground-plane factor of a vehicle under the shape ``prior``
+    takes: ``config.hub_height`` where it is set, else the prior's (the body type's wheel radius), else
+    :data:`DEFAULT_HUB_HEIGHT`."""
+    if config.hub_height is not None:
+        return float(config.hub_height)
+    if prior is not None and prior.hub_height is not None:
+        return prior.hub_height
+    return DEFAULT_HUB_HEIGHT
 
 
 def add_ground_factor(
@@ -624,30 +644,35 @@ def add_ground_factor(
     vehicle: int = 0,
     frame: int = 0,
     config: GraphConfig = GraphConfig(),
+    prior: ShapePrior | None = None,
 ) -> None:
-    """Adds the ground-plane factor of one pose (hubs at ``config.hub_height`` above ``plane``); no-op without a plane."""
+    """Adds the ground-plane factor of one pose (hubs at :func:`hub_height` above ``plane``); no-op without a
+    plane."""
     if plane is not None:
-        graph.add(ground_factor(keys.pose_key(vehicle, frame), plane, config))
+        graph.add(ground_factor(keys.pose_key(vehicle, frame), plane, config, prior=prior))
 
 
 def ground_factor(pose_key: int, plane: GroundPlane, config: GraphConfig = GraphConfig(),
-                  hub_key: int | None = None) -> gtsam.NonlinearFactor:
-    """The ground-plane factor of the pose ``pose_key`` with ``config``'s hub height and sigmas; with ``hub_key``
-    (a track's hub height, :func:`hub_prior`) the hub height is that variable and the height's sigma
-    ``config.ground_sigma_road``, each pose's own part of it."""
+                  hub_key: int | None = None, prior: ShapePrior | None = None) -> gtsam.NonlinearFactor:
+    """The ground-plane factor of the pose ``pose_key`` with ``config``'s sigmas and the hub height of
+    :func:`hub_height` (``config``, the shape ``prior``); with ``hub_key`` (a track's hub height, :func:`hub_prior`)
+    the hub height is that variable and the height's sigma ``config.ground_sigma_road``, each pose's own part of
+    it."""
     if hub_key is None:
-        return ground_plane_factor(pose_key, plane, config.hub_height, config.ground_sigma_height,
+        return ground_plane_factor(pose_key, plane, hub_height(config, prior), config.ground_sigma_height,
                                    config.ground_sigma_tilt)
-    return ground_plane_factor(pose_key, plane, config.hub_height, config.ground_sigma_road, config.ground_sigma_tilt,
-                               hub_key=hub_key)
+    return ground_plane_factor(pose_key, plane, hub_height(config, prior), config.ground_sigma_road,
+                               config.ground_sigma_tilt, hub_key=hub_key)
 
 
-def hub_prior(hub_key: int, config: GraphConfig = GraphConfig()) -> gtsam.NonlinearFactor:
-    """The prior of a track's hub height (``hub_key``): ``config.hub_height`` with the part of
-    ``config.ground_sigma_height`` that is not each pose's own (``ground_sigma_road``): the wheel radius, the same
-    in every frame of the track, so that its uncertainty does not average away over the track's poses."""
+def hub_prior(hub_key: int, config: GraphConfig = GraphConfig(), prior: ShapePrior | None = None
+              ) -> gtsam.NonlinearFactor:
+    """The prior of a track's hub height (``hub_key``): :func:`hub_height` (``config``, the track's shape
+    ``prior``) with the part of ``config.ground_sigma_height`` that is not each pose's own (``ground_sigma_road``):
+    the wheel radius, the same in every frame of the track, so that its uncertainty does not average away over the
+    track's poses."""
     sigma = float(np.sqrt(config.ground_sigma_height**2 - config.ground_sigma_road**2))
-    return hub_height_prior(hub_key, config.hub_height, sigma)
+    return hub_height_prior(hub_key, hub_height(config, prior), sigma)
 
 
 def insert_vehicle_values(
@@ -699,5 +724,5 @@ def build_vehicle_graph(
     graph = gtsam.NonlinearFactorGraph()
     add_observation_factor(graph, keys, observations, vehicle, frame, config)
     add_shape_factors(graph, keys, vehicle, config, prior, bounds)
-    add_ground_factor(graph, keys, ground_plane, vehicle, frame, config)
+    add_ground_factor(graph, keys, ground_plane, vehicle, frame, config, prior)
     return graph

@@ -563,7 +563,8 @@ def _moment_matched(model: ShapeModel, weights: dict, negligible: float = 1e-3) 
 
     ``mu = sum w_k mu_k``, ``Sigma = sum w_k (Sigma_k + (mu_k - mu)(mu_k - mu)^T)``: when the
     observations leave the type uncertain the prior widens over the types they allow instead
-    of committing to one; a clear choice gives that type's prior itself.
+    of committing to one; a clear choice gives that type's prior itself. Its hub height is the
+    weighted mean of theirs (None where one has none).
     """
     kept = {key: w for key, w in weights.items() if w >= negligible}
     if len(kept) == 1:
@@ -575,7 +576,9 @@ def _moment_matched(model: ShapeModel, weights: dict, negligible: float = 1e-3) 
     for key, w in kept.items():
         d = np.asarray(priors[key].mean).ravel() - mean
         cov += w / total * (priors[key].covariance + np.outer(d, d))
-    return ShapePrior.trusted(mean, 0.5 * (cov + cov.T))
+    heights = [priors[key].hub_height for key in kept]  # the wheel radius: the mixture's mean where all give one
+    hub_height = None if None in heights else sum(w * h for w, h in zip(kept.values(), heights)) / total
+    return ShapePrior.trusted(mean, 0.5 * (cov + cov.T), hub_height)
 
 
 def _kind_weights(results, model: ShapeModel | None) -> dict[bool, float]:

@@ -46,18 +46,29 @@ class ShapePrior:
         mean: (12, 3) mean shape, exactly left/right symmetric.
         covariance: (36, 36) covariance of the flattened shape (row-major
             ``[x0, y0, z0, x1, ...]``), positive definite.
+        hub_height: the wheel radius of such vehicles, metres: where a road plane is given, the ground-plane
+            factor holds the hubs this far above it (None: :attr:`vfactor.graph.GraphConfig.hub_height`). The
+            default model's is each body type's mean over the library (a bus's hubs are 0.48 m up, a hatchback's
+            0.32 m).
     """
 
     mean: np.ndarray
     covariance: np.ndarray
+    hub_height: float | None = None
 
     def __post_init__(self):
         """Read-only float copies (a prior is shared by every solve that uses it), checked.
 
         Raises:
-            InputError: (field ``ShapePrior.mean`` or ``ShapePrior.covariance``) not numbers of that shape, not
-                finite, a covariance that is not symmetric positive definite.
+            InputError: (field ``ShapePrior.mean``, ``ShapePrior.covariance`` or ``ShapePrior.hub_height``) not
+                numbers of that shape, not finite, a covariance that is not symmetric positive definite, a hub
+                height that is not a number > 0.
         """
+        if self.hub_height is not None:
+            if not _finite_number(self.hub_height) or self.hub_height <= 0:
+                raise InputError("ShapePrior.hub_height", f"expected a number of metres > 0 or None, got "
+                                                          f"{self.hub_height!r}")
+            object.__setattr__(self, "hub_height", float(self.hub_height))
         for name, shape in (("mean", (12, 3)), ("covariance", (36, 36))):
             field_name = f"ShapePrior.{name}"
             try:
@@ -83,10 +94,11 @@ class ShapePrior:
                              ) from None
 
     @classmethod
-    def trusted(cls, mean: np.ndarray, covariance: np.ndarray) -> "ShapePrior":
+    def trusted(cls, mean: np.ndarray, covariance: np.ndarray, hub_height: float | None = None) -> "ShapePrior":
         """A prior made by vfactor from priors already checked (a type's at another spread, a mixture's moments):
         read-only float copies without the checks of a prior built by hand (a Cholesky factor per solve)."""
         prior = object.__new__(cls)
+        object.__setattr__(prior, "hub_height", None if hub_height is None else float(hub_height))
         for name, value, shape in (("mean", mean, (12, 3)), ("covariance", covariance, (36, 36))):
             value = np.array(value, dtype=float).reshape(shape)
             value.setflags(write=False)
@@ -94,7 +106,8 @@ class ShapePrior:
         return prior
 
     @classmethod
-    def from_wireframes(cls, wireframes, floor_sigma=0.04, inflation: float = 1.5) -> "ShapePrior":
+    def from_wireframes(cls, wireframes, floor_sigma=0.04, inflation: float = 1.5,
+                        hub_height: float | None = None) -> "ShapePrior":
         """Mean and covariance of metric shapes, symmetrised.
 
         ``cov = inflation * S + diag(floor^2)`` with ``S`` the sample covariance
@@ -107,6 +120,7 @@ class ShapePrior:
             floor_sigma: standard deviation added to every coordinate, metres: one
                 number, or one per keypoint (12,).
             inflation: multiplies the sample covariance.
+            hub_height: the prior's :attr:`hub_height` (metres, or None).
         """
         pts = np.array([w.vehicle_p_keypoints for w in wireframes], dtype=float)
         if len(pts) < 2:
@@ -114,7 +128,8 @@ class ShapePrior:
         flat = symmetrised(pts).reshape(len(pts), 36)
         mean = flat.mean(0).reshape(12, 3)
         floor = np.repeat(np.broadcast_to(np.asarray(floor_sigma, dtype=float), (12,)), 3)
-        return cls(mean=mean, covariance=inflation * np.cov(flat, rowvar=False) + np.diag(floor**2))
+        return cls(mean=mean, covariance=inflation * np.cov(flat, rowvar=False) + np.diag(floor**2),
+                   hub_height=hub_height)
 
     def __getstate__(self):  # the factors made from it (vfactor.factors.shape_prior) stay in their process
         return {k: v for k, v in self.__dict__.items() if k != "_factors"}
@@ -139,7 +154,7 @@ class ShapePrior:
         """This prior with its covariance times ``spread``; its square-root information and evidence terms are this
         one's scaled (``R / sqrt(spread)``, ``P / spread``, ``log|Sigma| + 36 log(spread)``), with no factorisation
         (a body type's wider priors, :meth:`ShapeModel.prior`)."""
-        wide = ShapePrior.trusted(self.mean, self.covariance * spread)
+        wide = ShapePrior.trusted(self.mean, self.covariance * spread, self.hub_height)
         R = self.sqrt_information() / math.sqrt(spread)
         R.setflags(write=False)
         wide.__dict__["_sqrt_information"] = R
@@ -571,7 +586,9 @@ def default_shape_model(exclude=frozenset(), hub_sigma: float = 0.02, rule_sigma
     window tops are placed by rules (docs/vehicles.md). The library's hubs come
     from published dimensions, the rest from those rules that a real vehicle
     departs from: the priors' floor is ``hub_sigma`` on the hubs and
-    ``rule_sigma`` on the other eight keypoints.
+    ``rule_sigma`` on the other eight keypoints. Each prior's hub height
+    (:attr:`ShapePrior.hub_height`) is the mean wheel radius of its library
+    vehicles.
 
     Args:
         exclude: library ids and ``pascal3d_<index>`` ids left out of every
@@ -590,17 +607,22 @@ def _shape_model(exclude: frozenset, hub_sigma: float, rule_sigma: float, inflat
 
     floor_sigma = np.array([hub_sigma] * 4 + [rule_sigma] * 8)
     shapes = {t: [] for t in BODY_TYPES}
+    radii = {t: [] for t in BODY_TYPES}  # the library's wheel radii (the PASCAL3D+ models give none)
     for v in vehicle_library().values():
         if v.id not in exclude:
             shapes[v.body_type].append(v.wireframe)
+            radii[v.body_type].append(v.wheel_radius)
     library_only = {t: ShapePrior.from_wireframes(shapes[t], floor_sigma, inflation) for t in LIGHT_TYPES
                     if len(shapes[t]) >= 2}
     for cad_id, wireframe in pascal3d_wireframes().items():
         if cad_id not in exclude and library_only:
             nearest = min(library_only, key=lambda t: _mahalanobis2(library_only[t], wireframe))
             shapes[nearest].append(wireframe)
-    types = {t: ShapePrior.from_wireframes(w, floor_sigma, inflation) for t, w in shapes.items() if len(w) >= 2}
-    pooled = ShapePrior.from_wireframes([w for t in LIGHT_TYPES for w in shapes[t]], floor_sigma, inflation)
+    types = {t: ShapePrior.from_wireframes(w, floor_sigma, inflation, float(np.mean(radii[t])) if radii[t] else None)
+             for t, w in shapes.items() if len(w) >= 2}
+    light_radii = [r for t in LIGHT_TYPES for r in radii[t]]
+    pooled = ShapePrior.from_wireframes([w for t in LIGHT_TYPES for w in shapes[t]], floor_sigma, inflation,
+                                        float(np.mean(light_radii)) if light_radii else None)
     weight = {t: 1.0 if t in LIGHT_TYPES else HEAVY_PRIOR_WEIGHT for t in types}
     return ShapeModel(types=types, pooled=pooled, bounds=default_hwc_bounds(exclude),
                       prior_probability={t: w / sum(weight.values()) for t, w in weight.items()})

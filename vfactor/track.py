@@ -47,6 +47,7 @@ from vfactor.graph import (
     detector_offset_prior,
     detector_shape_sigmas,
     ground_factor,
+    hub_height,
     hub_prior,
     hwc_factor,
     hwc_terms,
@@ -585,7 +586,7 @@ class Tracker:
         _add_pose_factors(motion, track.poses, key, t, self.options, self._hub_key(track))
         insert_vehicle_values(values, self.keys, first.world_T_vehicle, first.wireframe, track.index, frame_index)
         if self._hub_key(track) is not None:
-            values.insert(self._hub_key(track), np.array([self.options.solve.graph.hub_height]))
+            values.insert(self._hub_key(track), np.array([hub_height(self.options.solve.graph, track.prior)]))
         track.offsets, track.offset_priors = {}, {}
         offsets = self._offsets(track, obs, values, gtsam.Values())
         track.young, track.young_frames = True, [(frame_index, obs, motion, first, offsets)]
@@ -648,7 +649,7 @@ class Tracker:
         graph = gtsam.NonlinearFactorGraph()
         add_shape_factors(graph, self.keys, track.index, config, track.prior, self.bounds)
         if self._hub_key(track) is not None:
-            graph.add(hub_prior(self._hub_key(track), config))
+            graph.add(hub_prior(self._hub_key(track), config, track.prior))
         used = set()
         for frame_index, obs, motion, _, offsets in track.young_frames if frames is None else frames:
             scaled = _track_scaled(obs, track.noise_scale, track.camera_factors)
@@ -1763,8 +1764,8 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
     add_shape_factors(graph, keys, index, config, track_prior, bounds)
     hub = _hub_key(keys, index, options)  # the track's wheel radius
     if hub is not None:
-        graph.add(hub_prior(hub, config))
-        values.insert(hub, np.array([config.hub_height]))
+        graph.add(hub_prior(hub, config, track_prior))
+        values.insert(hub, np.array([hub_height(config, track_prior)]))
     posed, best = [], -1
     offsets: dict[str, int] = {}  # camera name -> the key of its detector pose offset (one per camera, no lag)
     bias = detector_bias_sigma([d for _, frame in frames for d in frame.detections]) \

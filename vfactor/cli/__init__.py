@@ -171,7 +171,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene", help="scene file (JSON, docs/scene-format.md) without a ground_plane")
     p.add_argument("--out", required=True, help="scene file to write: SCENE with the fitted ground_plane (atomically)")
     p.add_argument("--hub-height", type=float, default=0.34,
-                   help="height of the wheel hubs above the road, metres (default: 0.34, GraphConfig.hub_height)")
+                   help="height of the wheel hubs above the road, metres (default: 0.34, a car's: "
+                        "vfactor.graph.DEFAULT_HUB_HEIGHT)")
     p.add_argument("--traffic", action="append", metavar="FILE",
                    help="another scene file of the same cameras whose tracks join the fit (repeatable): more traffic, "
                    "a better plane")
@@ -319,6 +320,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--body-motion", metavar="ROLL,PITCH",
                    help="tracks: the simulated bodies roll and pitch on their suspension, ROLL and PITCH degrees per g "
                    "of lateral and longitudinal acceleration (vfactor.sim.BodyMotion; default: rigid vehicles)")
+    p.add_argument("--road-plane", action="store_true",
+                   help="frames: the factor graph solves with the simulated road plane given (z = 0, "
+                   "SolveOptions.ground_plane), as on a rig whose road is surveyed (default: no plane)")
     p.add_argument("--markdown", help="also write the tables to this Markdown file")
     p.add_argument("--weights", help="images: keypoint-network weights to evaluate (default: the shipped weights)")
     p.add_argument("--clipped-boxes", action="store_true",

@@ -49,6 +49,7 @@ def evaluate(args) -> int:
             ("--figures", args.figures is not None, ("paper",), None),
             ("--sweep-frames", args.sweep_frames is not None, ("paper",), None),
             ("--clipped-boxes", args.clipped_boxes, ("images",), None),
+            ("--road-plane", args.road_plane, ("frames",), None),
             ("--detector-offsets", args.detector_offsets is not None, ("images",), None)):
         if given and args.experiment not in takers:
             raise InputError(flag, f"eval {args.experiment} {why}" if why else
@@ -59,7 +60,8 @@ def evaluate(args) -> int:
         with open_command_engine(args.workers, args.scheduler) as engine:
             if args.experiment == "frames":
                 sections = _eval_frames(args.scenario or "library_2cam", frames, args.seed,
-                                        _levels(args.levels or "clean,paper,hard"), args.seeds, engine)
+                                        _levels(args.levels or "clean,paper,hard"), args.seeds, engine,
+                                        args.road_plane)
             elif args.experiment == "tracks":
                 sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws,
                                         DEFAULT_LAG if args.lag is None else args.lag, engine, body_motion)
@@ -89,7 +91,7 @@ def evaluate(args) -> int:
         (f" --figures {args.figures}" if args.figures else "") + \
         (f" --sweep-frames {args.sweep_frames}" if args.sweep_frames is not None else "") + \
         (f" --weights {args.weights}" if args.weights else "") + (" --clipped-boxes" if args.clipped_boxes else "") + \
-        (" --amodal-pass" if args.amodal_pass else "") + \
+        (" --amodal-pass" if args.amodal_pass else "") + (" --road-plane" if args.road_plane else "") + \
         {True: " --real-roofs", False: " --no-real-roofs"}.get(args.real_roofs, "") + \
         {True: " --detector-offsets", False: " --no-detector-offsets"}.get(args.detector_offsets, "")
     echo = output(args)
@@ -112,13 +114,17 @@ def _levels(text: str) -> tuple[str, ...]:
 
 
 def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper", "hard"), seeds: int = 1,
-                 engine=None) -> list[str]:
+                 engine=None, road_plane: bool = False) -> list[str]:
     from vfactor.evaluation import (accuracy_table, body_type_table, consistency_table, keypoint_table, run_accuracy,
                                     poor_fit_summary, summarise_methods)
+    from vfactor.factors.ground_plane import GroundPlane
+    from vfactor.solve import SolveOptions
 
     sections = []
     which = f"seed {seed}" if seeds == 1 else f"seeds {seed}-{seed + seeds - 1}"
-    for scenario, rows in run_accuracy(scenario_name, frames, seed, levels, seeds=seeds, engine=engine):
+    which += ", the road plane given" if road_plane else ""
+    options = SolveOptions(ground_plane=GroundPlane()) if road_plane else SolveOptions()  # the simulator's road
+    for scenario, rows in run_accuracy(scenario_name, frames, seed, levels, options, seeds=seeds, engine=engine):
         n = scenario.noise
         summary = summarise_methods(rows)
         title = (f"### {scenario.name}: {n.outlier_rate:.0%} outliers, {n.swap_rate:.0%} left/right swaps, "

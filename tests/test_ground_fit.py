@@ -88,6 +88,30 @@ def test_fit_ground_writes_the_scene_with_the_road_under_the_tracks(tmp_path, ca
     assert not (tmp_path / "again.json").exists()
 
 
+def test_fit_ground_associates_detections_that_name_no_vehicle(tmp_path, capsys):
+    """A rig without a surveyed road and without vehicle ids (each camera numbering its own boxes): the command
+    refused the scene ("associate them first"); it now associates it, as ``vfactor track`` does, and writes the
+    scene as given with the plane."""
+    import dataclasses
+
+    from vfactor.observations import UNASSIGNED, Frame
+    from vfactor.scene import save_scene
+    from vfactor.sim import load_scenario, simulate
+
+    sim = simulate(load_scenario("library_tracks_2cam"), seed=20, num_frames=15)
+    frames = [Frame(f.t, [dataclasses.replace(d, vehicle=UNASSIGNED, track=f"{d.camera}-{d.vehicle}")
+                          for d in f.detections]) for f in sim.scene.frames]
+    scene = tmp_path / "no_ids.json"
+    save_scene(dataclasses.replace(sim.scene, frames=frames), scene)
+    out = tmp_path / "with_plane.json"
+    assert main(["fit-ground", str(scene), "--out", str(out)]) == 0
+    assert "associated" in capsys.readouterr().out
+    plane = load_scene(out).ground_plane
+    assert plane is not None and _tilt_deg(plane.normal, [0.0, 0.0, 1.0]) < 1.0 and abs(plane.offset) < 0.1
+    written = json.loads(out.read_text())
+    assert written.pop("ground_plane") and written == json.loads(scene.read_text())
+
+
 def test_fit_ground_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     scene = tmp_path / "short.json"
     assert main(["simulate", "intersection_2cam", "--out", str(scene)]) == 0  # 8 frames of one vehicle each

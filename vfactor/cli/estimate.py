@@ -37,15 +37,16 @@ def load_input(args):
 
 def associate(scene, args):
     """The scene with its vehicles found (vfactor.association) where the detections name none, or everywhere
-    with ``--associate``, and the :class:`~vfactor.association.Association`; the scene as it is and None
-    otherwise."""
-    todo = len(scene.unassigned()) if not args.associate else sum(len(f.detections) for f in scene.frames)
+    with ``--associate`` (a command without that option: only where they name none), and the
+    :class:`~vfactor.association.Association`; the scene as it is and None otherwise."""
+    force = getattr(args, "associate", False)
+    todo = len(scene.unassigned()) if not force else sum(len(f.detections) for f in scene.frames)
     if not todo:
         return scene, None
     from vfactor.association import associate_scene
 
     t0 = time.perf_counter()
-    found = associate_scene(scene, force=args.associate, progress=progress("associating", not args.quiet))
+    found = associate_scene(scene, force=force, progress=progress("associating", not args.quiet))
     for message in found.messages:
         note(message)
     single = sum(len(ids) for ids in found.single_view)

@@ -8,6 +8,7 @@ import time
 import numpy as np
 
 from vfactor.cli.common import EXIT_OK, check_out_file, detect, progress
+from vfactor.cli.estimate import associate
 from vfactor.errors import InputError
 
 __all__ = ["fit_ground"]
@@ -16,7 +17,7 @@ __all__ = ["fit_ground"]
 def fit_ground(args) -> int:
     """``vfactor fit-ground SCENE --out SCENE_OUT [--traffic FILE ...] [--hub-height M] [--batch] [--weights W]``:
     tracks SCENE and the ``--traffic`` scenes of the same cameras (none giving a plane; detections given as image
-    boxes through the keypoint network first), fits the road plane to all their tracks' hub centres and writes
+    boxes through the keypoint network first, detections that name no vehicle associated), fits the road plane to all their tracks' hub centres and writes
     SCENE, as it was given, with the plane as its ``ground_plane``."""
     from vfactor.ground_fit import fit_ground_plane
     from vfactor.scene import load_scene, save_scene
@@ -38,7 +39,7 @@ def fit_ground(args) -> int:
     t0 = time.perf_counter()
     results = []
     for name, other in scenes:
-        detected = detect(other, args)
+        detected, _ = associate(detect(other, args), args)  # detections that name no vehicle: found first
         if args.batch:
             results += smooth_scene(detected, options, progress=progress("smoothing", not args.quiet))
         else:

@@ -60,6 +60,29 @@ def test_the_plane_under_the_hubs_comes_back_despite_vehicles_metres_off():
     assert _tilt_deg(np.sign(plain[2]) * plain, normal) > 3 * _tilt_deg(fit.plane.normal, normal)
 
 
+def test_each_vehicle_s_hubs_are_moved_down_by_its_body_type_s_wheel_radius():
+    """Traffic of buses (hubs 0.48 m up) and hatchbacks (0.32 m) on a tilted road: the plane fitted with one hub
+    height for all (0.34 m) sat 6 cm above the road; with each vehicle's body type's it is on it."""
+    from vfactor.shape_model import default_shape_model
+
+    types = default_shape_model().types
+    rng = np.random.default_rng(5)
+    normal, offset = np.array([0.02, 0.04, 1.0]) / np.linalg.norm([0.02, 0.04, 1.0]), -0.8
+    frames = []
+    for i, body_type in enumerate(["bus", "hatchback"] * 20):
+        frame, = _on_plane(normal, offset, rng.uniform(-20.0, 20.0, (1, 2)), rng, noise=0.005)
+        v = frame.vehicles[0]
+        lift = types[body_type].hub_height - HUB_HEIGHT  # _on_plane put the hubs HUB_HEIGHT up
+        v.world_T_vehicle = gtsam.Pose3(v.world_T_vehicle.rotation(), v.world_T_vehicle.translation() + lift * normal)
+        v.body_type = body_type
+        frames.append(frame)
+    fit = fit_ground_plane(frames)
+    assert _tilt_deg(fit.plane.normal, normal) < 0.1 and fit.plane.offset == pytest.approx(offset, abs=0.01)
+    assert fit.hub_height == pytest.approx(np.mean([types[t].hub_height for t in ("bus", "hatchback")]), abs=0.01)
+    one = fit_ground_plane(frames, HUB_HEIGHT)
+    assert one.plane.offset - offset > 0.05 and one.hub_height == pytest.approx(HUB_HEIGHT)
+
+
 def test_too_few_poses_or_traffic_along_one_line_is_refused():
     rng = np.random.default_rng(4)
     with pytest.raises(InputError, match="at least"):

@@ -15,10 +15,11 @@ command ``vfactor fit-ground`` tracks a scene and writes it back with the
 fitted plane.
 
 The plane ``n . x = offset`` is that of the hub centres (the mean of the four
-hub keypoints, world frame) moved down by ``hub_height`` along ``n``, as the
-ground-plane factor expects (:class:`vfactor.graph.GraphConfig` ``hub_height``;
-the wheel radii of the 65 library vehicles span 0.30-0.42 m, which the factor's
-height sigma covers; the fitted offset takes the traffic's mean). docs/factors.md gives the maths.
+hub keypoints, world frame), each moved down by its vehicle's wheel radius: the
+mean of its body type's (``ShapePrior.hub_height`` of the default shape model,
+as the ground-plane factor takes it: a hatchback's 0.32 m, a bus's 0.48 m), or
+one ``hub_height`` for every vehicle where it is given. docs/factors.md gives the
+maths.
 """
 
 from __future__ import annotations
@@ -54,7 +55,8 @@ class GroundFit:
         inliers: how many of them lie within three robust scales of the hubs' plane.
         scale: robust scale (metres) of the hub centres' distances to their plane.
         tilt_deg: the plane's angle to the world's horizontal (degrees).
-        hub_height: the hub height it was moved down by (metres).
+        hub_height: the hub height it was moved down by (metres): the vehicles' mean, weighted as the fit weighs
+            them, where each vehicle's own was taken.
     """
 
     plane: GroundPlane
@@ -65,44 +67,58 @@ class GroundFit:
     hub_height: float
 
 
-def _hub_centres(results: Iterable[FrameResult]) -> np.ndarray:
+def _hub_centres(results: Iterable[FrameResult], hub_height: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """The hub centres (n, 3) of the solved vehicle poses and each one's wheel radius (n,), metres."""
+    from vfactor.graph import DEFAULT_HUB_HEIGHT
+    from vfactor.shape_model import default_shape_model
+
+    types = default_shape_model().types if hub_height is None else {}
     hubs = list(LAYERS["wheel"])
-    return np.array([v.keypoints_world[hubs].mean(axis=0) for frame in results for v in frame.vehicles
-                     if v.ok and v.keypoints_world is not None], dtype=float).reshape(-1, 3)
+    solved = [v for frame in results for v in frame.vehicles if v.ok and v.keypoints_world is not None]
+    points = np.array([v.keypoints_world[hubs].mean(axis=0) for v in solved], dtype=float).reshape(-1, 3)
+    radii = np.array([hub_height if hub_height is not None else
+                      types[v.body_type].hub_height or DEFAULT_HUB_HEIGHT if v.body_type in types else
+                      DEFAULT_HUB_HEIGHT for v in solved], dtype=float)
+    return points, radii
 
 
-def fit_ground_plane(results: Iterable[FrameResult], hub_height: float = 0.34) -> GroundFit:
+def fit_ground_plane(results: Iterable[FrameResult], hub_height: float | None = None) -> GroundFit:
     """The road plane under the solved vehicles of ``results``.
 
     A plane through the hub centres of every solved vehicle pose (the
-    converged and poor-fit ones), by iteratively reweighted total least squares
-    with Huber weights at 1.5 robust scales (the median absolute distance, made
-    a sigma), its normal pointing up; then moved down by ``hub_height``.
+    converged and poor-fit ones), each moved down by its wheel radius, by
+    iteratively reweighted total least squares with Huber weights at 1.5
+    robust scales (the median absolute distance, made a sigma), its normal
+    pointing up.
 
     Args:
         results: frames of results (``vfactor track`` or ``vfactor solve``; tracks are better: see the module).
-        hub_height: height of the wheel hubs above the road, metres.
+        hub_height: height of the wheel hubs above the road, metres, for every vehicle; None (the default): each
+            vehicle's body type's (``VehicleResult.body_type`` in the default shape model;
+            :data:`vfactor.graph.DEFAULT_HUB_HEIGHT`, 0.34 m, for a vehicle without one).
 
     Raises:
         InputError: fewer than :data:`MIN_GROUND_POINTS` solved poses, hub centres that lie along one line (less
             than :data:`MIN_SPREAD` across it), or a plane whose upward normal is more than 45 degrees from the
             world's z (the world frame's z must point up: docs/conventions.md).
     """
-    if not np.isfinite(hub_height) or hub_height < 0:
+    if hub_height is not None and not (np.isfinite(hub_height) and hub_height >= 0):
         raise InputError("hub_height", f"expected a non-negative number of metres, got {hub_height!r}")
-    points = _hub_centres(results)
-    if len(points) < MIN_GROUND_POINTS:
-        raise InputError("results", f"{len(points)} solved vehicle poses; a road plane needs at least "
+    hubs, radii = _hub_centres(results, hub_height)
+    normal = np.array([0.0, 0.0, 1.0])
+    if len(hubs) < MIN_GROUND_POINTS:
+        raise InputError("results", f"{len(hubs)} solved vehicle poses; a road plane needs at least "
                                     f"{MIN_GROUND_POINTS} (more frames, or tracks seen longer)")
-    weights = np.ones(len(points))
+    weights = np.ones(len(hubs))
     for _ in range(_ITERATIONS):
+        points = hubs - radii[:, None] * normal  # each hub centre moved down to the road, along the plane's normal
         centre = weights @ points / weights.sum()
         _, singular, Vt = np.linalg.svd(np.sqrt(weights)[:, None] * (points - centre), full_matrices=False)
         normal = Vt[-1] if Vt[-1][2] >= 0 else -Vt[-1]
         distance = (points - centre) @ normal
         scale = max(1.4826 * float(np.median(np.abs(distance))), 1e-6)
         new = 1.0 / np.maximum(1.0, np.abs(distance) / (_HUBER * scale))
-        if np.allclose(new, weights, atol=1e-6):
+        if np.allclose(new, weights, atol=1e-6) and np.allclose(points, hubs - radii[:, None] * normal, atol=1e-9):
             break
         weights = new
     spread = singular[1] / np.sqrt(weights.sum())  # rms extent along the plane's second direction
@@ -113,6 +129,6 @@ def fit_ground_plane(results: Iterable[FrameResult], hub_height: float = 0.34) -
     if tilt > 45.0:
         raise InputError("results", f"the hub centres' plane is {tilt:.0f} deg from horizontal: is the world "
                                     "frame's z up (docs/conventions.md)?")
-    plane = GroundPlane(tuple(float(v) for v in normal), float(normal @ centre - hub_height))
+    plane = GroundPlane(tuple(float(v) for v in normal), float(normal @ centre))
     inliers = int(np.sum(np.abs(distance) <= 3.0 * scale))
-    return GroundFit(plane, len(points), inliers, scale, tilt, float(hub_height))
+    return GroundFit(plane, len(points), inliers, scale, tilt, float(weights @ radii / weights.sum()))

@@ -170,9 +170,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("scene", help="scene file (JSON, docs/scene-format.md) without a ground_plane")
     p.add_argument("--out", required=True, help="scene file to write: SCENE with the fitted ground_plane (atomically)")
-    p.add_argument("--hub-height", type=float, default=0.34,
-                   help="height of the wheel hubs above the road, metres (default: 0.34, a car's: "
-                        "vfactor.graph.DEFAULT_HUB_HEIGHT)")
+    p.add_argument("--hub-height", type=float,
+                   help="height of the wheel hubs above the road, metres, for every vehicle (default: each vehicle's "
+                        "body type's wheel radius, as the ground-plane factor takes it)")
     p.add_argument("--traffic", action="append", metavar="FILE",
                    help="another scene file of the same cameras whose tracks join the fit (repeatable): more traffic, "
                    "a better plane")

@@ -26,7 +26,7 @@ def fit_ground(args) -> int:
 
     traffic = list(args.traffic or [])
     out = check_out_file(args.out, "--out", [("scene file", args.scene)] + [("--traffic file", t) for t in traffic])
-    if not (args.hub_height >= 0 and args.hub_height < float("inf")):
+    if args.hub_height is not None and not (args.hub_height >= 0 and args.hub_height < float("inf")):
         raise InputError("--hub-height", f"expected a non-negative number of metres, got {args.hub_height}")
     scene = load_scene(args.scene, allow_outside_paths=args.allow_outside_paths)
     scenes = [(args.scene, scene)] + [(t, load_scene(t, allow_outside_paths=args.allow_outside_paths))

@@ -72,14 +72,14 @@ def _hub_centres(results: Iterable[FrameResult], hub_height: float | None) -> tu
     from vfactor.graph import DEFAULT_HUB_HEIGHT
     from vfactor.shape_model import default_shape_model
 
-    types = default_shape_model().types if hub_height is None else {}
     hubs = list(LAYERS["wheel"])
     solved = [v for frame in results for v in frame.vehicles if v.ok and v.keypoints_world is not None]
     points = np.array([v.keypoints_world[hubs].mean(axis=0) for v in solved], dtype=float).reshape(-1, 3)
-    radii = np.array([hub_height if hub_height is not None else
-                      types[v.body_type].hub_height or DEFAULT_HUB_HEIGHT if v.body_type in types else
-                      DEFAULT_HUB_HEIGHT for v in solved], dtype=float)
-    return points, radii
+    if hub_height is not None:
+        return points, np.full(len(solved), float(hub_height))
+    types = default_shape_model().types
+    own = {t: prior.hub_height for t, prior in types.items() if prior.hub_height is not None}
+    return points, np.array([own.get(v.body_type, DEFAULT_HUB_HEIGHT) for v in solved], dtype=float)
 
 
 def fit_ground_plane(results: Iterable[FrameResult], hub_height: float | None = None) -> GroundFit:

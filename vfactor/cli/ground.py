@@ -17,8 +17,8 @@ __all__ = ["fit_ground"]
 def fit_ground(args) -> int:
     """``vfactor fit-ground SCENE --out SCENE_OUT [--traffic FILE ...] [--hub-height M] [--batch] [--weights W]``:
     tracks SCENE and the ``--traffic`` scenes of the same cameras (none giving a plane; detections given as image
-    boxes through the keypoint network first, detections that name no vehicle associated), fits the road plane to all their tracks' hub centres and writes
-    SCENE, as it was given, with the plane as its ``ground_plane``."""
+    boxes through the keypoint network first, detections that name no vehicle associated), fits the road plane to
+    all their tracks' hub centres and writes SCENE, as it was given, with the plane as its ``ground_plane``."""
     from vfactor.ground_fit import fit_ground_plane
     from vfactor.scene import load_scene, save_scene
     from vfactor.solve import SolveOptions

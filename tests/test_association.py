@@ -425,3 +425,28 @@ def test_the_scene_s_road_plane_keeps_a_bus_seen_by_one_camera_on_its_track():
         assert len(ids) == 1, (bus, ids)
     single = sum(len(g) == 1 for groups in found.groups for g in groups.values())
     assert single >= 8  # the buses were seen by one camera alone in many of these frames
+
+
+def test_the_association_s_solves_weigh_the_detectors_classes(multi):
+    """The association solved each group without the 2D detector's classes (``"class"``) that a one-frame solve
+    weighs the body types by (a detector's ``bus`` was dropped there): each group's solve now has the posterior
+    that ``solve_vehicle`` of the same detections has."""
+    from vfactor.solve import SolveOptions, solve_vehicle
+
+    frame = multi.scene.frames[0]
+    classed = Frame(frame.t, [dataclasses.replace(d, vehicle=UNASSIGNED, vehicle_class="truck")
+                              for d in frame.detections])
+    found = associate_frame(classed, multi.scene.cameras)
+    assert len(found.groups) == 3
+    for group, result in zip(found.groups, found.results):
+        alone = solve_vehicle([classed.detections[j] for j in group], multi.scene.cameras,
+                              SolveOptions(covariance=False))
+        assert result.body_type == alone.body_type
+        assert result.body_type_probability == pytest.approx(alone.body_type_probability, abs=0.05)
+    plain = associate_frame(Frame(frame.t, [dataclasses.replace(d, vehicle=UNASSIGNED) for d in frame.detections]),
+                            multi.scene.cameras)
+    def suggested(result):  # what a detector's "truck" suggests
+        return result.extras["body_type_posterior"]["pickup"] + result.extras["body_type_posterior"]["van"]
+
+    assert all(suggested(a) >= suggested(b) for a, b in zip(found.results, plain.results))
+    assert max(suggested(a) - suggested(b) for a, b in zip(found.results, plain.results)) > 0.01

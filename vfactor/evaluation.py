@@ -24,6 +24,7 @@ from vfactor.baselines import known_shape, pnp, triangulation
 from vfactor.box import BoxModel, default_box_model, published_box
 from vfactor.graph import observations_from_detections, resized_observations
 from vfactor.metrics import keypoint_nees, nees_summary, pose_errors, pose_nees, pose_nees_components
+from vfactor.observations import class_hints
 from vfactor.shape_model import ShapeModel, car_hwc_bounds, default_shape_model, default_shape_prior, pascal3d_wireframes
 from vfactor.sim import Scenario, Simulation, load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations
@@ -109,7 +110,7 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
             truth = sim.truth[f][vid]
             detections = frame.detections_of(vid)
             obs = observations_from_detections(detections, sim.scene.cameras, options.graph)
-            hints = tuple(d.vehicle_class for d in detections if d.vehicle_class)
+            hints = class_hints(detections)
             for method in methods:
                 t0 = time.perf_counter()
                 if method == "factor_graph":  # as solve_vehicle: the sigmas sized by the vehicle it finds

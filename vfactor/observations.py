@@ -16,7 +16,8 @@ from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.ground_plane import GroundPlane
 
-__all__ = ["DEFAULT_VEHICLE_ID", "UNASSIGNED", "Detection", "Frame", "Scene", "resolve_path", "covariance_problem"]
+__all__ = ["DEFAULT_VEHICLE_ID", "UNASSIGNED", "Detection", "Frame", "Scene", "resolve_path", "covariance_problem",
+           "class_hints"]
 
 #: Relative asymmetry a covariance matrix may have (rounding): keypoints' 2x2 blocks, results' covariances.
 SYMMETRY_RTOL = 1e-9
@@ -163,6 +164,14 @@ class Detection:
         if len(uv) < 2:
             return 0.0
         return float(np.linalg.norm(uv.max(0) - uv.min(0)))
+
+
+def class_hints(detections) -> tuple[str, ...]:
+    """The 2D detector's classes of ``detections`` (``Detection.vehicle_class``), each once, in the order first met:
+    the hints of a vehicle's body-type choice (:meth:`vfactor.shape_model.ShapeModel.suggested_types`), whether its
+    detections are one frame's (:func:`vfactor.solve.solve_vehicle`), a track's (:mod:`vfactor.track`) or those the
+    association solves together (:mod:`vfactor.association`)."""
+    return tuple(dict.fromkeys(d.vehicle_class for d in detections if d.vehicle_class))
 
 
 @dataclass

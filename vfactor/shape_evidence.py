@@ -624,7 +624,7 @@ class TrackShape:
 
 
 def track_shape(results, model: ShapeModel | None, fallback: ShapePrior | None = None,
-                far: bool | None = None) -> TrackShape:
+                far: bool | None = None, hints=()) -> TrackShape:
     """The prior and noise scale of a vehicle seen in several frames, from its one-frame solves.
 
     The frames share one shape, so the observations' Gaussians on it
@@ -650,6 +650,8 @@ def track_shape(results, model: ShapeModel | None, fallback: ShapePrior | None =
             (default: the model's pooled prior).
         far: where the frames are of both kinds (:func:`mixed_kinds`), count only those far from the pooled
             prior (True) or near it (False); None: the kind whose choices' probabilities add up to more.
+        hints: the 2D detector's classes of the vehicle's detections (:func:`vfactor.observations.class_hints`),
+            weighing the body types once for the whole track, as for one frame (:func:`choose_body_type`).
     """
     solved = [r for r in results if r is not None and r.ok]
     fallback = fallback if fallback is not None else (model.pooled if model is not None else None)
@@ -662,5 +664,5 @@ def track_shape(results, model: ShapeModel | None, fallback: ShapePrior | None =
     informations = [r.extras["shape_information"] for r in solved if "shape_information" in r.extras]
     if model is None or not informations:
         return TrackShape(fallback, scale)
-    choice = choose_body_type(model, sum(a for a, _ in informations), sum(b for _, b in informations))
+    choice = choose_body_type(model, sum(a for a, _ in informations), sum(b for _, b in informations), hints)
     return TrackShape(choice.prior, scale, choice.body_type, choice.probability)

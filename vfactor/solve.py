@@ -43,7 +43,7 @@ from vfactor.graph import (
 from vfactor.init import StartSearch, best_candidates, distinct_poses
 from vfactor.keys import KeyScheme
 from vfactor.label_swaps import SWAP_MARGIN, apply_swaps, merge_findings, relabel_swaps, suspect_pairs, swapped_rows
-from vfactor.observations import Detection, Frame, Scene
+from vfactor.observations import Detection, Frame, Scene, class_hints
 from vfactor.parallel import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
@@ -1115,8 +1115,7 @@ def solve_vehicle(
     """
     vehicle_id = vehicle_id or (detections[0].vehicle if detections else "vehicle")
     obs = observations_from_detections(detections, cameras, options.graph)
-    hints = tuple(d.vehicle_class for d in detections if d.vehicle_class)
-    return solve_observations(obs, options, vehicle_id, prior, bounds, hints=hints,
+    return solve_observations(obs, options, vehicle_id, prior, bounds, hints=class_hints(detections),
                               resize=partial(resized_observations, detections, cameras, options.graph))
 
 

@@ -61,7 +61,7 @@ from vfactor.graph import (
 from vfactor.init import StartSearch, best_candidates, cross_projection_cost
 from vfactor.keys import KeyScheme
 from vfactor.label_swaps import apply_swaps, relabel_swaps, turn_cameras, turned_cameras
-from vfactor.observations import Detection, Frame, Scene
+from vfactor.observations import Detection, Frame, Scene, class_hints
 from vfactor.parallel import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
@@ -295,6 +295,7 @@ class _TrackState:
     multiview_frames: int = 0  # frames two cameras saw
     reanchored: bool = False
     prior: ShapePrior | None = None  # the track's shape prior (the mixture its frames chose, Tracker._rechoose)
+    hints: tuple = ()  # the 2D detector's classes its detections carried (vfactor.observations.class_hints)
     body_type: str | None = None
     body_type_probability: float | None = None
     noise_scale: float = 1.0  # multiplies the detections' pixel sigmas
@@ -570,7 +571,7 @@ class Tracker:
         ``library_tracks`` seed 220's van was failed in its first frame for it)."""
         options = self.options.solve
         first = _solve_alone(obs, dataclasses.replace(options, shape_information=True), track.id,
-                             self.model or self.prior, self.bounds, detections, self.cameras)
+                             self.model or self.prior, self.bounds, detections, self.cameras, track.hints)
         if not first.ok:
             return first
         # the track's graph keeps the first frame's keypoints as the detector sized them: sized by the vehicle the
@@ -669,7 +670,7 @@ class Tracker:
         does; ``far``: of those of one kind, :func:`~vfactor.shape_evidence.track_shape`)."""
         if not any(r.ok for r in alone):
             return
-        shape = track_shape(alone, self.model, self.prior, far=far)
+        shape = track_shape(alone, self.model, self.prior, far=far, hints=track.hints)
         track.prior, track.noise_scale = shape.prior, shape.noise_scale
         track.body_type, track.body_type_probability = shape.body_type, shape.probability
         # a first frame's own cameras' factors (the one-frame rule); over several frames the re-solve's (_solved_young)
@@ -709,7 +710,8 @@ class Tracker:
         options = dataclasses.replace(self.options.solve, covariance=False, shape_information=True)
         for i, (index, obs, motion, alone, offsets) in enumerate(frames):
             if alone is None:
-                alone = _solve_alone(obs, options, track.id, self.model or self.prior, self.bounds)
+                alone = _solve_alone(obs, options, track.id, self.model or self.prior, self.bounds,
+                                     hints=track.hints)
                 frames[i] = (index, obs, motion, alone, offsets)
         alone = [frame[3] for frame in frames]
         if mixed_kinds(alone, self.model):  # a bus some frames took for a smaller vehicle: each kind solved
@@ -1093,6 +1095,7 @@ class Tracker:
         obs = given = observations_from_detections(detections, self.cameras, self.options.solve.graph)
         track = self._track(vid)
         track.last_seen = t
+        track.hints = tuple(dict.fromkeys(track.hints + class_hints(detections)))  # the vehicle's, over its frames
         bias = detector_bias_sigma(detections)
         if bias is not None:  # the detector's bias (the common offset's prior takes what is known when it is made)
             track.bias_sigma = bias if track.bias_sigma is None else np.maximum(track.bias_sigma, bias)
@@ -1600,13 +1603,15 @@ def _refresh(final: dict, estimates: dict, kind: str) -> None:
 
 
 def _solve_alone(obs: KeypointObservations, options: SolveOptions, vid: str, prior, bounds,
-                 detections: list[Detection] | None = None, cameras: dict[str, Camera] | None = None) -> VehicleResult:
-    """One frame of a track solved on its own (with ``detections``, those of ``obs``, as :func:`solve_vehicle`
-    solves them (:func:`vfactor.solve.solve_vehicle`): the keypoints' sigmas sized by the vehicle it finds); a numerical failure is a ``failed``
-    result, not an exception."""
+                 detections: list[Detection] | None = None, cameras: dict[str, Camera] | None = None,
+                 hints: tuple = ()) -> VehicleResult:
+    """One frame of a track solved on its own (with ``detections``, those of ``obs``, as
+    :func:`vfactor.solve.solve_vehicle` solves them: the keypoints' sigmas sized by the vehicle it finds), the body
+    types weighed by the track's 2D detector classes ``hints``; a numerical failure is a ``failed`` result, not an
+    exception."""
     resize = None if detections is None else partial(resized_observations, detections, cameras, options.graph)
     try:
-        return solve_observations(obs, options, vid, prior, bounds, resize=resize)
+        return solve_observations(obs, options, vid, prior, bounds, hints=hints, resize=resize)
     except (RuntimeError, np.linalg.LinAlgError) as exc:
         return VehicleResult(vid, Status.FAILED, message=summarise_error(exc))
 
@@ -1700,10 +1705,11 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     model, prior, bounds = resolve_shape_prior(prior, bounds)
     config = options.solve.graph
     alone = dataclasses.replace(options.solve, shape_information=True)
+    hints = class_hints(d for _, frame in frames for d in frame.detections)  # the vehicle's over the track
     firsts = []
     for _, frame in frames:
         obs = observations_from_detections(frame.detections, cameras, config)
-        firsts.append(_solve_alone(obs, alone, vid, model or prior, bounds, frame.detections, cameras)
+        firsts.append(_solve_alone(obs, alone, vid, model or prior, bounds, frame.detections, cameras, hints)
                       if len(obs) else None)
     seen = [(i, frame.t) for (i, frame), first in zip(frames, firsts) if first is not None]
     notes = {i: _segment_message(t - t0, options.max_gap) for (_, t0), (i, t) in zip(seen, seen[1:])
@@ -1758,7 +1764,7 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
     results: dict[int, VehicleResult] = {}
     frames = [item[0] for item in piece]
     firsts = [item[1] for item in piece]
-    shape = track_shape(firsts, model, prior)
+    shape = track_shape(firsts, model, prior, hints=class_hints(d for _, frame in frames for d in frame.detections))
     track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     add_shape_factors(graph, keys, index, config, track_prior, bounds)

@@ -51,7 +51,7 @@ from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.projection import whitened_residuals
 from vfactor.graph import observations_from_detections
-from vfactor.observations import Detection, Frame
+from vfactor.observations import Detection, Frame, class_hints
 from vfactor.result import VehicleResult
 from vfactor.solve import SolveOptions, solve_observations
 
@@ -173,7 +173,7 @@ def _solve(detections: list[Detection], cameras: dict[str, Camera], options: Ass
     try:
         obs = observations_from_detections(detections, cameras, options.solve.graph)
         start = (initial.world_T_vehicle, initial.wireframe) if initial is not None and initial.ok else None
-        return solve_observations(obs, options.solve, name, initial=start)
+        return solve_observations(obs, options.solve, name, initial=start, hints=class_hints(detections))
     except (InputError, RuntimeError, np.linalg.LinAlgError) as exc:
         return VehicleResult(name, Status.FAILED, message=summarise_error(exc))
 

@@ -35,6 +35,7 @@ from vfactor.evaluation import body_type_of, solve_held_out
 from vfactor.graph import observations_from_detections, shape_sigma_at_size
 from vfactor.metrics import pose_tangent_error
 from vfactor.net.end_to_end import render_and_detect
+from vfactor.observations import class_hints
 from vfactor.solve import SolveOptions
 
 __all__ = ["VehicleErrors", "measure_vehicles", "vehicle_errors", "fit_shape_sigma", "keypoint_nees_at",
@@ -113,7 +114,7 @@ def vehicle_errors(sim, detected, options: SolveOptions = SolveOptions()) -> lis
     for f, frame in enumerate(detected.frames):
         for vid in frame.vehicle_ids():
             truth = sim.truth[f][vid]
-            hints = tuple(d.vehicle_class for d in frame.detections_of(vid) if d.vehicle_class)
+            hints = class_hints(frame.detections_of(vid))
             results = []
             for sigma, opts in ((None, options), (1.0, unit_options)):  # the same solution, two covariances
                 detections = [dataclasses.replace(d, shape_sigma=sigma) for d in frame.detections_of(vid)]

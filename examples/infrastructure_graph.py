@@ -56,10 +56,11 @@ def build_graph(scenario: str = "intersection_2cam_track", seed: int = 2, frames
     frames = [(f, frame) for f, frame in enumerate(sim.scene.frames) if frame.detections_of(vehicle)]
     observations = {f: vfactor.observations_from_detections(frame.detections_of(vehicle), sim.scene.cameras, config)
                     for f, frame in frames}
+    hints = vfactor.class_hints(d for _, frame in frames for d in frame.detections_of(vehicle))  # a 2D detector's
     firsts = {f: vfactor.solve_observations(obs, dataclasses.replace(options, covariance=False, shape_information=True),
-                                            prior=model)
+                                            prior=model, hints=hints)  # classes, where the detections carry them
               for f, obs in observations.items()}
-    shape = vfactor.track_shape(list(firsts.values()), model)
+    shape = vfactor.track_shape(list(firsts.values()), model, hints=hints)
     vfactor.add_shape_factors(graph, KEYS, vehicle=0, config=config, prior=shape.prior)
     motion = MotionModel()
     pose_keys = {}

@@ -16,7 +16,7 @@ PUBLIC = {
     "save_scene", "solve_frame", "solve_observations", "solve_scene", "solve_vehicle", "GroundPlane", "MotionModel",
     "TrackOptions", "TrackRun", "Tracker", "smooth_scene", "track_scene", "BODY_TYPES", "ShapeModel", "TrackShape",
     "default_shape_model", "track_shape", "load_calibration", "Association", "AssociationOptions", "associate_scene",
-    "GroundFit", "fit_ground_plane",
+    "GroundFit", "fit_ground_plane", "class_hints",
 }
 
 

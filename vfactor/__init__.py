@@ -34,7 +34,7 @@ from vfactor.graph import (
 from vfactor.ground_fit import GroundFit, fit_ground_plane
 from vfactor.keypoints import KEYPOINT_NAMES, LAYERS, LEFT_RIGHT_PAIRS, NUM_KEYPOINTS
 from vfactor.keys import KeyScheme
-from vfactor.observations import Detection, Frame, Scene
+from vfactor.observations import Detection, Frame, Scene, class_hints
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.scene import load_results, load_scene, save_results, save_scene
 from vfactor.shape_evidence import TrackShape, track_shape
@@ -105,4 +105,5 @@ __all__ = [
     "track_scene",
     "track_shape",
     "vehicle_box",
+    "class_hints",
 ]

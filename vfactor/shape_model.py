@@ -47,9 +47,10 @@ class ShapePrior:
         covariance: (36, 36) covariance of the flattened shape (row-major
             ``[x0, y0, z0, x1, ...]``), positive definite.
         hub_height: the wheel radius of such vehicles, metres: where a road plane is given, the ground-plane
-            factor holds the hubs this far above it (None: :attr:`vfactor.graph.GraphConfig.hub_height`). The
-            default model's is each body type's mean over the library (a bus's hubs are 0.48 m up, a hatchback's
-            0.32 m).
+            factor holds the hubs this far above it (:func:`vfactor.graph.hub_height`; None:
+            :data:`vfactor.graph.DEFAULT_HUB_HEIGHT`; a ``GraphConfig.hub_height`` the user sets overrides it).
+            The default model's is each body type's mean over the library (a bus's hubs are 0.48 m up, a
+            hatchback's 0.32 m).
     """
 
     mean: np.ndarray

@@ -98,13 +98,7 @@ def test_fit_ground_writes_the_scene_with_the_road_under_the_tracks(tmp_path, ca
     scene = tmp_path / "scene.json"
     assert main(["simulate", "library_tracks_2cam", "--seed", "20", "--out", str(scene)]) == 0
     out = tmp_path / "with_plane.json"
-    assert main(["fit-ground", str(scene), "--out", str(out)]) == 0
-    assert "road plane" in capsys.readouterr().out
-    plane = load_scene(out).ground_plane
-    assert plane is not None and _tilt_deg(plane.normal, [0.0, 0.0, 1.0]) < 0.5 and abs(plane.offset) < 0.1
-    given = json.loads(scene.read_text())
-    written = json.loads(out.read_text())
-    assert written.pop("ground_plane") and written == given  # nothing else changed
+    _fit_ground_keeps_the_scene(scene, out, capsys, "road plane", max_tilt_deg=0.5)
 
     assert main(["fit-ground", str(out), "--out", str(tmp_path / "again.json")]) == 2  # a plane is given already
     assert "ground_plane" in capsys.readouterr().err
@@ -126,11 +120,16 @@ def test_fit_ground_associates_detections_that_name_no_vehicle(tmp_path, capsys)
                           for d in f.detections]) for f in sim.scene.frames]
     scene = tmp_path / "no_ids.json"
     save_scene(dataclasses.replace(sim.scene, frames=frames), scene)
-    out = tmp_path / "with_plane.json"
+    _fit_ground_keeps_the_scene(scene, tmp_path / "with_plane.json", capsys, "associated", max_tilt_deg=1.0)
+
+
+def _fit_ground_keeps_the_scene(scene, out, capsys, said: str, max_tilt_deg: float) -> None:
+    """``vfactor fit-ground scene --out out`` says ``said``, fits a plane within ``max_tilt_deg`` and 10 cm of the
+    simulator's road and writes the scene as given plus the plane (nothing else changed)."""
     assert main(["fit-ground", str(scene), "--out", str(out)]) == 0
-    assert "associated" in capsys.readouterr().out
+    assert said in capsys.readouterr().out
     plane = load_scene(out).ground_plane
-    assert plane is not None and _tilt_deg(plane.normal, [0.0, 0.0, 1.0]) < 1.0 and abs(plane.offset) < 0.1
+    assert plane is not None and _tilt_deg(plane.normal, [0.0, 0.0, 1.0]) < max_tilt_deg and abs(plane.offset) < 0.1
     written = json.loads(out.read_text())
     assert written.pop("ground_plane") and written == json.loads(scene.read_text())
 

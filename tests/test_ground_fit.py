@@ -98,7 +98,7 @@ def test_fit_ground_writes_the_scene_with_the_road_under_the_tracks(tmp_path, ca
     scene = tmp_path / "scene.json"
     assert main(["simulate", "library_tracks_2cam", "--seed", "20", "--out", str(scene)]) == 0
     out = tmp_path / "with_plane.json"
-    _fit_ground_keeps_the_scene(scene, out, capsys, "road plane", max_tilt_deg=0.5)
+    _fit_ground_keeps_the_scene(scene, out, capsys, "each at its body type's wheel radius", max_tilt_deg=0.5)
 
     assert main(["fit-ground", str(out), "--out", str(tmp_path / "again.json")]) == 2  # a plane is given already
     assert "ground_plane" in capsys.readouterr().err

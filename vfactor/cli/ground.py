@@ -51,9 +51,11 @@ def fit_ground(args) -> int:
     save_scene(dataclasses.replace(scene, ground_plane=fit.plane), out)
     if not args.quiet:
         n, d = fit.plane.normal, fit.plane.offset
+        hubs = f"hubs {fit.hub_height:.3f} m above it" + ("" if args.hub_height is not None else
+                                                           " on average, each at its body type's wheel radius")
         print(f"road plane {n[0]:.4f} x + {n[1]:.4f} y + {n[2]:.4f} z = {d:.3f} m ({fit.tilt_deg:.2f} deg from "
               f"horizontal), from {fit.points} tracked poses of {len(scenes)} scene(s) ({fit.inliers} within 3 "
-              f"robust scales; scale {100 * fit.scale:.1f} cm), {time.perf_counter() - t0:.2f} s; wrote {out}")
+              f"robust scales; scale {100 * fit.scale:.1f} cm; {hubs}), {time.perf_counter() - t0:.2f} s; wrote {out}")
     return EXIT_OK
 
 

@@ -10,7 +10,8 @@ import pytest
 
 from vfactor.cli import main
 from vfactor.errors import InputError
-from vfactor.ground_fit import MIN_GROUND_POINTS, fit_ground_plane
+from vfactor.factors.ground_plane import GroundPlane
+from vfactor.ground_fit import MIN_GROUND_POINTS, fit_ground_plane, plane_heights, plane_note
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.scene import load_scene
 from vfactor.wireframe import PRESETS
@@ -165,3 +166,26 @@ def test_fit_ground_pools_the_traffic_of_one_rig(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("vfactor fit-ground: error: --traffic:") and not (tmp_path / "no.json").exists()
 
+
+
+def test_a_wrong_road_plane_is_said_and_a_right_one_is_not(tmp_path, capsys):
+    """A scene's ground_plane 30 cm off (a survey in another datum, a plane fitted elsewhere) pulled every vehicle
+    towards it without a word; the solved hubs still sit a median 16 cm from it, and the commands say so."""
+    rng = np.random.default_rng(6)
+    frames = _on_plane([0, 0, 1], 0.0, rng.uniform(-15.0, 15.0, (12, 2)), rng, noise=0.02)
+    assert np.abs(plane_heights(frames, GroundPlane((0, 0, 1), 0.0), HUB_HEIGHT)).max() < 0.1
+    assert plane_note(frames, GroundPlane((0, 0, 1), 0.0), HUB_HEIGHT) is None
+    assert "below" in plane_note(frames, GroundPlane((0, 0, 1), 0.3), HUB_HEIGHT)
+    assert plane_note(frames[:MIN_GROUND_POINTS - 1], GroundPlane((0, 0, 1), 0.3), HUB_HEIGHT) is None  # too few
+
+    import dataclasses
+
+    from vfactor.scene import save_scene
+    from vfactor.sim import load_scenario, simulate
+
+    sim = simulate(load_scenario("library_2cam"), seed=700, num_frames=12)
+    for offset, said in ((0.0, False), (0.3, True)):
+        scene = tmp_path / f"plane_{offset}.json"
+        save_scene(dataclasses.replace(sim.scene, ground_plane=GroundPlane((0, 0, 1), offset)), scene)
+        assert main(["solve", str(scene), "--out", str(tmp_path / "result.json"), "--no-covariance"]) == 0
+        assert ("is the plane right?" in capsys.readouterr().err) == said

@@ -165,6 +165,7 @@ def _solve_one(args, engine: _Engine) -> int:
             yield frame
 
     write_output(args, frames(), scene)
+    _plane_note(results, scene)
     vehicles = [v for fr in results for v in fr.vehicles]
     solved = sum(v.ok for v in vehicles)
     poor = sum(v.status == Status.POOR_FIT for v in vehicles)
@@ -172,6 +173,17 @@ def _solve_one(args, engine: _Engine) -> int:
         print(f"solved {solved} of {len(vehicles)} vehicles" + (f" ({poor} a poor fit)" if poor else "")
               + f" in {len(results)} frames ({time.perf_counter() - t0:.2f} s); wrote {args.out}")
     return report_unsolved(results, scene, args.quiet)
+
+
+def _plane_note(results, scene) -> None:
+    """Says so where the solved vehicles do not stand on the scene's road plane
+    (:func:`vfactor.ground_fit.plane_note`)."""
+    if scene.ground_plane is not None:
+        from vfactor.ground_fit import plane_note
+
+        text = plane_note(results, scene.ground_plane)
+        if text:
+            note(text)
 
 
 def track(args) -> int:
@@ -222,6 +234,7 @@ def _track_one(args, engine: _Engine) -> int:
     write_output(args, results, scene)
     for message in messages:
         note(message)
+    _plane_note(results, scene)
     vehicles = [v for fr in results for v in fr.vehicles]
     tracks = {v.id for v in vehicles}
     if not args.quiet:

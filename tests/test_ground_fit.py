@@ -177,6 +177,8 @@ def test_a_wrong_road_plane_is_said_and_a_right_one_is_not(tmp_path, capsys):
     assert plane_note(frames, GroundPlane((0, 0, 1), 0.0), HUB_HEIGHT) is None
     assert "below" in plane_note(frames, GroundPlane((0, 0, 1), 0.3), HUB_HEIGHT)
     assert plane_note(frames[:MIN_GROUND_POINTS - 1], GroundPlane((0, 0, 1), 0.3), HUB_HEIGHT) is None  # too few
+    tilted = GroundPlane((np.sin(0.05), 0.0, np.cos(0.05)), 0.0)  # 2.9 deg: the vehicles 0.75 m off at 15 m
+    assert "plane tilted 2." in plane_note(frames, tilted, HUB_HEIGHT)
 
     import dataclasses
 

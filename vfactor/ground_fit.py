@@ -157,9 +157,9 @@ def plane_note(results: Iterable[FrameResult], plane: GroundPlane, hub_height: f
     The ground-plane factor holds each vehicle to the plane within its sigmas, so a plane given wrong pulls every
     vehicle towards it, and the keypoints pull back: on ``library_2cam`` seed 700 (paper-like noise) a plane 30 cm
     too high or too low left the hubs a median 16 cm from it and the translations 2.4-2.6 times worse, a plane 10 cm
-    off 5 cm from it; a plane tilted 2.9 degrees left the hubs' own plane tilted 1.4 degrees against it, one tilted
-    1.7 degrees 0.7-0.9 (on the true plane 0.1-0.3: docs/factors.md). A scene solved on the true road sits within
-    about a centimetre of it.
+    off 5 cm from it; a plane tilted 2.9 degrees left the hubs' own plane tilted 1.25-1.80 degrees against it on four
+    scenes, one tilted 1.7 degrees 0.65-1.04, the true plane 0.02-0.39 (seven scenarios, solved and tracked; the
+    median within 1.5 cm: docs/factors.md).
     """
     results = list(results)
     heights = plane_heights(results, plane, hub_height)

@@ -1705,7 +1705,7 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
     model, prior, bounds = resolve_shape_prior(prior, bounds)
     config = options.solve.graph
     alone = dataclasses.replace(options.solve, shape_information=True)
-    hints = class_hints(d for _, frame in frames for d in frame.detections)  # the vehicle's over the track
+    hints = class_hints(d for _, frame in frames for d in frame.detections)  # the track's, as the tracker counts them
     firsts = []
     for _, frame in frames:
         obs = observations_from_detections(frame.detections, cameras, config)
@@ -1719,10 +1719,10 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
         results, suspect, piece = {}, 0, []
         for item in zip(frames, firsts):
             if item[0][0] in starts and piece:
-                done, odd = _smooth_piece(vid, index, cameras, options, model, prior, bounds, piece)
+                done, odd = _smooth_piece(vid, index, cameras, options, model, prior, bounds, piece, hints=hints)
                 results, suspect, piece = {**results, **done}, suspect + odd, []
             piece.append(item)
-        done, odd = _smooth_piece(vid, index, cameras, options, model, prior, bounds, piece)
+        done, odd = _smooth_piece(vid, index, cameras, options, model, prior, bounds, piece, hints=hints)
         return {**results, **done}, suspect + odd
 
     results, suspect = smoothed(set(notes))
@@ -1745,7 +1745,8 @@ def _smooth_unit(unit: tuple) -> dict[int, VehicleResult]:
 
 
 def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: TrackOptions, model, prior, bounds,
-                  piece: list, camera_factors: dict | None = None) -> tuple[dict[int, VehicleResult], int]:
+                  piece: list, camera_factors: dict | None = None,
+                  hints: tuple = ()) -> tuple[dict[int, VehicleResult], int]:
     """One piece of a track (``[((frame index, frame), its one-frame solve or None), ...]``) smoothed by
     Levenberg-Marquardt from its frames' own solves, each keypoint's sigma sized by the vehicle its frame's solve
     found (:func:`vfactor.graph.sized_observations`, as the one-frame solve sizes them; a frame whose solve failed
@@ -1758,13 +1759,14 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
     detector's scores on another scale in one camera; each camera's median over all the piece's frames), the piece
     is smoothed again with each camera's sigmas times its own factor (``camera_factors``, camera name -> factor;
     the results' ``extras["camera_noise_factors"]``): one scale for all made the other cameras' keypoints too sharp.
+    ``hints``: the track's 2D detector classes (all its detections', as the tracker counts them).
     """
     keys = KeyScheme()
     config = options.solve.graph
     results: dict[int, VehicleResult] = {}
     frames = [item[0] for item in piece]
     firsts = [item[1] for item in piece]
-    shape = track_shape(firsts, model, prior, hints=class_hints(d for _, frame in frames for d in frame.detections))
+    shape = track_shape(firsts, model, prior, hints=hints)
     track_prior, scale, body_type, probability = shape.prior, shape.noise_scale, shape.body_type, shape.probability
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     add_shape_factors(graph, keys, index, config, track_prior, bounds)
@@ -1845,7 +1847,8 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
     if camera_factors is None:  # the cameras' own scales over the piece's frames, where they differ that much
         factors = _camera_factors(residuals.values())
         if factors is not None:
-            again, suspect_again = _smooth_piece(vid, index, cameras, options, model, prior, bounds, piece, factors)
+            again, suspect_again = _smooth_piece(vid, index, cameras, options, model, prior, bounds, piece, factors,
+                                                 hints)
             for result in again.values():
                 if result.ok:
                     result.extras["camera_noise_factors"] = factors

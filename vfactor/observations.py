@@ -166,12 +166,13 @@ class Detection:
         return float(np.linalg.norm(uv.max(0) - uv.min(0)))
 
 
-def class_hints(detections) -> tuple[str, ...]:
-    """The 2D detector's classes of ``detections`` (``Detection.vehicle_class``), each once, in the order first met:
-    the hints of a vehicle's body-type choice (:meth:`vfactor.shape_model.ShapeModel.suggested_types`), whether its
-    detections are one frame's (:func:`vfactor.solve.solve_vehicle`), a track's (:mod:`vfactor.track`) or those the
-    association solves together (:mod:`vfactor.association`)."""
-    return tuple(dict.fromkeys(d.vehicle_class for d in detections if d.vehicle_class))
+def class_hints(detections, known: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """The 2D detector's classes of ``detections`` (``Detection.vehicle_class``) after those ``known`` already (a
+    track's so far), each once, in the order first met: the hints of a vehicle's body-type choice
+    (:meth:`vfactor.shape_model.ShapeModel.suggested_types`), whether its detections are one frame's
+    (:func:`vfactor.solve.solve_vehicle`), a track's (:mod:`vfactor.track`) or those the association solves together
+    (:mod:`vfactor.association`)."""
+    return tuple(dict.fromkeys((*known, *(d.vehicle_class for d in detections if d.vehicle_class))))
 
 
 @dataclass

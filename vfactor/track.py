@@ -726,11 +726,12 @@ class Tracker:
             self._rechoose(track, alone)  # all frames so far, not the first alone
             graph, solved = self._young_lm(track, frames, estimate, pose_keys, fresh)
         points = self._wireframe(solved, track).vehicle_p_keypoints
-        factors = _camera_factors(
-            ((scaled, _frame_residuals(scaled, solved, self.keys, track.index, index, offsets, points))
-             for index, scaled, offsets in ((index, _track_scaled(obs, track.noise_scale, None), offsets)
-                                            for index, obs, _, _, offsets in frames) if len(scaled)),
-            _YOUNG_CAMERA_FRAME_SHARE)
+        fits = []  # each frame's keypoints at the track's noise scale, one for all cameras, and their residuals
+        for index, obs, _, _, offsets in frames:
+            scaled = _track_scaled(obs, track.noise_scale, None)
+            if len(scaled):
+                fits.append((scaled, _frame_residuals(scaled, solved, self.keys, track.index, index, offsets, points)))
+        factors = _camera_factors(fits, _YOUNG_CAMERA_FRAME_SHARE)
         if factors is not None:  # the cameras' keypoints fit at scales far apart: each camera's sigmas its own
             track.camera_factors = factors
             graph = self._young_graph(track, frames)
@@ -1095,7 +1096,7 @@ class Tracker:
         obs = given = observations_from_detections(detections, self.cameras, self.options.solve.graph)
         track = self._track(vid)
         track.last_seen = t
-        track.hints = tuple(dict.fromkeys(track.hints + class_hints(detections)))  # the vehicle's, over its frames
+        track.hints = class_hints(detections, track.hints)  # the vehicle's, over its frames
         bias = detector_bias_sigma(detections)
         if bias is not None:  # the detector's bias (the common offset's prior takes what is known when it is made)
             track.bias_sigma = bias if track.bias_sigma is None else np.maximum(track.bias_sigma, bias)

@@ -516,11 +516,11 @@ def _restarted(obs: KeypointObservations, options: SolveOptions, vehicle_id: str
         if not result.ok:
             continue
         reached.append(result.world_T_vehicle)
-        scale = result.extras.get("fit_noise_scale")
+        scale, score = result.extras.get("fit_noise_scale"), _fit_score(result)
         better = fit_scale is None or (scale is not None and scale < fit_scale
                                        and distinct_poses(result.world_T_vehicle, solution))
-        if better and (best is None or _fit_score(result) < best[0]):
-            best = _fit_score(result), result, candidate.source
+        if better and (best is None or score < best[0]):
+            best = score, result, candidate.source
         if scale is not None and scale < POOR_FIT_SCALE:
             break
     if best is None:

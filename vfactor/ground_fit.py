@@ -110,7 +110,11 @@ def fit_ground_plane(results: Iterable[FrameResult], hub_height: float | None = 
     """
     if hub_height is not None and not (np.isfinite(hub_height) and hub_height >= 0):
         raise InputError("hub_height", f"expected a non-negative number of metres, got {hub_height!r}")
-    hubs, radii = _hub_centres(results, hub_height)
+    return _fitted(*_hub_centres(results, hub_height))
+
+
+def _fitted(hubs: np.ndarray, radii: np.ndarray) -> GroundFit:
+    """:func:`fit_ground_plane` of hub centres (n, 3) and their wheel radii (n,), metres."""
     normal = np.array([0.0, 0.0, 1.0])
     if len(hubs) < MIN_GROUND_POINTS:
         raise InputError("results", f"{len(hubs)} solved vehicle poses; a road plane needs at least "
@@ -144,7 +148,11 @@ def plane_heights(results: Iterable[FrameResult], plane: GroundPlane, hub_height
     """Each solved vehicle pose's hub centre above where ``plane`` puts it (metres, along the plane's normal; its
     hubs' height above the plane less its body type's wheel radius, as :func:`fit_ground_plane` takes it, or less
     ``hub_height`` for every vehicle where it is given): 0 for a vehicle standing on the plane."""
-    hubs, radii = _hub_centres(results, hub_height)
+    return _heights(*_hub_centres(results, hub_height), plane)
+
+
+def _heights(hubs: np.ndarray, radii: np.ndarray, plane: GroundPlane) -> np.ndarray:
+    """:func:`plane_heights` of hub centres (n, 3) and their wheel radii (n,), metres."""
     return hubs @ np.asarray(plane.normal) - plane.offset - radii
 
 
@@ -161,13 +169,13 @@ def plane_note(results: Iterable[FrameResult], plane: GroundPlane, hub_height: f
     scenes, one tilted 1.7 degrees 0.65-1.04, the true plane 0.02-0.39 (seven scenarios, solved and tracked; the
     median within 1.5 cm: docs/factors.md).
     """
-    results = list(results)
-    heights = plane_heights(results, plane, hub_height)
+    hubs, radii = _hub_centres(results, hub_height)  # once: the heights and the hubs' own plane
+    heights = _heights(hubs, radii, plane)
     if len(heights) < MIN_GROUND_POINTS:
         return None
     median = float(np.median(heights))
     try:
-        own = fit_ground_plane(results, hub_height).plane.normal
+        own = _fitted(hubs, radii).plane.normal
         tilt = float(np.degrees(np.arccos(np.clip(abs(np.dot(own, plane.normal)), 0.0, 1.0))))
     except InputError:  # the traffic along one line: no plane of its own
         tilt = 0.0

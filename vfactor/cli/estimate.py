@@ -35,11 +35,11 @@ def load_input(args):
         raise
 
 
-def associate(scene, args):
+def associate(scene, args, force: bool | None = None):
     """The scene with its vehicles found (vfactor.association) where the detections name none, or everywhere
-    with ``--associate`` (a command without that option: only where they name none), and the
-    :class:`~vfactor.association.Association`; the scene as it is and None otherwise."""
-    force = getattr(args, "associate", False)
+    with ``force`` (default: ``--associate``), and the :class:`~vfactor.association.Association`; the scene as it
+    is and None otherwise."""
+    force = args.associate if force is None else force
     todo = len(scene.unassigned()) if not force else sum(len(f.detections) for f in scene.frames)
     if not todo:
         return scene, None

@@ -39,7 +39,7 @@ def fit_ground(args) -> int:
     t0 = time.perf_counter()
     results = []
     for name, other in scenes:
-        detected, _ = associate(detect(other, args), args)  # detections that name no vehicle: found first
+        detected, _ = associate(detect(other, args), args, force=False)  # detections that name no vehicle first
         if args.batch:
             results += smooth_scene(detected, options, progress=progress("smoothing", not args.quiet))
         else:

@@ -109,6 +109,20 @@ def test_eval_prints_the_comparison(tmp_path, capsys):
     for method in ("factor_graph", "triangulation", "known_shape"):
         assert method in out
     assert "vfactor eval --frames 3" in md.read_text()
+    assert "Per camera count" not in out  # library_2cam: two cameras see every vehicle
+
+
+def test_eval_reports_per_camera_count_where_the_count_varies(capsys):
+    """Where vehicles are seen by different numbers of cameras, ``vfactor eval`` adds the accuracy and the
+    covariances' consistency per camera count (the project reports per class, camera count included)."""
+    assert main(["eval", "--scenario", "rig_spread_4cam", "--frames", "10", "--levels", "paper", "--road-plane"]) == 0
+    out = capsys.readouterr().out
+    section = out[out.index("Per camera count"):]
+    accuracy = section[section.index("| cameras | vehicles | factor_graph"):].split("\n\n")[0].splitlines()[2:]
+    counts = {int(line.split("|")[1]): int(line.split("|")[2]) for line in accuracy}
+    assert len(counts) > 1 and set(counts) <= {1, 2, 3, 4} and sum(counts.values()) == 10, counts
+    consistency = section[section.index("| cameras | vehicles | pose NEES"):].split("\n\n")[0].splitlines()[2:]
+    assert [line.split("|")[1].strip() for line in consistency] == [str(c) for c in sorted(counts)] + ["all"]
 
 
 def test_eval_association_at_a_noise_level_beside_the_true_ids(tmp_path, capsys):

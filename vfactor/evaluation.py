@@ -96,7 +96,8 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
 
     Returns:
         method -> rows: ``pose_errors`` fields plus ``preset`` (the vehicle
-        model), ``body_type`` (the truth's), ``chosen_type`` (the solver's, or
+        model), ``body_type`` (the truth's), ``cameras`` (how many cameras saw
+        at least one of its keypoints), ``chosen_type`` (the solver's, or
         None), ``status``, ``seconds``; a vehicle a method could not solve has
         ``status`` only and counts as a failure.
     """
@@ -110,6 +111,7 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
             truth = sim.truth[f][vid]
             detections = frame.detections_of(vid)
             obs = observations_from_detections(detections, sim.scene.cameras, options.graph)
+            cameras = len(np.unique(obs.camera_index))  # those that saw at least one of its keypoints
             hints = class_hints(detections)
             for method in methods:
                 t0 = time.perf_counter()
@@ -127,7 +129,8 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
                                          ground_plane=options.ground_plane, wheel_radius=truth.wheel_radius)
                 seconds = time.perf_counter() - t0
                 row = {"frame": f, "vehicle": vid, "preset": truth.preset, "body_type": body_type_of(truth.preset),
-                       "chosen_type": result.body_type, "status": result.status.value, "seconds": seconds}
+                       "cameras": cameras, "chosen_type": result.body_type, "status": result.status.value,
+                       "seconds": seconds}
                 if result.ok:
                     row.update(pose_errors(result.world_T_vehicle, result.keypoints_world, truth.world_T_vehicle,
                                            truth.keypoints_world))
@@ -290,31 +293,34 @@ def keypoint_table(summary: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
-def body_type_table(rows: dict[str, list[dict]], reference: str = "known_shape") -> str:
-    """Per body type: each method's rotation / translation / keypoint error, and the factor graph's ratios to ``reference``.
+def body_type_table(rows: dict[str, list[dict]], reference: str = "known_shape", by: str = "body_type") -> str:
+    """Per body type (or camera count, ``by="cameras"``): each method's rotation / translation / keypoint error, and
+    the factor graph's ratios to ``reference``.
 
     Also the share of vehicles whose body type the factor graph chose right
     (PASCAL3D+ cars count as right when a car type was chosen).
     """
     methods = [m for m in rows if m in ("factor_graph", "car_prior", "triangulation", reference)]
-    header = "| body type | vehicles | " + " | ".join(f"{m} (deg / cm / kp cm)" for m in methods) + \
+    header = f"| {by.replace('_', ' ')} | vehicles | " + " | ".join(f"{m} (deg / cm / kp cm)" for m in methods) + \
         " | factor_graph vs reference (rot / trans / kp) | type chosen right | failed (factor graph) |"
     lines = [header, "| --- " * (len(methods) + 5) + "|"]
-    present = [t for t in (*BODY_TYPES, "pascal3d") if any(r["body_type"] == t for r in rows["factor_graph"])]
+    present = [t for t in (*BODY_TYPES, "pascal3d") if any(r["body_type"] == t for r in rows["factor_graph"])] \
+        if by == "body_type" else sorted({r[by] for r in rows["factor_graph"]})
     car_types = ("sedan", "hatchback", "estate", "suv")
-    for body_type in present:
+    for group in present:
         cells, summary = [], {}
         for m in methods:
-            s = summarise_methods({m: [r for r in rows[m] if r["body_type"] == body_type]})[m]
+            s = summarise_methods({m: [r for r in rows[m] if r[by] == group]})[m]
             summary[m] = s
             cells.append(f"{s['rotation_deg']:.2f} / {s['translation_cm']:.1f} / {s['keypoint_cm']:.1f}")
         fg, ref = summary["factor_graph"], summary.get(reference)
         ratio = "-" if ref is None else " / ".join(f"{fg[k] / ref[k]:.2f}x" for k in ("rotation_deg", "translation_cm",
                                                                                       "keypoint_cm"))
-        mine = [r for r in rows["factor_graph"] if r["body_type"] == body_type and r.get("chosen_type")]
-        right = [r for r in mine if r["chosen_type"] == body_type or (body_type == "pascal3d" and r["chosen_type"] in car_types)]
+        mine = [r for r in rows["factor_graph"] if r[by] == group and r.get("chosen_type")]
+        right = [r for r in mine if r["chosen_type"] == r["body_type"]
+                 or (r["body_type"] == "pascal3d" and r["chosen_type"] in car_types)]
         share = f"{len(right)}/{len(mine)}" if mine else "-"
-        lines.append(f"| {body_type} | {fg['count']} | " + " | ".join(cells) + f" | {ratio} | {share} | {fg['failures']} |")
+        lines.append(f"| {group} | {fg['count']} | " + " | ".join(cells) + f" | {ratio} | {share} | {fg['failures']} |")
     return "\n".join(lines)
 
 

@@ -135,6 +135,9 @@ def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper"
                         f"Consistency of the factor "
                         f"graph's covariances (NEES; consistent: 1.00x and 95 %):\n\n{consistency_table(rows)}\n\n"
                         f"Mean error per keypoint (cm):\n\n{keypoint_table(summary)}\n")
+        if len({r["cameras"] for r in rows["factor_graph"]}) > 1:  # vehicles seen by different numbers of cameras
+            sections.append(f"Per camera count (the cameras that saw at least one keypoint of the vehicle):\n\n"
+                            f"{body_type_table(rows, by='cameras')}\n\n{consistency_table(rows, by='cameras')}\n")
     return sections
 
 

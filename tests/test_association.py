@@ -184,6 +184,22 @@ def test_bad_options_are_named():
     with pytest.raises(InputError) as info:
         AssociationOptions(gate_cost=-1.0)
     assert info.value.field == "AssociationOptions.gate_cost"
+    with pytest.raises(InputError) as info:
+        AssociationOptions(quick_gate=float("nan"))
+    assert info.value.field == "AssociationOptions.quick_gate"
+
+
+def test_a_pair_the_quick_solve_refuses_is_the_full_test_s_refusal_too(multi):
+    """The quick solve (``quick_gate``) refuses pairs of different vehicles without their full joint solve, and
+    refuses none that the full test finds compatible: the same groups as testing every pair in full."""
+    frame, truth = multi.scene.frames[0], [d.vehicle for d in multi.scene.frames[0].detections]
+    anonymous_frame = Frame(frame.t, [dataclasses.replace(d, vehicle=UNASSIGNED) for d in frame.detections])
+    full = associate_frame(anonymous_frame, multi.scene.cameras, AssociationOptions(quick_gate=0.0))
+    quick = associate_frame(anonymous_frame, multi.scene.cameras, AssociationOptions())
+    assert quick.groups == full.groups and set(quick.pairs) == set(full.pairs)
+    refused = [pair for pair, (ok, score) in quick.pairs.items() if score >= 3.0]  # refused by the quick solve
+    assert refused and all(truth[i] != truth[j] and not full.pairs[(i, j)][0] for i, j in refused)
+    assert all(quick.pairs[pair] == full.pairs[pair] for pair in full.pairs if full.pairs[pair][0])
 
 
 def test_solve_and_track_associate_scenes_without_ids(tmp_path, multi, capsys):

@@ -93,9 +93,9 @@ class AssociationOptions:
             camera disagrees) or either detection's rise is beyond ``quick_gate`` times the pair's gate, the pair
             is not compatible without the full joint solve, whose robust steps (the swap search, the refit
             without gross outliers, the restarts) cost different vehicles' pairs about four times a same
-            vehicle's. Set on the scenes of ``gate_cost`` (seed 0, paper-like and hard noise, 806
-            pairs): the compatible pairs' quick rise reached 1.43 times their gate, and 1 of 442 compatible
-            pairs (hard noise) was refused by the quick solve's camera check; 0 tests every pair in full.
+            vehicle's. Set on the scenes of ``gate_cost`` (seed 0, paper-like and hard noise, 806 pairs): the
+            compatible pairs' quick rise reached 1.43 times their gate, and 1 of 442 compatible pairs (hard
+            noise) was refused by the quick solve's camera check; 0 tests every pair in full.
         gate_cost_weak: the same gate where the weaker detection has ``min_keypoints`` to ``strong_keypoints``
             - 1 keypoints (its single-view solve fits its few keypoints closely, so any joint solve raises their
             cost more): same vehicles rose up to 1.5 (6-7 keypoints) and 5.4 (4-5), different vehicles by at
@@ -146,8 +146,8 @@ class AssociationOptions:
     solve: SolveOptions = field(default_factory=lambda: SolveOptions(covariance=False))
 
     def __post_init__(self):
-        for name in ("gate_distance", "gate_cost", "gate_cost_weak", "quick_gate", "strong_keypoints", "min_keypoints",
-                     "leftover_rise", "leftover_cost", "hint_relax", "hint_bonus", "min_track_frames",
+        for name in ("gate_distance", "gate_cost", "gate_cost_weak", "quick_gate", "strong_keypoints",
+                     "min_keypoints", "leftover_rise", "leftover_cost", "hint_relax", "hint_bonus", "min_track_frames",
                      "max_track_residual", "min_hit_ratio", "link_distance", "max_speed", "max_acceleration",
                      "max_missed", "track_bonus", "single_view_weight", "single_view_depth", "tentative_missed"):
             value = getattr(self, name)
@@ -225,6 +225,10 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
 
     pairs: dict[tuple[int, int], tuple[bool, float]] = {}
     joint: dict[tuple[int, int], VehicleResult] = {}
+
+    def rise_on(result: VehicleResult, pair: tuple[int, int]) -> float:  # the pair's larger rise, per keypoint
+        return max((_cost(own[k], result, options) - baseline[k]) / seen[k] for k in pair) if result.ok else math.inf
+
     for i, j in itertools.combinations(strong, 2):
         if det[i].camera == det[j].camera:
             continue
@@ -235,19 +239,14 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
             continue  # neither says where it is: no test
         better = i if seen[i] >= seen[j] else j
         gate = options.gate_cost if min(seen[i], seen[j]) >= options.strong_keypoints else options.gate_cost_weak
-
-        def rise_on(result: VehicleResult) -> float:  # the larger of the two detections' rises, per keypoint
-            return max((_cost(own[k], result, options) - baseline[k]) / seen[k] for k in (i, j)) \
-                if result.ok else math.inf
-
         if options.quick_gate > 0:
-            quick = rise_on(_solve([det[i], det[j]], cameras, options, "quick", alone[better], quick=True))
+            quick = rise_on(_solve([det[i], det[j]], cameras, options, "quick", alone[better], quick=True), (i, j))
             if quick > options.quick_gate * gate:
                 pairs[(i, j)] = (False, quick / gate)
                 continue
         result = _solve([det[i], det[j]], cameras, options, f"d{i}+d{j}", initial=alone[better])
         joint[(i, j)] = result
-        rise = rise_on(result)
+        rise = rise_on(result, (i, j))
         score = rise / gate  # scored against its gate: strong and weak pairs comparable
         if hints and i in hints and hints.get(j) == hints[i]:
             score -= options.hint_bonus  # the cameras' trackers say they have shown one vehicle

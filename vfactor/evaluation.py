@@ -324,7 +324,7 @@ def body_type_table(rows: dict[str, list[dict]], reference: str = "known_shape",
     return "\n".join(lines)
 
 
-def run_accuracy(scenario: str = "accuracy_2cam", frames: int | None = None, seed: int = 0,
+def run_accuracy(scenario: str | Scenario = "accuracy_2cam", frames: int | None = None, seed: int = 0,
                  levels=("paper", "hard"), options: SolveOptions = SolveOptions(),
                  methods=tuple(METHODS), seeds: int = 1, engine=None) -> list[tuple[Scenario, dict[str, list[dict]]]]:
     """The accuracy experiment of docs/results.md: each noise level (:data:`NOISE_LEVELS`) simulated, every method run.
@@ -339,7 +339,7 @@ def run_accuracy(scenario: str = "accuracy_2cam", frames: int | None = None, see
     """
     from vfactor.parallel import InProcess
 
-    base = load_scenario(scenario)
+    base = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     variants = []
     for level in levels:
         if level not in NOISE_LEVELS:

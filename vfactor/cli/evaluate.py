@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from collections import defaultdict
+from pathlib import Path
 
 import numpy as np
 
@@ -49,7 +50,7 @@ def evaluate(args) -> int:
             ("--figures", args.figures is not None, ("paper",), None),
             ("--sweep-frames", args.sweep_frames is not None, ("paper",), None),
             ("--clipped-boxes", args.clipped_boxes, ("images",), None),
-            ("--road-plane", args.road_plane, ("frames",), None),
+            ("--road-plane", args.road_plane, ("frames",), None), ("--rig", args.rig is not None, ("frames",), None),
             ("--detector-offsets", args.detector_offsets is not None, ("images",), None)):
         if given and args.experiment not in takers:
             raise InputError(flag, f"eval {args.experiment} {why}" if why else
@@ -59,7 +60,10 @@ def evaluate(args) -> int:
     if args.experiment in ("frames", "tracks", "association"):
         with open_command_engine(args.workers, args.scheduler) as engine:
             if args.experiment == "frames":
-                sections = _eval_frames(args.scenario or "library_2cam", frames, args.seed,
+                scenario = args.scenario or "library_2cam"
+                if args.rig is not None:
+                    scenario = _on_rig(scenario, args.rig)
+                sections = _eval_frames(scenario, frames, args.seed,
                                         _levels(args.levels or "clean,paper,hard"), args.seeds, engine,
                                         args.road_plane)
             elif args.experiment == "tracks":
@@ -92,6 +96,7 @@ def evaluate(args) -> int:
         (f" --sweep-frames {args.sweep_frames}" if args.sweep_frames is not None else "") + \
         (f" --weights {args.weights}" if args.weights else "") + (" --clipped-boxes" if args.clipped_boxes else "") + \
         (" --amodal-pass" if args.amodal_pass else "") + (" --road-plane" if args.road_plane else "") + \
+        (f" --rig {args.rig}" if args.rig is not None else "") + \
         {True: " --real-roofs", False: " --no-real-roofs"}.get(args.real_roofs, "") + \
         {True: " --detector-offsets", False: " --no-detector-offsets"}.get(args.detector_offsets, "")
     echo = output(args)
@@ -101,6 +106,33 @@ def evaluate(args) -> int:
     if args.markdown:
         write_text_atomic(args.markdown, f"<!-- made by: {command} -->\n\n" + "\n".join(sections))
     return EXIT_OK
+
+
+def _on_rig(scenario: str, scene_file: str):
+    """``--rig``: the scenario's vehicles and noise seen by the cameras of ``scene_file``, on the road where they
+    look (:func:`vfactor.sim.scenario_on_cameras`).
+
+    Raises:
+        InputError: (``--rig``) the scene file does not load, its road plane is not the world's ``z = 0`` (on
+            which the simulator's vehicles stand), or no camera looks at that road.
+    """
+    from vfactor.errors import ScenarioError
+    from vfactor.scene import load_scene
+    from vfactor.sim import load_scenario, scenario_on_cameras
+
+    try:
+        scene = load_scene(scene_file)
+    except InputError as exc:
+        raise InputError("--rig", f"{scene_file}: {exc}") from None
+    plane = scene.ground_plane  # n . x = offset, n of unit length
+    if plane is not None and (abs(plane.offset) > 0.05 or np.degrees(np.arccos(min(plane.normal[2], 1.0))) > 1.0):
+        raise InputError("--rig", f"{scene_file}'s road plane is not the world's z = 0 plane, on which the simulated "
+                         "vehicles stand: give the rig in a world frame whose road is z = 0")
+    try:
+        return scenario_on_cameras(load_scenario(scenario), scene.cameras,
+                                   name=f"{scenario} on {Path(scene_file).stem}")
+    except ScenarioError as exc:
+        raise InputError("--rig", f"{scene_file}: {exc}") from None
 
 
 def _levels(text: str) -> tuple[str, ...]:

@@ -51,6 +51,7 @@ from vfactor.sim.scenario import (
     load_scenario,
     noise_from_value,
     scenario_from_dict,
+    scenario_on_cameras,
     scenario_path,
 )
 from vfactor.sim.simulate import (
@@ -135,6 +136,7 @@ __all__ = [
     "REQUIRE_VISIBLE",
     "load_scenario",
     "scenario_from_dict",
+    "scenario_on_cameras",
     "scenario_path",
     "list_scenarios",
     "noise_from_value",

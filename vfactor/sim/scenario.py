@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
+import numpy as np
+
 from vfactor.camera import Camera
 from vfactor.errors import CalibrationError, ScenarioError
 from vfactor.jsonio import read_json
@@ -40,6 +42,7 @@ __all__ = [
     "noise_from_value",
     "load_scenario",
     "scenario_from_dict",
+    "scenario_on_cameras",
     "scenario_path",
     "list_scenarios",
 ]
@@ -392,6 +395,50 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     path = scenario_path(name_or_path)
     data = read_json(path, ScenarioError)  # vfactor.jsonio: numbers out of range and deep nesting are input errors
     return scenario_from_dict(data, default_name=path.stem)
+
+
+def scenario_on_cameras(base: Scenario, cameras: dict[str, Camera], half_size: float = 3.0,
+                        name: str | None = None) -> Scenario:
+    """``base``'s vehicles and noise seen by another rig (a user's calibrated cameras): how vfactor does there.
+
+    The vehicles stand in a square of the road (the world's ``z = 0`` plane) ``2 half_size`` metres wide
+    around where the cameras look: the median of the points where their optical axes meet the road. Each
+    vehicle is whole in at least one camera's image (``require_visible="any"``): where the views overlap
+    little, some vehicles are seen by one camera, and ``vfactor eval`` reports per camera count. Only
+    independent frames (``base`` without motion).
+
+    Args:
+        base: the scenario to take the vehicles, noise, frames and margins from (for example
+            ``load_scenario("library_2cam")``).
+        cameras: camera name -> :class:`~vfactor.camera.Camera` (a scene's ``cameras``).
+        half_size: half the side of the square of road, metres (> 0).
+        name: the scenario's name (default: ``base``'s with ``" on your cameras"``).
+
+    Raises:
+        ScenarioError: (field ``cameras``) no camera, or none whose optical axis meets the road in front of it;
+            (``motion``) ``base`` has motion; (``half_size``) not a number > 0.
+    """
+    if not cameras:
+        raise ScenarioError("cameras", "expected at least one camera")
+    if base.motion is not None:
+        raise ScenarioError("motion", f"{base.name} has motion: only a scenario of independent frames can be moved")
+    if not (isinstance(half_size, (int, float)) and math.isfinite(half_size) and half_size > 0):
+        raise ScenarioError("half_size", f"expected a number > 0, got {half_size!r}")
+    on_road = []
+    for camera in cameras.values():
+        centre, axis = camera.world_T_camera[:3, 3], camera.world_T_camera[:3, 2]
+        if axis[2] < -1e-6 and centre[2] > 0:  # looking down from above the road
+            on_road.append(centre[:2] - centre[2] / axis[2] * axis[:2])
+    if not on_road:
+        raise ScenarioError("cameras", "no camera's optical axis meets the road (the world's z = 0 plane, world z "
+                            "up) in front of it: check world_T_camera (docs/conventions.md)")
+    x, y = (float(v) for v in np.median(on_road, axis=0))
+    return dataclasses.replace(
+        base, cameras=dict(cameras), name=name or f"{base.name} on your cameras",
+        description=f"{base.name}'s vehicles and noise seen by {len(cameras)} given camera(s), on the road within "
+                    f"{half_size:g} m of ({x:.1f}, {y:.1f})",
+        region=((x - half_size, x + half_size), (y - half_size, y + half_size)), visible_in=tuple(cameras),
+        require_visible="any")
 
 
 def scenario_from_dict(data: dict, default_name: str = "scenario") -> Scenario:

@@ -123,14 +123,16 @@ def _on_rig(scenario: str, scene_file: str):
     try:
         scene = load_scene(scene_file)
     except InputError as exc:
-        raise InputError("--rig", f"{scene_file}: {exc}") from None
+        raise InputError("--rig", str(exc)) from None
     plane = scene.ground_plane  # n . x = offset, n of unit length
     if plane is not None and (abs(plane.offset) > 0.05 or np.degrees(np.arccos(min(plane.normal[2], 1.0))) > 1.0):
         raise InputError("--rig", f"{scene_file}'s road plane is not the world's z = 0 plane, on which the simulated "
                          "vehicles stand: give the rig in a world frame whose road is z = 0")
+    base = load_scenario(scenario)
+    if base.motion is not None:
+        raise InputError("--rig", f"takes a scenario of independent frames; {scenario} has motion")
     try:
-        return scenario_on_cameras(load_scenario(scenario), scene.cameras,
-                                   name=f"{scenario} on {Path(scene_file).stem}")
+        return scenario_on_cameras(base, scene.cameras, name=f"{scenario} on {Path(scene_file).stem}")
     except ScenarioError as exc:
         raise InputError("--rig", f"{scene_file}: {exc}") from None
 
@@ -145,8 +147,10 @@ def _levels(text: str) -> tuple[str, ...]:
     return levels
 
 
-def _eval_frames(scenario_name: str, frames, seed: int, levels=("clean", "paper", "hard"), seeds: int = 1,
+def _eval_frames(scenario_name, frames, seed: int, levels=("clean", "paper", "hard"), seeds: int = 1,
                  engine=None, road_plane: bool = False) -> list[str]:
+    """``vfactor eval`` (frames) of ``scenario_name``: a packaged name, a file, or a
+    :class:`~vfactor.sim.Scenario` (``--rig``)."""
     from vfactor.evaluation import (accuracy_table, body_type_table, consistency_table, keypoint_table, run_accuracy,
                                     poor_fit_summary, summarise_methods)
     from vfactor.factors.ground_plane import GroundPlane

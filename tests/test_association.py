@@ -189,17 +189,27 @@ def test_bad_options_are_named():
     assert info.value.field == "AssociationOptions.quick_gate"
 
 
-def test_a_pair_the_quick_solve_refuses_is_the_full_test_s_refusal_too(multi):
+def test_a_pair_the_quick_solve_refuses_is_the_full_test_s_refusal_too(multi, monkeypatch):
     """The quick solve (``quick_gate``) refuses pairs of different vehicles without their full joint solve, and
     refuses none that the full test finds compatible: the same groups as testing every pair in full."""
+    import vfactor.association.cross_camera as cross_camera
+
+    solved = []
+    solve = cross_camera.solve_observations
+    monkeypatch.setattr(cross_camera, "solve_observations",
+                        lambda obs, options, name, *args, **kwargs: solved.append(name) or
+                        solve(obs, options, name, *args, **kwargs))
     frame, truth = multi.scene.frames[0], [d.vehicle for d in multi.scene.frames[0].detections]
     anonymous_frame = Frame(frame.t, [dataclasses.replace(d, vehicle=UNASSIGNED) for d in frame.detections])
     full = associate_frame(anonymous_frame, multi.scene.cameras, AssociationOptions(quick_gate=0.0))
+    solved.clear()
     quick = associate_frame(anonymous_frame, multi.scene.cameras, AssociationOptions())
     assert quick.groups == full.groups and set(quick.pairs) == set(full.pairs)
-    refused = [pair for pair, (ok, score) in quick.pairs.items() if score >= 3.0]  # refused by the quick solve
-    assert refused and all(truth[i] != truth[j] and not full.pairs[(i, j)][0] for i, j in refused)
-    assert all(quick.pairs[pair] == full.pairs[pair] for pair in full.pairs if full.pairs[pair][0])
+    refused = [(i, j) for i, j in quick.pairs if f"d{i}+d{j}" not in solved]  # the quick solve's refusals
+    assert refused and solved.count("quick") == len(quick.pairs)
+    assert all(not quick.pairs[pair][0] and quick.pairs[pair][1] > 3.0 for pair in refused)
+    assert all(truth[i] != truth[j] and not full.pairs[(i, j)][0] for i, j in refused)
+    assert all(quick.pairs[pair] == full.pairs[pair] for pair in quick.pairs if pair not in refused)
 
 
 def test_solve_and_track_associate_scenes_without_ids(tmp_path, multi, capsys):

@@ -306,8 +306,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "accuracy_2cam for images, association_4cam and association_3cam for association)")
     p.add_argument("--levels",
                    help="frames, association: keypoint noise levels, comma-separated, of clean, paper, hard, "
-                   "noisy, noisy_hard (6 %% of the box: twice the solve's nominal sigma) (default: clean, paper, hard "
-                   "for frames; the scenario's own, the paper's, for association)")
+                   "noisy, noisy_hard (6 %% of the box: twice the solve's nominal sigma), sharp (1 %%: a good "
+                   "detector) (default: clean, paper, hard for frames; the scenario's own, the paper's, for "
+                   "association)")
     p.add_argument("--frames", type=int, help="number of scenes or frames (default: the scenario's)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     p.add_argument("--seeds", type=int, default=1,

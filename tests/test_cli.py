@@ -113,8 +113,9 @@ def test_eval_prints_the_comparison(tmp_path, capsys):
 
 
 def test_eval_on_the_user_s_rig(tmp_path, capsys):
-    """``vfactor eval --rig SCENE`` solves the scenario's vehicles as the cameras of the user's scene file see them;
-    a rig whose road is not the world's z = 0 and --rig beside another experiment are named input errors."""
+    """``vfactor eval --rig SCENE`` solves the scenario's vehicles as the cameras of the user's scene file see them
+    (and ``eval tracks --rig`` its tracks); a rig whose road is not the world's z = 0 and --rig beside an experiment
+    that takes no scenario are named input errors."""
     rig = tmp_path / "my_rig.json"
     assert main(["simulate", "rig_opposite_2cam", "--frames", "1", "--out", str(rig), "-q"]) == 0
     assert main(["eval", "--rig", str(rig), "--frames", "6", "--levels", "paper"]) == 0
@@ -122,12 +123,14 @@ def test_eval_on_the_user_s_rig(tmp_path, capsys):
     assert "### library_2cam on my_rig (paper)" in out and f"--rig {rig}" in out
     row = next(line for line in out.splitlines() if line.startswith("| factor_graph |"))
     assert row.split("|")[2].strip() == "6" and row.split("|")[3].strip() == "0", row  # six vehicles, none failed
+    assert main(["eval", "tracks", "--rig", str(rig), "--scenario", "library_tracks_2cam", "--frames", "5"]) == 0
+    assert "### library_tracks_2cam on my_rig, seed 0: 5 frames" in capsys.readouterr().out
     data = json.loads(rig.read_text())
     data["ground_plane"] = {"normal": [0.0, 0.0, 1.0], "offset": 2.0}
     rig.write_text(json.dumps(data))
     assert main(["eval", "--rig", str(rig), "--frames", "2"]) == 2
     assert "--rig" in capsys.readouterr().err
-    assert main(["eval", "tracks", "--rig", str(rig)]) == 2
+    assert main(["eval", "paper", "--rig", str(rig)]) == 2
     assert "--rig" in capsys.readouterr().err
 
 

@@ -161,27 +161,28 @@ def test_a_bad_K_is_reported_under_the_camera(base):
 
 
 def test_a_scenario_moves_onto_given_cameras_where_they_look():
-    """``scenario_on_cameras``: the base scenario's vehicles and noise on the road where the given cameras look
-    (the median of their optical axes' points on z = 0), each vehicle whole in at least one view; cameras that look
-    at no road and a scenario with motion are named errors."""
+    """``scenario_on_cameras``: the given rig moved along the road so that where it looks (the median of its optical
+    axes' points on z = 0) is the world origin, around which the base scenario puts its vehicles, each whole in at
+    least one view; a scenario with tracks keeps its own; cameras that look at no road are a named error."""
     from vfactor.sim import pole_camera, scenario_on_cameras, simulate
 
     cameras = {c.name: c for c in (pole_camera("a", (20.0, -5.0), 8.0, target=(40.0, 10.0, 0.0)),
                                    pole_camera("b", (55.0, 28.0), 6.0, target=(40.0, 10.0, 0.0)))}
     base = load_scenario("library_2cam")
-    moved = scenario_on_cameras(base, cameras, half_size=2.5)
-    (x0, x1), (y0, y1) = moved.region
-    assert np.allclose([(x0 + x1) / 2, (y0 + y1) / 2], [40.0, 10.0], atol=1e-6) and x1 - x0 == pytest.approx(5.0)
-    assert moved.require_visible == "any" and moved.visible_in == ("a", "b") and moved.noise == base.noise
+    moved = scenario_on_cameras(base, cameras)
+    for name, camera in moved.cameras.items():  # the same rig, 40 m and 10 m nearer the origin, turned by nothing
+        shift = cameras[name].world_T_camera - camera.world_T_camera
+        assert np.allclose(shift[:2, 3], [40.0, 10.0]) and np.allclose(np.delete(shift, 3, axis=1), 0.0)
+        assert np.array_equal(camera.K, cameras[name].K)
+    assert moved.region == base.region and moved.noise == base.noise
+    assert moved.require_visible == "any" and moved.visible_in == ("a", "b")
     sim = simulate(moved, seed=3, num_frames=4)
-    for truth in sim.truth:
-        for vehicle in truth.values():
-            x, y = vehicle.world_T_vehicle.translation()[:2]
-            assert x0 <= x <= x1 and y0 <= y <= y1
+    for frame in sim.scene.frames:  # every vehicle whole in at least one view
+        assert {d.camera for d in frame.detections if d.seen.all()}
+    tracks = scenario_on_cameras(load_scenario("tracks_3veh"), cameras)
+    assert tracks.motion == load_scenario("tracks_3veh").motion and tracks.require_visible == "none"
+    assert len(simulate(tracks, seed=1).scene.frames) == 30
     up = pole_camera("up", (0.0, 0.0), 5.0, target=(10.0, 0.0, 9.0))  # looking above the horizon
     with pytest.raises(ScenarioError) as info:
         scenario_on_cameras(base, {"up": up})
     assert info.value.field == "cameras"
-    with pytest.raises(ScenarioError) as info:
-        scenario_on_cameras(load_scenario("tracks_3veh"), cameras)
-    assert info.value.field == "motion"

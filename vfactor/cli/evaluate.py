@@ -50,7 +50,8 @@ def evaluate(args) -> int:
             ("--figures", args.figures is not None, ("paper",), None),
             ("--sweep-frames", args.sweep_frames is not None, ("paper",), None),
             ("--clipped-boxes", args.clipped_boxes, ("images",), None),
-            ("--road-plane", args.road_plane, ("frames",), None), ("--rig", args.rig is not None, ("frames",), None),
+            ("--road-plane", args.road_plane, ("frames",), None),
+            ("--rig", args.rig is not None, ("frames", "tracks"), None),
             ("--detector-offsets", args.detector_offsets is not None, ("images",), None)):
         if given and args.experiment not in takers:
             raise InputError(flag, f"eval {args.experiment} {why}" if why else
@@ -67,7 +68,10 @@ def evaluate(args) -> int:
                                         _levels(args.levels or "clean,paper,hard"), args.seeds, engine,
                                         args.road_plane)
             elif args.experiment == "tracks":
-                sections = _eval_tracks(args.scenario or "tracks_3veh", frames, args.seed, args.seeds, args.draws,
+                scenario = args.scenario or "tracks_3veh"
+                if args.rig is not None:
+                    scenario = _on_rig(scenario, args.rig)
+                sections = _eval_tracks(scenario, frames, args.seed, args.seeds, args.draws,
                                         DEFAULT_LAG if args.lag is None else args.lag, engine, body_motion)
             else:
                 sections = _eval_association(args.scenario, frames, args.seed, args.seeds, engine,
@@ -109,8 +113,8 @@ def evaluate(args) -> int:
 
 
 def _on_rig(scenario: str, scene_file: str):
-    """``--rig``: the scenario's vehicles and noise seen by the cameras of ``scene_file``, on the road where they
-    look (:func:`vfactor.sim.scenario_on_cameras`).
+    """``--rig``: the scenario's vehicles seen by the cameras of ``scene_file``, the rig moved along the road so
+    that where it looks is the scenario's centre (:func:`vfactor.sim.scenario_on_cameras`).
 
     Raises:
         InputError: (``--rig``) the scene file does not load, its road plane is not the world's ``z = 0`` (on
@@ -128,11 +132,9 @@ def _on_rig(scenario: str, scene_file: str):
     if plane is not None and (abs(plane.offset) > 0.05 or np.degrees(np.arccos(min(plane.normal[2], 1.0))) > 1.0):
         raise InputError("--rig", f"{scene_file}'s road plane is not the world's z = 0 plane, on which the simulated "
                          "vehicles stand: give the rig in a world frame whose road is z = 0")
-    base = load_scenario(scenario)
-    if base.motion is not None:
-        raise InputError("--rig", f"takes a scenario of independent frames; {scenario} has motion")
     try:
-        return scenario_on_cameras(base, scene.cameras, name=f"{scenario} on {Path(scene_file).stem}")
+        return scenario_on_cameras(load_scenario(scenario), scene.cameras,
+                                   name=f"{scenario} on {Path(scene_file).stem}")
     except ScenarioError as exc:
         raise InputError("--rig", f"{scene_file}: {exc}") from None
 
@@ -243,15 +245,17 @@ def _body_motion(text: str):
     return BodyMotion(roll, pitch)
 
 
-def _eval_tracks(scenario_name: str, frames, seed: int, seeds: int, draws: int = 0, lag: float = 0.5,
+def _eval_tracks(scenario_name, frames, seed: int, seeds: int, draws: int = 0, lag: float = 0.5,
                  engine=None, body_motion=None) -> list[str]:
+    """``vfactor eval tracks`` of ``scenario_name``: a packaged name, a file, or a :class:`~vfactor.sim.Scenario`
+    (``--rig``)."""
     import dataclasses
 
     from vfactor.evaluation import nees_component_table
     from vfactor.parallel import InProcess
-    from vfactor.sim import load_scenario
+    from vfactor.sim import Scenario, load_scenario
 
-    scenario = load_scenario(scenario_name)
+    scenario = scenario_name if isinstance(scenario_name, Scenario) else load_scenario(scenario_name)
     if scenario.motion is None:
         raise InputError("--scenario", f"{scenario.name!r} has no motion: each frame holds new vehicles, so there "
                          "is nothing to track; use a scenario with tracks, e.g. tracks_3veh or tracks_3cam")

@@ -397,33 +397,27 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     return scenario_from_dict(data, default_name=path.stem)
 
 
-def scenario_on_cameras(base: Scenario, cameras: dict[str, Camera], half_size: float = 3.0,
-                        name: str | None = None) -> Scenario:
-    """``base``'s vehicles and noise seen by another rig (a user's calibrated cameras): how vfactor does there.
+def scenario_on_cameras(base: Scenario, cameras: dict[str, Camera], name: str | None = None) -> Scenario:
+    """``base``'s vehicles, noise and motion seen by another rig (a user's calibrated cameras): how vfactor does there.
 
-    The vehicles stand in a square of the road (the world's ``z = 0`` plane) ``2 half_size`` metres wide
-    around where the cameras look: the median of the points where their optical axes meet the road. Each
-    vehicle is whole in at least one camera's image (``require_visible="any"``): where the views overlap
-    little, some vehicles are seen by one camera, and ``vfactor eval`` reports per camera count. Only
-    independent frames (``base`` without motion).
+    The rig is moved along the road (a horizontal translation of the world, which changes no error) so that the
+    point it looks at, the median of the points where its cameras' optical axes meet the road (the world's ``z = 0``
+    plane), is the world origin, around which ``base`` puts its vehicles (its ``region``, or its routes through the
+    intersection). Independent frames (``base`` without motion) need each vehicle whole in at least one camera's
+    image (``require_visible="any"``): where the views overlap little, some vehicles are seen by one camera, and
+    ``vfactor eval`` reports per camera count; tracks keep ``base``'s requirement.
 
     Args:
-        base: the scenario to take the vehicles, noise, frames and margins from (for example
-            ``load_scenario("library_2cam")``).
+        base: the scenario to take the vehicles, noise, motion and frames from (``load_scenario("library_2cam")``
+            for frames, ``"library_tracks_2cam"`` for tracks).
         cameras: camera name -> :class:`~vfactor.camera.Camera` (a scene's ``cameras``).
-        half_size: half the side of the square of road, metres (> 0).
         name: the scenario's name (default: ``base``'s with ``" on your cameras"``).
 
     Raises:
-        ScenarioError: (field ``cameras``) no camera, or none whose optical axis meets the road in front of it;
-            (``motion``) ``base`` has motion; (``half_size``) not a number > 0.
+        ScenarioError: (field ``cameras``) no camera, or none whose optical axis meets the road in front of it.
     """
     if not cameras:
         raise ScenarioError("cameras", "expected at least one camera")
-    if base.motion is not None:
-        raise ScenarioError("motion", f"{base.name} has motion: only a scenario of independent frames can be moved")
-    if not (isinstance(half_size, (int, float)) and math.isfinite(half_size) and half_size > 0):
-        raise ScenarioError("half_size", f"expected a number > 0, got {half_size!r}")
     on_road = []
     for camera in cameras.values():
         centre, axis = camera.world_T_camera[:3, 3], camera.world_T_camera[:3, 2]
@@ -433,12 +427,16 @@ def scenario_on_cameras(base: Scenario, cameras: dict[str, Camera], half_size: f
         raise ScenarioError("cameras", "no camera's optical axis meets the road (the world's z = 0 plane, world z "
                             "up) in front of it: check world_T_camera (docs/conventions.md)")
     x, y = (float(v) for v in np.median(on_road, axis=0))
+    moved = {}
+    for camera_name, camera in cameras.items():
+        world_T_camera = camera.world_T_camera.copy()
+        world_T_camera[:2, 3] -= (x, y)
+        moved[camera_name] = dataclasses.replace(camera, world_T_camera=world_T_camera)
     return dataclasses.replace(
-        base, cameras=dict(cameras), name=name or f"{base.name} on your cameras",
-        description=f"{base.name}'s vehicles and noise seen by {len(cameras)} given camera(s), on the road within "
-                    f"{half_size:g} m of ({x:.1f}, {y:.1f})",
-        region=((x - half_size, x + half_size), (y - half_size, y + half_size)), visible_in=tuple(cameras),
-        require_visible="any")
+        base, cameras=moved, name=name or f"{base.name} on your cameras",
+        description=f"{base.name}'s vehicles seen by {len(moved)} given camera(s), moved by ({-x:.1f}, {-y:.1f}) m "
+                    "along the road so that the point they look at is the world origin",
+        visible_in=tuple(moved), require_visible=base.require_visible if base.motion is not None else "any")
 
 
 def scenario_from_dict(data: dict, default_name: str = "scenario") -> Scenario:

@@ -123,8 +123,8 @@ def test_eval_on_the_user_s_rig(tmp_path, capsys):
     assert "### library_2cam on my_rig (paper)" in out and f"--rig {rig}" in out
     row = next(line for line in out.splitlines() if line.startswith("| factor_graph |"))
     assert row.split("|")[2].strip() == "6" and row.split("|")[3].strip() == "0", row  # six vehicles, none failed
-    assert main(["eval", "tracks", "--rig", str(rig), "--scenario", "library_tracks_2cam", "--frames", "5"]) == 0
-    assert "### library_tracks_2cam on my_rig, seed 0: 5 frames" in capsys.readouterr().out
+    assert main(["eval", "tracks", "--rig", str(rig), "--scenario", "library_tracks_2cam"]) == 0
+    assert "### library_tracks_2cam on my_rig, seed 0: 30 frames" in capsys.readouterr().out
     data = json.loads(rig.read_text())
     data["ground_plane"] = {"normal": [0.0, 0.0, 1.0], "offset": 2.0}
     rig.write_text(json.dumps(data))

@@ -325,8 +325,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="frames: the factor graph solves with the simulated road plane given (z = 0, "
                    "SolveOptions.ground_plane), as on a rig whose road is surveyed (default: no plane)")
     p.add_argument("--rig", metavar="SCENE",
-                   help="frames, tracks: the cameras of this scene file (yours) in place of the scenario's, moved along "
-                   "the road so that where they look is the scenario's centre (vfactor.sim.scenario_on_cameras; "
+                   help="frames, tracks: the cameras of this scene file (yours) in place of the scenario's, moved "
+                   "along the road so that where they look is the scenario's centre (vfactor.sim.scenario_on_cameras; "
                    "frames: each vehicle whole in at least one view): how vfactor does on your rig, per body type "
                    "and camera count")
     p.add_argument("--markdown", help="also write the tables to this Markdown file")

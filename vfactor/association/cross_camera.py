@@ -180,8 +180,10 @@ class FrameGroups:
 def _solve(detections: list[Detection], cameras: dict[str, Camera], options: AssociationOptions,
            name: str, initial: VehicleResult | None = None, quick: bool = False) -> VehicleResult:
     """A solve of some detections as one vehicle; any failure is a result that is not ``ok``. ``quick``: a pair's
-    quick solve (:attr:`AssociationOptions.quick_gate`): one Levenberg-Marquardt run with the default shape model's
-    pooled prior at the detector's sigmas (no refinement, relabelling or restarts), the solver's checks included."""
+    or a join's quick solve (:attr:`AssociationOptions.quick_gate`): one Levenberg-Marquardt run at the detector's
+    sigmas (no refinement, relabelling or restarts), the solver's checks included, with the default shape model's
+    pooled prior, or the prior of ``initial``'s body type where that type lies far from the pooled one (a bus,
+    whose views a light vehicles' prior fits poorly: :meth:`~vfactor.shape_model.ShapeModel.far_from_pooled`)."""
     from vfactor.result import Status
     from vfactor.sanity import summarise_error
     from vfactor.shape_model import default_shape_model
@@ -189,7 +191,9 @@ def _solve(detections: list[Detection], cameras: dict[str, Camera], options: Ass
     solve, prior, hints = options.solve, None, class_hints(detections)
     if quick:
         solve = replace(solve, estimate_noise=False, relabel_swaps=False, num_starts=1, poor_fit_restarts=0)
-        prior, hints = default_shape_model().pooled, ()
+        model, typed = default_shape_model(), initial.body_type if initial is not None and initial.ok else None
+        prior = model.prior(typed) if typed is not None and model.far_from_pooled(typed) else model.pooled
+        hints = ()
     try:
         obs = observations_from_detections(detections, cameras, solve.graph)
         start = (initial.world_T_vehicle, initial.wireframe) if initial is not None and initial.ok else None

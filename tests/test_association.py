@@ -212,29 +212,6 @@ def test_a_pair_the_quick_solve_refuses_is_the_full_test_s_refusal_too(multi, mo
     assert all(quick.pairs[pair] == full.pairs[pair] for pair in quick.pairs if pair not in refused)
 
 
-def test_a_join_the_quick_solve_refuses_changes_no_group(monkeypatch):
-    """The second pass's joins take the quick solve too: on a frame of a scene of twelve vehicles, fewer full joint
-    solves of a leftover view and a group, every one of them also made without the quick solve, and the same
-    groups."""
-    import vfactor.association.cross_camera as cross_camera
-
-    solved = []
-    solve = cross_camera.solve_observations
-    monkeypatch.setattr(cross_camera, "solve_observations",
-                        lambda obs, options, name, *args, **kwargs: solved.append(name) or
-                        solve(obs, options, name, *args, **kwargs))
-    sim = simulate(load_scenario("association_3cam"), seed=0)
-    frame = sim.scene.frames[0]
-    anonymous_frame = Frame(frame.t, [dataclasses.replace(d, vehicle=UNASSIGNED) for d in frame.detections])
-    full = associate_frame(anonymous_frame, sim.scene.cameras, AssociationOptions(quick_gate=0.0))
-    joins_in_full = [name for name in solved if name.startswith("g") and "+d" in name]
-    solved.clear()
-    quick = associate_frame(anonymous_frame, sim.scene.cameras, AssociationOptions())
-    joins = [name for name in solved if name.startswith("g") and "+d" in name]
-    assert quick.groups == full.groups
-    assert len(joins) < len(joins_in_full) and set(joins) <= set(joins_in_full)
-
-
 def test_solve_and_track_associate_scenes_without_ids(tmp_path, multi, capsys):
     scene, truth = anonymous(multi.scene)
     for frame in scene.frames:  # the cameras' own track ids, as a 2D tracker would give them

@@ -95,9 +95,7 @@ class AssociationOptions:
             without gross outliers, the restarts) cost different vehicles' pairs about four times a same
             vehicle's. Set on the scenes of ``gate_cost`` (seed 0, paper-like and hard noise, 806 pairs): the
             compatible pairs' quick rise reached 1.43 times their gate, and 1 of 442 compatible pairs (hard
-            noise) was refused by the quick solve's camera check; 0 tests every pair in full. The second pass's
-            joins (:func:`join_test`) take the same quick solve: on the same scenes and the 30-vehicle benchmark
-            (143 tests, 72 joins) the joins' quick figures reached 0.92 of their gates.
+            noise) was refused by the quick solve's camera check; 0 tests every pair in full.
         gate_cost_weak: the same gate where the weaker detection has ``min_keypoints`` to ``strong_keypoints``
             - 1 keypoints (its single-view solve fits its few keypoints closely, so any joint solve raises their
             cost more): same vehicles rose up to 1.5 (6-7 keypoints) and 5.4 (4-5), different vehicles by at
@@ -180,10 +178,8 @@ class FrameGroups:
 def _solve(detections: list[Detection], cameras: dict[str, Camera], options: AssociationOptions,
            name: str, initial: VehicleResult | None = None, quick: bool = False) -> VehicleResult:
     """A solve of some detections as one vehicle; any failure is a result that is not ``ok``. ``quick``: a pair's
-    or a join's quick solve (:attr:`AssociationOptions.quick_gate`): one Levenberg-Marquardt run at the detector's
-    sigmas (no refinement, relabelling or restarts), the solver's checks included, with the default shape model's
-    pooled prior, or the prior of ``initial``'s body type where that type lies far from the pooled one (a bus,
-    whose views a light vehicles' prior fits poorly: :meth:`~vfactor.shape_model.ShapeModel.far_from_pooled`)."""
+    quick solve (:attr:`AssociationOptions.quick_gate`): one Levenberg-Marquardt run with the default shape model's
+    pooled prior at the detector's sigmas (no refinement, relabelling or restarts), the solver's checks included."""
     from vfactor.result import Status
     from vfactor.sanity import summarise_error
     from vfactor.shape_model import default_shape_model
@@ -191,9 +187,7 @@ def _solve(detections: list[Detection], cameras: dict[str, Camera], options: Ass
     solve, prior, hints = options.solve, None, class_hints(detections)
     if quick:
         solve = replace(solve, estimate_noise=False, relabel_swaps=False, num_starts=1, poor_fit_restarts=0)
-        model, typed = default_shape_model(), initial.body_type if initial is not None and initial.ok else None
-        prior = model.prior(typed) if typed is not None and model.far_from_pooled(typed) else model.pooled
-        hints = ()
+        prior, hints = default_shape_model().pooled, ()
     try:
         obs = observations_from_detections(detections, cameras, solve.graph)
         start = (initial.world_T_vehicle, initial.wireframe) if initial is not None and initial.ok else None
@@ -474,9 +468,7 @@ def join_test(det: list[Detection], k: int, group: list[int], result: VehicleRes
 
     The group and the detection are solved together; the detection joins when that solve is sane, each of the
     group's detections' cost per keypoint rises by at most ``leftover_rise`` and the detection's own keypoints cost
-    at most ``leftover_cost`` each. As for a pair (:attr:`AssociationOptions.quick_gate`), a quick solve first:
-    where it fails or either figure is beyond ``quick_gate`` times its gate, the detection does not join, without
-    the full solve.
+    at most ``leftover_cost`` each.
 
     Args:
         det: the frame's detections.
@@ -493,25 +485,14 @@ def join_test(det: list[Detection], k: int, group: list[int], result: VehicleRes
             own[m] = _observations(det[m], cameras, options)
     if own[k] is None or len(own[k]) == 0:
         return None  # no keypoint to test
-    detections = [det[m] for m in group] + [det[k]]
-
-    def test(together: VehicleResult, factor: float) -> tuple[list[float], float, bool]:
-        """The group's rises, the detection's own cost per keypoint, and whether both are within ``factor`` times
-        their gates."""
-        rises = [_rise(own[m], det[m], result, together, options) for m in group]
-        mine = _cost(own[k], together, options) / max(int(det[k].seen.sum()), 1)
-        within = max(rises) <= factor * relax * options.leftover_rise and mine <= factor * relax * options.leftover_cost
-        return rises, mine, within
-
-    if options.quick_gate > 0:  # refused by a quick solve: no full joint solve (AssociationOptions.quick_gate)
-        quick = _solve(detections, cameras, options, "quick", result, quick=True)
-        if not quick.ok or not test(quick, options.quick_gate)[2]:
-            return None
-    together = _solve(detections, cameras, options, name)
+    together = _solve([det[m] for m in group] + [det[k]], cameras, options, name)
     if not together.ok:
         return None
-    rises, mine, within = test(together, 1.0)
-    return (sum(rises) + mine, together) if within else None
+    rises = [_rise(own[m], det[m], result, together, options) for m in group]
+    mine = _cost(own[k], together, options) / max(int(det[k].seen.sum()), 1)
+    if max(rises) <= relax * options.leftover_rise and mine <= relax * options.leftover_cost:
+        return sum(rises) + mine, together
+    return None
 
 
 def _may_meet(p_i: np.ndarray, camera_i: Camera, p_j: np.ndarray, camera_j: Camera,

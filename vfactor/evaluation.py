@@ -341,7 +341,7 @@ def run_accuracy(scenario: str | Scenario = "accuracy_2cam", frames: int | None 
     """
     from vfactor.parallel import InProcess
 
-    base = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    base = load_scenario(scenario)
     variants = []
     for level in levels:
         if level not in NOISE_LEVELS:

@@ -89,7 +89,7 @@ def run(scenario: str | Scenario = "paper_webots", frames: int | None = 10, seed
         method -> rows: :func:`vfactor.metrics.pose_errors` fields plus ``preset``,
         ``status`` and ``seconds``; a failed method's row has no error fields.
     """
-    spec = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    spec = load_scenario(scenario)
     if not gross_errors:
         spec = dataclasses.replace(spec, noise=dataclasses.replace(spec.noise, outlier_rate=0.0, swap_rate=0.0, missing_rate=0.0))
     sim = simulate(spec, seed=seed, num_frames=frames)

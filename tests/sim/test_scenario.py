@@ -32,6 +32,7 @@ def test_the_packaged_scenarios_load():
     for name in names:
         scenario = load_scenario(name)
         assert isinstance(scenario, Scenario) and scenario.name == name
+        assert load_scenario(scenario) is scenario  # one built in code (or loaded) is taken as it is
         assert len(scenario.cameras) >= (1 if name.startswith("rig_one_cam") else 2)  # the single-camera rigs
 
 

@@ -253,9 +253,9 @@ def _eval_tracks(scenario_name, frames, seed: int, seeds: int, draws: int = 0, l
 
     from vfactor.evaluation import nees_component_table
     from vfactor.parallel import InProcess
-    from vfactor.sim import Scenario, load_scenario
+    from vfactor.sim import load_scenario
 
-    scenario = scenario_name if isinstance(scenario_name, Scenario) else load_scenario(scenario_name)
+    scenario = load_scenario(scenario_name)
     if scenario.motion is None:
         raise InputError("--scenario", f"{scenario.name!r} has no motion: each frame holds new vehicles, so there "
                          "is nothing to track; use a scenario with tracks, e.g. tracks_3veh or tracks_3cam")

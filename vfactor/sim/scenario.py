@@ -386,12 +386,15 @@ def _graphs_dir() -> Path:
     return Path(str(resources.files("vfactor.graphs")))
 
 
-def load_scenario(name_or_path: str | Path) -> Scenario:
-    """Loads and validates a scenario file (a packaged name or a path).
+def load_scenario(name_or_path: str | Path | Scenario) -> Scenario:
+    """Loads and validates a scenario file (a packaged name or a path); a :class:`Scenario` is returned as it is
+    (so that every function taking a scenario takes a name, a file or one built in code).
 
     Raises:
         ScenarioError: the file is missing, not JSON, or a field is wrong (the error names it).
     """
+    if isinstance(name_or_path, Scenario):
+        return name_or_path
     path = scenario_path(name_or_path)
     data = read_json(path, ScenarioError)  # vfactor.jsonio: numbers out of range and deep nesting are input errors
     return scenario_from_dict(data, default_name=path.stem)

@@ -197,8 +197,7 @@ def simulate(scenario: Scenario | str | Path, seed: int | None = None, num_frame
     Raises:
         ScenarioError: no placement found (the region is not seen by the required cameras, or too crowded).
     """
-    if not isinstance(scenario, Scenario):
-        scenario = load_scenario(scenario)
+    scenario = load_scenario(scenario)
     seed = scenario.seed if seed is None else int(seed)
     if seed < 0:
         raise ValueError(f"seed: expected an integer >= 0, got {seed}")

@@ -26,7 +26,7 @@ import numpy as np
 from vfactor.errors import CalibrationError
 
 __all__ = ["Camera", "DIST_SIZES", "LENS_FISHEYE", "LENS_FULL", "LENS_MODELS", "LENS_PLAIN", "as_pose3",
-           "check_rigid_transform", "project_pinhole", "tilt_matrix"]
+           "check_rigid_transform", "extrinsic_sigma", "project_pinhole", "tilt_matrix"]
 
 _ROTATION_TOL = 1e-4
 
@@ -71,6 +71,30 @@ def check_rigid_transform(matrix, field_name: str) -> np.ndarray:
     return T
 
 
+def extrinsic_sigma(rotation_deg, translation_m, field_name: str = "extrinsic_sigma") -> np.ndarray:
+    """The (6,) :attr:`Camera.extrinsic_sigma` of a survey's accuracy: rotation (radians) then translation (metres).
+
+    Args:
+        rotation_deg: standard deviation of the camera's orientation error about each of its axes, degrees: one
+            number for all three, or three (about x, y, z of the camera frame: OpenCV's x right, y down, z forward).
+        translation_m: standard deviation of its position error along each axis, metres: one number or three.
+        field_name: field path named in the error.
+
+    Raises:
+        CalibrationError: not one or three finite numbers >= 0.
+    """
+    parts = []
+    for name, value, unit in (("rotation_deg", rotation_deg, np.pi / 180.0), ("translation_m", translation_m, 1.0)):
+        try:
+            x = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            x = np.array([np.nan])
+        if x.ndim > 1 or x.size not in (1, 3) or not np.all(np.isfinite(x)) or np.any(x < 0):
+            raise CalibrationError(f"{field_name}.{name}", f"expected one or three finite numbers >= 0, got {value!r}")
+        parts.append(np.broadcast_to(x.ravel() * unit, (3,)))
+    return np.concatenate(parts)
+
+
 def as_pose3(matrix) -> gtsam.Pose3:
     """Returns a ``gtsam.Pose3`` from a 4x4 rigid transform (re-orthonormalised)."""
     T = np.asarray(matrix, dtype=float)
@@ -92,6 +116,11 @@ class Camera:
             ``[k1, k2, k3, k4]`` (None: four zeros). Tilt angles ``tauX, tauY`` in radians.
         image_size: ``(width, height)`` in pixels, or ``None`` when unknown.
         model: lens model, one of :data:`LENS_MODELS` (``"pinhole"`` or ``"fisheye"``).
+        extrinsic_sigma: how well ``world_T_camera`` is known: (6,) standard deviations of its error as a right
+            perturbation (the true pose is ``world_T_camera * Exp(xi)``, GTSAM's ``Pose3`` tangent), rotation about
+            the camera's x, y, z axes (radians), then translation along them (metres) (:func:`extrinsic_sigma` from
+            degrees and metres); None: taken as exact. The one-frame solve's covariances carry what this error
+            gives the estimate (docs/factors.md, "Covariances", item 7).
     """
 
     name: str
@@ -100,6 +129,7 @@ class Camera:
     dist: np.ndarray | None = None
     image_size: tuple[int, int] | None = None
     model: str = "pinhole"
+    extrinsic_sigma: np.ndarray | None = None
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
@@ -118,6 +148,16 @@ class Camera:
             ):
                 raise CalibrationError("image_size", f"expected [width, height] as two positive integers, got {size!r}")
             object.__setattr__(self, "image_size", (int(size[0]), int(size[1])))
+        if self.extrinsic_sigma is not None:
+            try:
+                sigma = np.array(self.extrinsic_sigma, dtype=float)
+            except (TypeError, ValueError):
+                sigma = np.array([np.nan])
+            if sigma.shape != (6,) or not np.all(np.isfinite(sigma)) or np.any(sigma < 0):
+                raise CalibrationError("extrinsic_sigma", "expected 6 finite numbers >= 0 (rotation about x, y, z in "
+                                       f"radians, translation along them in metres), got {self.extrinsic_sigma!r}")
+            sigma.setflags(write=False)
+            object.__setattr__(self, "extrinsic_sigma", sigma)
         for name in ("K", "world_T_camera", "dist"):
             getattr(self, name).setflags(write=False)
         camera_T_world = np.linalg.inv(self.world_T_camera)
@@ -266,6 +306,9 @@ class Camera:
         }
         if self.image_size is not None:
             out["image_size"] = list(self.image_size)
+        if self.extrinsic_sigma is not None:
+            out["extrinsic_sigma"] = {"rotation_deg": np.degrees(self.extrinsic_sigma[:3]).tolist(),
+                                      "translation_m": self.extrinsic_sigma[3:].tolist()}
         return out
 
     @classmethod

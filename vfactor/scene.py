@@ -16,6 +16,7 @@ otherwise)::
     camera = {"name", "K", "world_T_camera", "model"?, "dist"?, "image_size"?}          (inline)
            | {"name", "calibration", "calibration_format"?, "chain_camera"?,
               "world_T_camera"?, "image_size"?}                                    (by file)
+             and either: "extrinsic_sigma"?: {"rotation_deg", "translation_m"}
 
     detection = {"camera", "vehicle"?, "keypoints"?: 12 x [u, v, confidence],
                  "keypoint_covariances"?: 12 x (null | 2x2), "covariances_calibrated"?: bool,
@@ -48,6 +49,7 @@ calibration file (:mod:`vfactor.calibration`) is written back inline.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -61,7 +63,7 @@ import numpy as np
 
 from vfactor.box import Box
 from vfactor.calibration import CALIBRATION_FORMATS, detect_format, kalibr_cameras, read_calibration
-from vfactor.camera import DIST_SIZES, LENS_MODELS, Camera, check_rigid_transform
+from vfactor.camera import DIST_SIZES, LENS_MODELS, Camera, check_rigid_transform, extrinsic_sigma
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.errors import CalibrationError, SceneError
 from vfactor.heatmaps import decode_heatmaps
@@ -92,7 +94,8 @@ __all__ = [
 _TOP_KEYS = ("cameras", "frames", "ground_plane")
 _REQUIRED_TOP_KEYS = ("cameras", "frames")
 _CAMERA_KEYS = ("name", "model", "K", "dist", "image_size", "world_T_camera", "calibration", "calibration_format",
-                "chain_camera")
+                "chain_camera", "extrinsic_sigma")
+_EXTRINSIC_SIGMA_KEYS = ("rotation_deg", "translation_m")
 #: Inline camera fields a ``calibration`` file replaces (an error beside it).
 _INTRINSIC_KEYS = ("model", "K", "dist")
 _FRAME_KEYS = ("t", "detections", "images")
@@ -169,7 +172,10 @@ def scene_from_dict(data: dict, base_dir: Path | None = None, allow_outside_path
     names unique and every camera valid (inline: ``K``, ``world_T_camera``,
     ``model`` ``"pinhole"`` or ``"fisheye"``, ``dist`` of 4, 5, 8, 12 or 14 numbers
     (pinhole) or 4 (fisheye), ``image_size``; or by a ``calibration`` file, see
-    below); each detection's camera exists; a
+    below; either with an optional ``extrinsic_sigma``, ``{"rotation_deg": r,
+    "translation_m": t}``, how well ``world_T_camera`` is known, each one number
+    or three per camera axis, >= 0: :attr:`vfactor.camera.Camera.extrinsic_sigma`);
+    each detection's camera exists; a
     detection has ``keypoints`` (exactly 12 rows ``[u, v, confidence]``,
     confidence in [0, 1], ``u`` and ``v`` finite where confidence > 0 and null
     or finite where it is 0), ``heatmaps`` with ``roi``, or only a ``roi`` in
@@ -198,10 +204,10 @@ def scene_from_dict(data: dict, base_dir: Path | None = None, allow_outside_path
     replaces the scene camera of that name: its intrinsics, lens and distortion
     always, its extrinsic when the file has one (else the scene's
     ``world_T_camera`` is kept), its image size when the file has one (else the
-    scene's is kept). A camchain of several cameras gives the entry named like
-    the scene's camera. A name the scene lacks is a SceneError at
-    ``camera_files.<name>``; a problem in the file too, its message starting
-    with the file and node.
+    scene's is kept; the scene's ``extrinsic_sigma`` is kept). A camchain of
+    several cameras gives the entry named like the scene's camera. A name the
+    scene lacks is a SceneError at ``camera_files.<name>``; a problem in the
+    file too, its message starting with the file and node.
 
     Paths: a heatmap, image or calibration path resolves inside ``base_dir`` (after
     following symbolic links: a link out of the folder is refused too), unless
@@ -342,6 +348,20 @@ def scene_to_dict(scene: Scene, base_dir: Path | None = None) -> dict:
 
 def _camera_from_dict(data, path: str, base: "_Folder") -> Camera:
     cam = _object(data, path, _CAMERA_KEYS, required=("name",))
+    camera = _camera_entry(cam, path, base)
+    if cam.get("extrinsic_sigma") is None:
+        return camera
+    field = f"{path}.extrinsic_sigma"
+    given = _object(cam["extrinsic_sigma"], field, _EXTRINSIC_SIGMA_KEYS, required=_EXTRINSIC_SIGMA_KEYS)
+    try:
+        sigma = extrinsic_sigma(given["rotation_deg"], given["translation_m"], field)
+    except CalibrationError as exc:
+        raise SceneError(exc.field, exc.problem) from None
+    return dataclasses.replace(camera, extrinsic_sigma=sigma)
+
+
+def _camera_entry(cam: dict, path: str, base: "_Folder") -> Camera:
+    """A scene camera entry's camera, inline or by calibration file (its ``extrinsic_sigma`` aside)."""
     name = _string(cam["name"], f"{path}.name")
     world_T_camera = None
     if cam.get("world_T_camera") is not None:
@@ -449,9 +469,10 @@ def _replace_cameras(cameras: dict[str, Camera], camera_files) -> dict[str, Came
                 keys = kalibr_cameras(file)
                 chain = None if len(keys) == 1 else name  # several: the entry named like the scene's camera
             calibration = read_calibration(file, chain_camera=chain)
-            out[name] = calibration.camera(
+            out[name] = dataclasses.replace(calibration.camera(
                 name, None if calibration.world_T_camera is not None else scene_camera.world_T_camera,
-                None if calibration.image_size is not None else scene_camera.image_size)
+                None if calibration.image_size is not None else scene_camera.image_size),
+                extrinsic_sigma=scene_camera.extrinsic_sigma)
         except CalibrationError as exc:
             raise _file_error(exc, field, file, file) from None
     return out

@@ -22,6 +22,7 @@ import numpy.ma  # noqa: F401  numpy 2 imports it lazily, on a solve's first np.
 from vfactor.box import BoxModel, vehicle_box
 from vfactor.camera import Camera
 from vfactor.errors import InputError, check_numbers
+from vfactor.extrinsics import extrinsic_covariance
 from vfactor.factors.body_frame import canonical_gauge
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.factors.projection import KeypointObservations, projection_factor, whitened_residuals
@@ -424,6 +425,8 @@ def solve_observations(
                     marginal, linear.at(0).jacobian()[0], inliers, sigmas)  # ... and through the fit
                 if np.all(np.isfinite(through)):  # else the shape block alone, as where the sandwich is not
                     joint = joint + through
+            if any(camera.extrinsic_sigma is not None for camera in inliers.cameras):  # their errors, through the fit
+                joint = joint + extrinsic_covariance(marginal, linear.at(0).jacobian()[0], inliers, world_T_vehicle)
             result.pose_covariance = joint[:6, :6].copy()
             result.keypoint_covariances_world = keypoint_covariances(joint, keys, world_T_vehicle, wireframe)
         except (RuntimeError, np.linalg.LinAlgError) as exc:

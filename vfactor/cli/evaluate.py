@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -32,6 +33,10 @@ def evaluate(args) -> int:
     if args.lag is not None and not (np.isfinite(args.lag) and args.lag > 0):
         raise InputError("--lag", f"expected a positive number of seconds, got {args.lag}")
     body_motion = _body_motion(args.body_motion) if args.body_motion is not None else None
+    extrinsic_error = (_extrinsic_error(args.extrinsic_error, not args.undeclared_extrinsics)
+                       if args.extrinsic_error is not None else None)
+    if args.undeclared_extrinsics and extrinsic_error is None:
+        raise InputError("--undeclared-extrinsics", "only with --extrinsic-error (the cameras' error it leaves out)")
     roofs = "--real-roofs" if args.real_roofs else "--no-real-roofs"
     cluster = "--workers" if args.workers is not None else "--scheduler"
     for flag, given, takers, why in (  # an option another experiment takes is bad input here, never dropped
@@ -51,6 +56,7 @@ def evaluate(args) -> int:
             ("--sweep-frames", args.sweep_frames is not None, ("paper",), None),
             ("--clipped-boxes", args.clipped_boxes, ("images",), None),
             ("--road-plane", args.road_plane, ("frames",), None),
+            ("--extrinsic-error", extrinsic_error is not None, ("frames",), None),
             ("--rig", args.rig is not None, ("frames", "tracks"), None),
             ("--detector-offsets", args.detector_offsets is not None, ("images",), None)):
         if given and args.experiment not in takers:
@@ -64,6 +70,10 @@ def evaluate(args) -> int:
                 scenario = args.scenario or "library_2cam"
                 if args.rig is not None:
                     scenario = _on_rig(scenario, args.rig)
+                if extrinsic_error is not None:
+                    from vfactor.sim import load_scenario
+
+                    scenario = dataclasses.replace(load_scenario(scenario), extrinsic_error=extrinsic_error)
                 sections = _eval_frames(scenario, frames, args.seed,
                                         _levels(args.levels or "clean,paper,hard"), args.seeds, engine,
                                         args.road_plane)
@@ -101,6 +111,8 @@ def evaluate(args) -> int:
         (f" --weights {args.weights}" if args.weights else "") + (" --clipped-boxes" if args.clipped_boxes else "") + \
         (" --amodal-pass" if args.amodal_pass else "") + (" --road-plane" if args.road_plane else "") + \
         (f" --rig {args.rig}" if args.rig is not None else "") + \
+        (f" --extrinsic-error {args.extrinsic_error}" if extrinsic_error is not None else "") + \
+        (" --undeclared-extrinsics" if args.undeclared_extrinsics else "") + \
         {True: " --real-roofs", False: " --no-real-roofs"}.get(args.real_roofs, "") + \
         {True: " --detector-offsets", False: " --no-detector-offsets"}.get(args.detector_offsets, "")
     echo = output(args)
@@ -163,11 +175,14 @@ def _eval_frames(scenario_name, frames, seed: int, levels=("clean", "paper", "ha
     which += ", the road plane given" if road_plane else ""
     options = SolveOptions(ground_plane=GroundPlane()) if road_plane else SolveOptions()  # the simulator's road
     for scenario, rows in run_accuracy(scenario_name, frames, seed, levels, options, seeds=seeds, engine=engine):
-        n = scenario.noise
+        n, off = scenario.noise, scenario.extrinsic_error
         summary = summarise_methods(rows)
         title = (f"### {scenario.name}: {n.outlier_rate:.0%} outliers, {n.swap_rate:.0%} left/right swaps, "
                  f"{n.missing_rate:.0%} missing, sigma {n.relative_sigma:.1%} of the box diagonal "
                  f"(x{n.occluded_factor:g} when self-occluded), {which}")
+        if off is not None:
+            title += (f", each camera off by draws of {off.rotation_deg:g} deg and {off.translation_m:g} m per axis "
+                      f"({'its extrinsic_sigma' if off.declared else 'no extrinsic_sigma'})")
         sections.append(f"{title}\n\n{accuracy_table(summary)}\n\nPer body type (each vehicle solved with a "
                         f"shape model learnt without it):\n\n{body_type_table(rows)}\n\n{poor_fit_summary(rows)}\n\n"
                         f"Consistency of the factor "
@@ -243,6 +258,22 @@ def _body_motion(text: str):
         raise InputError("--body-motion", f"expected ROLL and PITCH within [0, {BodyMotion.MAX_DEG_PER_G:g}] degrees "
                                           f"per g, got {text!r}")
     return BodyMotion(roll, pitch)
+
+
+def _extrinsic_error(text: str, declared: bool):
+    """``--extrinsic-error DEG,M`` as a :class:`vfactor.sim.ExtrinsicError` (degrees and metres per camera axis)."""
+    from vfactor.sim import ExtrinsicError
+
+    try:
+        rotation, translation = (float(part) for part in text.split(","))
+    except ValueError:
+        raise InputError("--extrinsic-error", f"expected DEG,M (degrees and metres), e.g. 0.3,0.05, "
+                                              f"got {text!r}") from None
+    if not (np.isfinite(rotation) and 0.0 <= rotation <= ExtrinsicError.MAX_ROTATION_DEG
+            and np.isfinite(translation) and 0.0 <= translation <= ExtrinsicError.MAX_TRANSLATION_M):
+        raise InputError("--extrinsic-error", f"expected DEG within [0, {ExtrinsicError.MAX_ROTATION_DEG:g}] and M "
+                                              f"within [0, {ExtrinsicError.MAX_TRANSLATION_M:g}], got {text!r}")
+    return ExtrinsicError(rotation, translation, declared)
 
 
 def _eval_tracks(scenario_name, frames, seed: int, seeds: int, draws: int = 0, lag: float = 0.5,

@@ -43,6 +43,7 @@ from vfactor.sim.scenario import (
     ROUTE_MOTION_FIELDS,
     SCENARIO_FIELDS,
     BodyMotion,
+    ExtrinsicError,
     Motion,
     RouteMotion,
     RouteSpec,
@@ -125,6 +126,7 @@ __all__ = [
     # scenarios
     "Scenario",
     "BodyMotion",
+    "ExtrinsicError",
     "Motion",
     "RouteMotion",
     "RouteSpec",

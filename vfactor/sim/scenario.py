@@ -15,9 +15,10 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
+import gtsam
 import numpy as np
 
-from vfactor.camera import Camera
+from vfactor.camera import Camera, extrinsic_sigma
 from vfactor.errors import CalibrationError, ScenarioError
 from vfactor.jsonio import read_json
 from vfactor.sim import _checks as chk
@@ -29,6 +30,7 @@ from vfactor.sim.vehicles import RANDOM, RandomShape, check_vehicle_name
 
 __all__ = [
     "BodyMotion",
+    "ExtrinsicError",
     "Motion",
     "RouteMotion",
     "RouteSpec",
@@ -76,6 +78,10 @@ SCENARIO_FIELDS: dict[str, str] = {
     "(routes through the intersection; see ROUTE_MOTION_FIELDS)",
     "body_motion": 'null (default: rigid vehicles) or {"roll_deg_per_g": 5.0, "pitch_deg_per_g": 2.0}: with motion, '
     "the body rolls and pitches on its suspension with the accelerations while its hubs stay on the road",
+    "extrinsic_error": 'null (default: the scene\'s cameras as they are) or {"rotation_deg": 0.3, "translation_m": '
+    '0.05, "declared": true}: each camera of the simulated scene (its world_T_camera) errs by a draw of these '
+    'standard deviations per axis (the detections are seen by the true cameras); declared: the scene\'s cameras '
+    'carry them as extrinsic_sigma',
 }
 
 #: Values of ``require_visible``.
@@ -184,6 +190,51 @@ class BodyMotion:
         roll = math.radians(self.roll_deg_per_g) * truth.speed * truth.yaw_rate / g
         pitch = -math.radians(self.pitch_deg_per_g) * truth.acceleration / g
         return dataclasses.replace(truth, body_roll=roll, body_pitch=pitch)
+
+
+@dataclass(frozen=True)
+class ExtrinsicError:
+    """Cameras whose ``world_T_camera`` errs, as a survey or a calibration does (a simulated scene's cameras).
+
+    The detections are seen by the scenario's cameras; the scene the solver gets holds each camera at
+    ``world_T_camera * Exp(xi)^-1`` (so that the true pose is the scene's times ``Exp(xi)``, as
+    :attr:`vfactor.camera.Camera.extrinsic_sigma` states it), ``xi`` drawn per camera and seed with these
+    standard deviations about and along each camera axis.
+
+    Attributes:
+        rotation_deg: orientation error about each camera axis, degrees (>= 0).
+        translation_m: position error along each camera axis, metres (>= 0).
+        declared: the scene's cameras carry these as their ``extrinsic_sigma`` (what a user who knows the survey's
+            accuracy gives); False: they carry none.
+    """
+
+    #: The largest rotation error a scenario (or ``vfactor eval --extrinsic-error``) may give, degrees.
+    MAX_ROTATION_DEG = 10.0
+    #: The largest translation error, metres.
+    MAX_TRANSLATION_M = 5.0
+
+    rotation_deg: float = 0.0
+    translation_m: float = 0.0
+    declared: bool = True
+
+    def __post_init__(self):
+        for name, hi in (("rotation_deg", self.MAX_ROTATION_DEG), ("translation_m", self.MAX_TRANSLATION_M)):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and not isinstance(value, bool) and 0.0 <= value <= hi):
+                raise ScenarioError(f"extrinsic_error.{name}", f"expected a number in [0, {hi:g}], got {value!r}")
+        if not isinstance(self.declared, bool):
+            raise ScenarioError("extrinsic_error.declared", f"expected true or false, got {self.declared!r}")
+
+    def surveyed(self, cameras: dict[str, Camera], rng: np.random.Generator) -> dict[str, Camera]:
+        """The cameras as the scene gives them: each moved by its own draw, with ``extrinsic_sigma`` if declared."""
+        sigma = extrinsic_sigma(self.rotation_deg, self.translation_m)
+        out = {}
+        for name, camera in cameras.items():
+            xi = rng.normal(0.0, 1.0, 6) * sigma
+            world_T_camera = camera.world_T_camera @ gtsam.Pose3.Expmap(xi).inverse().matrix()
+            out[name] = dataclasses.replace(camera, world_T_camera=world_T_camera,
+                                            extrinsic_sigma=sigma if self.declared else None)
+        return out
 
 
 @dataclass(frozen=True)
@@ -324,6 +375,8 @@ class Scenario:
             (routes through the intersection, or explicit paths, with stops).
         body_motion: with :attr:`motion`, the body's roll and pitch with the accelerations
             (:class:`BodyMotion`); None: rigid vehicles (roll and pitch 0, as on a flat road).
+        extrinsic_error: the simulated scene's cameras err from the true ones (:class:`ExtrinsicError`); None:
+            they are the true ones.
     """
 
     cameras: dict[str, Camera]
@@ -346,6 +399,7 @@ class Scenario:
     motion: Motion | RouteMotion | None = None
     ground_plane: bool = False
     body_motion: BodyMotion | None = None
+    extrinsic_error: ExtrinsicError | None = None
 
     def __post_init__(self):
         if self.visible_in is None:
@@ -528,6 +582,16 @@ def scenario_from_dict(data: dict, default_name: str = "scenario") -> Scenario:
         kw["body_motion"] = BodyMotion(**{key: chk.number(value[key], f"body_motion.{key}", lo=0.0,
                                                           hi=BodyMotion.MAX_DEG_PER_G)
                                           for key in ("roll_deg_per_g", "pitch_deg_per_g") if key in value})
+    if data.get("extrinsic_error") is not None:
+        value = chk.check_mapping(data["extrinsic_error"], "extrinsic_error",
+                                  ("rotation_deg", "translation_m", "declared"))
+        if "declared" in value and not isinstance(value["declared"], bool):
+            raise ScenarioError("extrinsic_error.declared", f"expected true or false, got {value['declared']!r}")
+        kw["extrinsic_error"] = ExtrinsicError(
+            **{key: chk.number(value[key], f"extrinsic_error.{key}", lo=0.0, hi=hi)
+               for key, hi in (("rotation_deg", ExtrinsicError.MAX_ROTATION_DEG),
+                               ("translation_m", ExtrinsicError.MAX_TRANSLATION_M)) if key in value},
+            declared=value.get("declared", True))
     return Scenario(**kw)
 
 

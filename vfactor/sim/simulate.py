@@ -33,7 +33,7 @@ from vfactor.wireframe import Wireframe
 __all__ = ["VehicleTruth", "DetectionTruth", "Simulation", "simulate", "vehicle_ids", "keypoints_in_view"]
 
 # Random streams: (seed, stream, ...) seeds one generator each.
-_PLACE, _NOISE, _TRACKS = 0, 1, 2
+_PLACE, _NOISE, _TRACKS, _EXTRINSICS = 0, 1, 2, 3
 _MAX_TRIES = 2000
 _ROUTE_TRIES = 500
 _ROUTE_DRAWS = 10  # uniform draws per route try, whatever is given explicitly
@@ -186,6 +186,11 @@ def simulate(scenario: Scenario | str | Path, seed: int | None = None, num_frame
     in the frames where it is in the scene; vehicles are redrawn until they
     keep ``min_gap`` from each other and meet ``require_visible``.
 
+    The detections are those of ``scenario.cameras``; with
+    ``scenario.extrinsic_error`` the scene's cameras are those cameras as a
+    survey that errs gives them (:class:`~vfactor.sim.scenario.ExtrinsicError`:
+    each moved by its own draw), the truth's frames the true ones.
+
     Args:
         scenario: a :class:`Scenario`, or a packaged scenario name or file path.
         seed: overrides ``scenario.seed`` (an integer >= 0).
@@ -215,8 +220,11 @@ def simulate(scenario: Scenario | str | Path, seed: int | None = None, num_frame
 
     if scenario.body_motion is not None:
         truth = [{vid: scenario.body_motion.applied(v) for vid, v in frame.items()} for frame in truth]
-    frames, detection_truth = _observe_frames(scenario, truth, seed)
-    scene = Scene(cameras=dict(scenario.cameras), frames=frames, base_dir=None,
+    frames, detection_truth = _observe_frames(scenario, truth, seed)  # by the true cameras
+    cameras = dict(scenario.cameras)
+    if scenario.extrinsic_error is not None:  # the scene's cameras as surveyed
+        cameras = scenario.extrinsic_error.surveyed(cameras, np.random.default_rng([seed, _EXTRINSICS]))
+    scene = Scene(cameras=cameras, frames=frames, base_dir=None,
                   ground_plane=GroundPlane() if scenario.ground_plane else None)
     return Simulation(
         scenario=scenario, seed=seed, scene=scene, truth=truth, detection_truth=detection_truth,

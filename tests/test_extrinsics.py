@@ -87,7 +87,8 @@ def test_extrinsic_covariance_is_the_linear_propagation_of_the_cameras_errors():
 
 def test_the_solve_adds_the_extrinsic_covariance_and_keeps_the_estimate():
     """The same frame with and without the cameras' sigmas: the same poses and shapes, wider covariances (pose,
-    keypoints and box), and without them the covariances as before."""
+    keypoints and box; the keypoints' own noise is then read off with the cameras' errors explained, so no
+    direction need be wider), and with sigmas of zero the covariances as without any."""
     sim, frame, _ = _one_vehicle(5)
     uncertain = {name: dataclasses.replace(cam, extrinsic_sigma=SURVEY) for name, cam in sim.scene.cameras.items()}
     zero = {name: dataclasses.replace(cam, extrinsic_sigma=np.zeros(6)) for name, cam in sim.scene.cameras.items()}
@@ -97,11 +98,11 @@ def test_the_solve_adds_the_extrinsic_covariance_and_keeps_the_estimate():
         assert a.ok and b.ok
         np.testing.assert_array_equal(a.world_T_vehicle.matrix(), b.world_T_vehicle.matrix())
         np.testing.assert_array_equal(a.pose_covariance, z.pose_covariance)
-        added = b.pose_covariance - a.pose_covariance
-        assert np.all(np.linalg.eigvalsh(added) > -1e-12)
-        assert np.trace(added[3:, 3:]) > 0.5 * np.trace(a.pose_covariance[3:, 3:])  # 0.3 deg: tens of cm at 25 m
-        assert np.all(np.linalg.eigvalsh(b.keypoint_covariances_world - a.keypoint_covariances_world) > -1e-12)
-        assert np.all(b.box.size_sigma >= a.box.size_sigma - 1e-12)
+        assert np.trace(b.pose_covariance[3:, 3:]) > 1.5 * np.trace(a.pose_covariance[3:, 3:])  # 0.3 deg at 25 m
+        assert np.trace(b.pose_covariance[:3, :3]) > np.trace(a.pose_covariance[:3, :3])
+        assert np.all(np.trace(b.keypoint_covariances_world, axis1=1, axis2=2)
+                      > np.trace(a.keypoint_covariances_world, axis1=1, axis2=2))
+        assert np.all(b.box.centre_sigma > a.box.centre_sigma)
 
 
 @pytest.mark.parametrize("declared", [True, False])
@@ -220,3 +221,43 @@ def test_eval_takes_an_extrinsic_error(capsys):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err.strip()
         assert "extrinsic" in err and len(err.splitlines()) == 1, err
+
+
+def test_a_camera_off_by_its_declared_error_is_not_at_odds_but_a_wrong_one_is():
+    """Far poles (40 m), a sharp detector, cameras off by draws of 0.3 degrees and 5 cm: without their sigmas the
+    check of cameras at odds fails three of twelve vehicles of this scene (their keypoints do disagree by 20-30 cm);
+    with them it fails none, and a camera turned by 3 degrees more is still named."""
+    base = noise_variant(load_scenario("rig_far_2cam"), **NOISE_LEVELS["sharp"])
+    frames = (0, 8, 10)
+    runs = {}
+    for declared in (False, True):
+        sim = simulate(dataclasses.replace(base, extrinsic_error=ExtrinsicError(0.3, 0.05, declared)), seed=1104,
+                       num_frames=11)
+        runs[declared] = sim
+        for f in frames:
+            v = solve_frame(sim.scene.frames[f], sim.scene.cameras).vehicles[0]
+            assert v.ok == declared, (declared, f, v.status, v.message)
+            if not declared:
+                assert "disagree" in v.message
+    sim = runs[True]
+    turned = dict(sim.scene.cameras)
+    cam0 = turned["cam0"]
+    turned["cam0"] = dataclasses.replace(
+        cam0, world_T_camera=cam0.world_T_camera @ gtsam.Pose3(gtsam.Rot3.Ry(np.radians(3.0)), np.zeros(3)).matrix())
+    for f in frames:
+        v = solve_frame(sim.scene.frames[f], turned).vehicles[0]
+        assert not v.ok and "disagree" in v.message, (f, v.status, v.message)
+
+
+def test_the_keypoints_noise_is_read_with_the_cameras_errors_explained():
+    """The cameras' disagreement is not taken for pixel noise where their errors are declared: the covariances'
+    noise scale comes out as with exact cameras (far poles, sharp detector), where undeclared it is far larger."""
+    base = noise_variant(load_scenario("rig_far_2cam"), **NOISE_LEVELS["sharp"])
+    scales = {}
+    for name, off in (("exact", None), ("declared", ExtrinsicError(0.3, 0.05, True)),
+                      ("undeclared", ExtrinsicError(0.3, 0.05, False))):
+        sim = simulate(dataclasses.replace(base, extrinsic_error=off), seed=1105, num_frames=10)
+        scales[name] = np.median([v.extras["covariance_noise_scale"] for frame in sim.scene.frames
+                                  for v in solve_frame(frame, sim.scene.cameras).vehicles])
+    assert abs(scales["declared"] / scales["exact"] - 1) < 0.25, scales
+    assert scales["undeclared"] > 1.3 * scales["exact"], scales

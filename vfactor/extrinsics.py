@@ -17,12 +17,22 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from vfactor.factors.projection import KeypointObservations
+from vfactor.factors.projection import KeypointObservations, whitened_pose_jacobian
+from vfactor.factors.robust import RobustLoss
+from vfactor.shape_evidence import Linearisation
+from vfactor.stats import chi2_quantile
 
-__all__ = ["extrinsic_jacobian", "extrinsic_covariance"]
+__all__ = ["extrinsic_jacobian", "extrinsic_covariance", "explained_residuals", "with_extrinsics",
+           "without_camera_errors", "PLAUSIBLE_ERROR"]
+
+#: A camera's error estimated from its residuals is its declared error's within this quantile of chi2 (its
+#: Mahalanobis norm under ``extrinsic_sigma``); beyond it the camera is off by more than it says
+#: (:func:`without_camera_errors`).
+PLAUSIBLE_ERROR = 0.999
 
 
-def extrinsic_jacobian(pose_jacobian: np.ndarray, world_T_vehicle: gtsam.Pose3, world_T_camera: gtsam.Pose3) -> np.ndarray:
+def extrinsic_jacobian(pose_jacobian: np.ndarray, world_T_vehicle: gtsam.Pose3,
+                       world_T_camera: gtsam.Pose3) -> np.ndarray:
     """(2m, 6) derivative of one camera's whitened residuals with respect to its extrinsic's error.
 
     With the true camera ``world_T_camera * Exp(xi)``, the keypoints reach it as
@@ -72,3 +82,111 @@ def extrinsic_covariance(covariance: np.ndarray, jacobian: np.ndarray, observati
         G = covariance @ (A_c.T @ extrinsic_jacobian(A_c[:, :6], world_T_vehicle, camera.pose))  # (n, 6)
         out += (G * camera.extrinsic_sigma ** 2) @ G.T
     return 0.5 * (out + out.T)
+
+
+def explained_residuals(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehicle_p: np.ndarray,
+                        loss: RobustLoss | None = None) -> np.ndarray:
+    """(n, 2) whitened residuals of ``obs`` at a solution, each camera's keypoints less what its extrinsic's error
+    most likely makes of them (:func:`without_camera_errors`).
+
+    Args:
+        obs: the observations (the sigmas the residuals are whitened by).
+        world_T_vehicle: the solution's pose (vehicle -> world), metres.
+        vehicle_p: (12, 3) its body-frame keypoints, metres.
+        loss: the robust loss whose weights the cameras' fits take (None: least squares).
+    """
+    residuals, pose_jacobian = whitened_pose_jacobian(obs, world_T_vehicle, vehicle_p)
+    return without_camera_errors(residuals.ravel(), pose_jacobian.reshape(-1, 6), obs, world_T_vehicle,
+                                 loss).reshape(-1, 2)
+
+
+def without_camera_errors(residuals: np.ndarray, pose_jacobian: np.ndarray, obs: KeypointObservations,
+                          world_T_vehicle: gtsam.Pose3, loss: RobustLoss | None = None,
+                          iterations: int = 5) -> np.ndarray:
+    """(2n,) whitened residuals, each camera's less what its extrinsic's error most likely makes of them.
+
+    For a camera with an ``extrinsic_sigma``, its residuals ``e_c`` are those of the camera moved by the robust
+    ridge estimate ``xi_c = -(B_c^T W B_c + S_c^-1)^-1 B_c^T W e_c`` (:func:`extrinsic_jacobian`; ``W`` first 1,
+    then the robust loss's weights of the moved camera's residuals, iterated; components whose sigma is 0 stay 0;
+    from the raw residuals' weights a camera off by far more than its error stalled half explained), linearly:
+    ``e_c + B_c xi_c``, where ``xi_c`` is a plausible draw of the declared error (``xi_c^T S_c^-1 xi_c`` within
+    the :data:`PLAUSIBLE_ERROR` quantile of chi2): a camera off by about its declared error then agrees with the
+    others; one off by many times more (a wrong ``world_T_camera``) keeps its residuals, and its outliers do not
+    move it. The other cameras' residuals as they are. Minus the residuals give minus the result (the weights
+    depend on their norms alone).
+
+    Args:
+        residuals: (2n,) whitened residuals of ``obs``, two per observation.
+        pose_jacobian: (2n, 6) their derivative with respect to the vehicle's pose (GTSAM's right perturbation).
+        obs: the observations (their cameras).
+        world_T_vehicle: the solution's pose (vehicle -> world), metres.
+        loss: the robust loss whose weights the ridge takes (None: least squares).
+        iterations: reweightings of the ridge (with a loss).
+    """
+    out = np.array(residuals, dtype=float)
+    rows = np.repeat(obs.camera_index, 2)
+    for c in np.unique(obs.camera_index):
+        sigma = obs.cameras[c].extrinsic_sigma
+        if sigma is None or not np.any(sigma > 0):
+            continue
+        free = sigma > 0
+        mine = rows == c
+        B = extrinsic_jacobian(pose_jacobian[mine], world_T_vehicle, obs.cameras[c].pose)[:, free]
+        e = out[mine]
+        w = np.ones(len(e))  # least squares first: a camera off by far more than its error is then seen so
+        for k in range(1 + (iterations if loss is not None else 0)):
+            if k:  # the robust loss's weights of the moved camera's residuals
+                w = np.repeat(loss.weight(np.linalg.norm(moved.reshape(-1, 2), axis=1)), 2)
+            xi = -np.linalg.solve((B.T * w) @ B + np.diag(sigma[free] ** -2.0), (B.T * w) @ e)
+            moved = e + B @ xi
+        if np.sum((xi / sigma[free]) ** 2) <= chi2_quantile(int(free.sum()), PLAUSIBLE_ERROR):
+            out[mine] = moved  # else the camera is off by more than its declared error: its residuals as they are
+    return out
+
+
+def with_extrinsics(lin: Linearisation, obs: KeypointObservations, world_T_vehicle: gtsam.Pose3) -> Linearisation:
+    """``lin`` with each camera's extrinsic error as further variables under their priors: the system the noise of
+    the keypoints is read off where the cameras' errors are declared (``lin`` itself where none is).
+
+    A camera's error moves all its keypoints together, and where cameras see a vehicle from different sides their
+    disagreement shows in the residuals; read as pixel noise it widened the covariances a second time, beside what
+    :func:`extrinsic_covariance` adds. With the errors ``xi_c`` (their nonzero components) as variables, prior
+    ``S_c^-1``, the projection's Jacobian is ``[A, B]`` (:func:`extrinsic_jacobian`) and
+
+    ``H' = [[H, A^T B], [B^T A, B^T B + S^-1]]``, ``H'_proj = [A, B]^T [A, B]``, ``eta' = [eta, B^T b]``,
+    ``eta'_proj = [A, B]^T b``:
+
+    the prior on the errors is no projection information, so a noise scale multiplies all of ``H'_proj`` but not
+    it, and the residuals' degrees of freedom count the errors' share of the fit.
+
+    Args:
+        lin: the linearisation of the graph with its projection factor without the robust loss, at ``obs``'
+            sigmas (its ``jacobian`` and ``rhs`` that factor's, ``obs``' rows).
+        obs: the observations of ``lin``'s projection factor.
+        world_T_vehicle: the solution's pose (vehicle -> world), metres.
+    """
+    A, b = lin.jacobian, lin.rhs
+    if A is None or A.shape[0] != 2 * len(obs):
+        return lin
+    rows = np.repeat(obs.camera_index, 2)
+    columns, precision = [], []
+    for c in np.unique(obs.camera_index):
+        sigma = obs.cameras[c].extrinsic_sigma
+        if sigma is None or not np.any(sigma > 0):
+            continue
+        free = sigma > 0
+        B_c = np.zeros((len(A), int(free.sum())))
+        B_c[rows == c] = extrinsic_jacobian(A[rows == c, :6], world_T_vehicle, obs.cameras[c].pose)[:, free]
+        columns.append(B_c)
+        precision.append(sigma[free] ** -2.0)
+    if not columns:
+        return lin
+    B = np.hstack(columns)
+    AB = np.hstack([A, B])
+    projection = AB.T @ AB
+    total = projection.copy()
+    m = len(lin.total)
+    total[:m, :m] = lin.total
+    total[m:, m:] += np.diag(np.concatenate(precision))
+    return Linearisation(total, np.concatenate([lin.total_eta, B.T @ b]), projection, AB.T @ b, lin.prior,
+                         lin.prior_eta, lin.shape, AB, b)

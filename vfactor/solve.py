@@ -22,7 +22,7 @@ import numpy.ma  # noqa: F401  numpy 2 imports it lazily, on a solve's first np.
 from vfactor.box import BoxModel, vehicle_box
 from vfactor.camera import Camera
 from vfactor.errors import InputError, check_numbers
-from vfactor.extrinsics import extrinsic_covariance
+from vfactor.extrinsics import explained_residuals, extrinsic_covariance, with_extrinsics, without_camera_errors
 from vfactor.factors.body_frame import canonical_gauge
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.factors.projection import KeypointObservations, projection_factor, whitened_residuals
@@ -374,7 +374,11 @@ def solve_observations(
     strict = as_given.scaled(min(float(extras.get("noise_scale", 1.0)), 1.0))
     strict_weights = options.graph.loss.weight(np.linalg.norm(
         whitened_residuals(strict, world_T_vehicle, wireframe.vehicle_p_keypoints), axis=1))
-    problem, rejected, cut = _camera_disagreement(strict, strict_weights, mean, options)
+    explained = None  # a camera off by about the extrinsic error it declares is no camera at odds
+    if any(camera.extrinsic_sigma is not None for camera in strict.cameras):
+        explained = options.graph.loss.weight(np.linalg.norm(explained_residuals(
+            strict, world_T_vehicle, wireframe.vehicle_p_keypoints, options.graph.loss), axis=1))
+    problem, rejected, cut = _camera_disagreement(strict, strict_weights, mean, options, explained)
     if problem:
         suspects = _cut_views(as_given, exclude=rejected)
         if suspects:  # the joint solve followed a view the image border cuts: solve without it (the keypoints as given)
@@ -415,7 +419,7 @@ def solve_observations(
             result.extras["covariance_noise_scale"] = covariance_scale
             if options.estimate_noise and options.graph.covariance_sandwich_weight > 0:
                 joint = _widened_by_residuals(joint, inflation, linear, options.graph.covariance_sandwich_weight,
-                                              result.extras)
+                                              result.extras, inliers, world_T_vehicle, options.graph.loss)
             sigmas = detector_shape_sigmas(obs, wireframe.vehicle_p_keypoints, options.graph.shape_sigma_size_exponent)
             if sigmas:  # the detectors' shape-like error, which no residual shows (item 6): on the shape ...
                 shape_variance = _averaged_variance(sigmas)
@@ -612,7 +616,7 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
         at_scale = copy_graph(graph)
         raw = projection_factor(pose_key, layer_keys, fitted, RobustLoss("none"))
         at_scale.replace(0, raw)
-        lin = linearise(at_scale, raw, None, estimate, keys)
+        lin = with_extrinsics(linearise(at_scale, raw, None, estimate, keys), fitted, world_T_vehicle)
         relative, _, dof = inlier_noise_scale(whitened, lin)
         inflation, noise = covariance_inflation(dof), scale * relative
         calibrated = nominal.calibrated
@@ -621,7 +625,11 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
             inflation = 1.0 if calibrated.all() else inflation
         else:
             obs = obs.scaled(relative)
-    within = np.sum(whitened_residuals(obs, world_T_vehicle, points) ** 2, axis=1) < INLIER_BOUND
+    if any(camera.extrinsic_sigma is not None for camera in obs.cameras):  # a camera's error is no outlier
+        residuals = explained_residuals(obs, world_T_vehicle, points, options.graph.loss)
+    else:
+        residuals = whitened_residuals(obs, world_T_vehicle, points)
+    within = np.sum(residuals ** 2, axis=1) < INLIER_BOUND
     if not within.any():  # sigmas far from the residuals (a refinement that failed at a detector's extreme sigmas)
         raise RuntimeError(f"no keypoint is within {np.sqrt(INLIER_BOUND):.3g} sigmas of the solution at the "
                            "covariances' sigmas")
@@ -686,20 +694,26 @@ def detector_shape_covariance(covariance: np.ndarray, jacobian: np.ndarray, obse
 
 
 def _widened_by_residuals(joint: np.ndarray, inflation: float, linear: gtsam.GaussianFactorGraph, weight: float,
-                          extras: dict) -> np.ndarray:
+                          extras: dict, observations: KeypointObservations | None = None,
+                          world_T_vehicle: gtsam.Pose3 | None = None, loss: RobustLoss | None = None) -> np.ndarray:
     """``joint`` (the model's (42, 42) covariance of pose and shape, times ``inflation``) widened where the residuals
     say the keypoints are off by more than it assumes: a covariance wider than both it and ``weight`` times the
     sandwich of the covariance graph ``linear`` (linearised at the solution; factor 0 its projection factor;
     docs/factors.md, "Covariances", item 5). The residuals are those the covariance graph's own least squares leaves
     (one Gauss-Newton step from the solution), not the solution's: the solve weighs the shape prior and the bounds
     otherwise (its own sigmas and robust loss), and the share of their pull that shows in the residuals is no
-    spread of the keypoints. Sets ``extras["covariance_widening"]``; ``joint`` as it is where the sandwich is not
-    defined (a numerically singular covariance)."""
+    spread of the keypoints. Where the cameras of ``observations`` (the projection factor's, at ``world_T_vehicle``)
+    declare their extrinsics' errors, the residuals are taken less what those errors most likely make of them
+    (:func:`vfactor.extrinsics.without_camera_errors`, with ``loss``): item 7 adds them. Sets
+    ``extras["covariance_widening"]``; ``joint`` as it is where the sandwich is not defined (a numerically singular
+    covariance)."""
     projection = linear.at(0)
     jacobian, rhs = projection.jacobian()  # columns [pose, wheel, light, roof]
     try:
         step = linear.optimize()
         rhs = rhs - jacobian @ np.concatenate([step.at(key) for key in projection.keys()])
+        if observations is not None and any(camera.extrinsic_sigma is not None for camera in observations.cameras):
+            rhs = without_camera_errors(rhs, jacobian[:, :6], observations, world_T_vehicle, loss)
         sandwich = sandwich_covariance(joint / inflation, jacobian, rhs)
         widened, widening = covariance_upper_bound(joint, weight * sandwich)
     except (np.linalg.LinAlgError, RuntimeError):
@@ -1007,6 +1021,8 @@ def _lm(graph, values, keys: KeyScheme, options: SolveOptions, terms, hwc, check
 DISAGREEMENT_JOINT_INLIERS = 0.3
 #: ... and a pose fitted to its keypoints alone (PnP of the mean shape) keeps this many more (a share of them).
 DISAGREEMENT_MARGIN = 0.55
+#: ... unless, with its declared extrinsic error's plausible part explained, it keeps at least this share.
+EXPLAINED_INLIERS = 0.5
 
 
 def _add_note(result: VehicleResult, note: str) -> None:
@@ -1026,8 +1042,8 @@ def _cut_views(obs: KeypointObservations, exclude=()) -> list[str]:
             if camera.name not in exclude and _view_cut(obs, obs.camera_index == c)]
 
 
-def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: Wireframe,
-                         options: SolveOptions) -> tuple[str, list[str], list[str]]:
+def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: Wireframe, options: SolveOptions,
+                         explained: np.ndarray | None = None) -> tuple[str, list[str], list[str]]:
     """A message when some camera's keypoints agree among themselves but not with the other cameras, naming it,
     the names of those cameras ("" and [] when none), and the names of the cameras that would be named but whose
     view of the vehicle the image border cuts (``obs.cut``: a detector may draw a whole vehicle in the part it
@@ -1041,7 +1057,9 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
     cameras see it, which points to its ``world_T_camera``. A camera whose
     keypoints are mostly outliers (heavy noise, swaps) is rejected by both fits
     and is not blamed. Measured by benchmarks/disagreement_check.py
-    (docs/reliability.md). The message also says when, as a camera sees it, the
+    (docs/reliability.md). ``explained``: the robust-loss weights of the keypoints with each camera's declared
+    extrinsic error's plausible part explained (:func:`vfactor.extrinsics.explained_residuals`); a camera that keeps
+    at least :data:`EXPLAINED_INLIERS` of its keypoints so is off by about what it declares, and not at odds. The message also says when, as a camera sees it, the
     vehicle lies behind another camera.
     """
     own_poses, rejected, cut = {}, [], []
@@ -1065,8 +1083,11 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
             continue
         alone = options.graph.loss.weight(np.linalg.norm(
             whitened_residuals(obs.subset(rows), own_pose(c), mean.vehicle_p_keypoints), axis=1))
-        if float(np.mean(alone > 0.5)) - joint >= DISAGREEMENT_MARGIN - 1e-9:
-            (cut if _view_cut(obs, rows) else rejected).append(camera.name)
+        if float(np.mean(alone > 0.5)) - joint < DISAGREEMENT_MARGIN - 1e-9:
+            continue
+        if explained is not None and float(np.mean(explained[rows] > 0.5)) >= EXPLAINED_INLIERS:
+            continue  # off by about its declared extrinsic error
+        (cut if _view_cut(obs, rows) else rejected).append(camera.name)
     if not rejected:
         return "", [], cut
     details = []

@@ -1057,10 +1057,12 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
     cameras see it, which points to its ``world_T_camera``. A camera whose
     keypoints are mostly outliers (heavy noise, swaps) is rejected by both fits
     and is not blamed. Measured by benchmarks/disagreement_check.py
-    (docs/reliability.md). ``explained``: the robust-loss weights of the keypoints with each camera's declared
-    extrinsic error's plausible part explained (:func:`vfactor.extrinsics.explained_residuals`); a camera that keeps
-    at least :data:`EXPLAINED_INLIERS` of its keypoints so is off by about what it declares, and not at odds. The message also says when, as a camera sees it, the
-    vehicle lies behind another camera.
+    (docs/reliability.md). ``explained``: the robust-loss weights of the
+    keypoints with each camera's declared extrinsic error's plausible part
+    explained (:func:`vfactor.extrinsics.explained_residuals`); a camera that
+    keeps at least :data:`EXPLAINED_INLIERS` of its keypoints so is off by
+    about what it declares, and not at odds. The message also says when, as a
+    camera sees it, the vehicle lies behind another camera.
     """
     own_poses, rejected, cut = {}, [], []
 

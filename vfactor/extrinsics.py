@@ -22,13 +22,18 @@ from vfactor.factors.robust import RobustLoss
 from vfactor.shape_evidence import Linearisation
 from vfactor.stats import chi2_quantile
 
-__all__ = ["extrinsic_jacobian", "extrinsic_covariance", "explained_residuals", "with_extrinsics",
-           "without_camera_errors", "PLAUSIBLE_ERROR"]
+__all__ = ["declares_extrinsics", "extrinsic_jacobian", "extrinsic_covariance", "extrinsic_pose_covariance",
+           "explained_residuals", "with_extrinsics", "without_camera_errors", "PLAUSIBLE_ERROR"]
 
 #: A camera's error estimated from its residuals is its declared error's within this quantile of chi2 (its
 #: Mahalanobis norm under ``extrinsic_sigma``); beyond it the camera is off by more than it says
 #: (:func:`without_camera_errors`).
 PLAUSIBLE_ERROR = 0.999
+
+
+def declares_extrinsics(cameras) -> bool:
+    """Whether any of the cameras (:class:`vfactor.camera.Camera`) gives an ``extrinsic_sigma``."""
+    return any(camera.extrinsic_sigma is not None for camera in cameras)
 
 
 def extrinsic_jacobian(pose_jacobian: np.ndarray, world_T_vehicle: gtsam.Pose3,
@@ -190,3 +195,45 @@ def with_extrinsics(lin: Linearisation, obs: KeypointObservations, world_T_vehic
     total[m:, m:] += np.diag(np.concatenate(precision))
     return Linearisation(total, np.concatenate([lin.total_eta, B.T @ b]), projection, AB.T @ b, lin.prior,
                          lin.prior_eta, lin.shape, AB, b)
+
+
+def extrinsic_pose_covariance(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehicle_p: np.ndarray,
+                              inlier_bound: float, loss: RobustLoss | None = None) -> np.ndarray:
+    """(6, 6) what the cameras' extrinsic errors give a pose through its own frame's keypoints: a track's poses.
+
+    A camera's error is the same in every frame, so neither the motion model that joins a track's frames nor their
+    number averages it away; to first order, with the shape held, it moves each pose by ``G_c xi_c``,
+    ``G_c = H^-1 A_c^T B_c`` (``A`` the frame's inliers' whitened pose Jacobian, ``H = A^T A``, ``A_c`` camera c's
+    rows, :func:`extrinsic_jacobian`): the term is ``sum_c G_c S_c G_c^T`` (one camera alone: its whole error, seen
+    from the vehicle). The inliers are the observations whose residuals, less each camera's plausible error
+    (:func:`without_camera_errors`), are within ``inlier_bound`` (squared, whitened). Zero where no camera declares
+    an error or the frame's pose information is singular.
+
+    Args:
+        obs: the frame's observations (its sigmas: those the track weighs them with).
+        world_T_vehicle: the frame's pose (vehicle -> world), metres.
+        vehicle_p: (12, 3) the track's body-frame keypoints, metres.
+        inlier_bound: the squared whitened residual an inlier stays within.
+        loss: the robust loss of :func:`without_camera_errors`.
+    """
+    out = np.zeros((6, 6))
+    if not declares_extrinsics(obs.cameras[c] for c in np.unique(obs.camera_index)):
+        return out
+    residuals, pose_jacobian = whitened_pose_jacobian(obs, world_T_vehicle, vehicle_p)
+    explained = without_camera_errors(residuals.ravel(), pose_jacobian.reshape(-1, 6), obs, world_T_vehicle, loss)
+    inlier = np.sum(explained.reshape(-1, 2) ** 2, axis=1) < inlier_bound
+    A = pose_jacobian[inlier].reshape(-1, 6)
+    try:
+        H_inv = np.linalg.inv(A.T @ A)
+    except np.linalg.LinAlgError:
+        return out
+    rows = np.repeat(obs.camera_index[inlier], 2)
+    for c in np.unique(obs.camera_index[inlier]):
+        sigma = obs.cameras[c].extrinsic_sigma
+        if sigma is None:
+            continue
+        A_c = A[rows == c]
+        G = H_inv @ (A_c.T @ extrinsic_jacobian(A_c, world_T_vehicle, obs.cameras[c].pose))
+        out += (G * sigma ** 2) @ G.T
+    out = 0.5 * (out + out.T)
+    return out if np.all(np.isfinite(out)) else np.zeros((6, 6))

@@ -22,7 +22,8 @@ import numpy.ma  # noqa: F401  numpy 2 imports it lazily, on a solve's first np.
 from vfactor.box import BoxModel, vehicle_box
 from vfactor.camera import Camera
 from vfactor.errors import InputError, check_numbers
-from vfactor.extrinsics import explained_residuals, extrinsic_covariance, with_extrinsics, without_camera_errors
+from vfactor.extrinsics import (declares_extrinsics, explained_residuals, extrinsic_covariance, with_extrinsics,
+                                without_camera_errors)
 from vfactor.factors.body_frame import canonical_gauge
 from vfactor.factors.ground_plane import GroundPlane
 from vfactor.factors.projection import KeypointObservations, projection_factor, whitened_residuals
@@ -375,7 +376,7 @@ def solve_observations(
     strict_weights = options.graph.loss.weight(np.linalg.norm(
         whitened_residuals(strict, world_T_vehicle, wireframe.vehicle_p_keypoints), axis=1))
     explained = None  # a camera off by about the extrinsic error it declares is no camera at odds
-    if any(camera.extrinsic_sigma is not None for camera in strict.cameras):
+    if declares_extrinsics(strict.cameras):
         explained = options.graph.loss.weight(np.linalg.norm(explained_residuals(
             strict, world_T_vehicle, wireframe.vehicle_p_keypoints, options.graph.loss), axis=1))
     problem, rejected, cut = _camera_disagreement(strict, strict_weights, mean, options, explained)
@@ -429,7 +430,7 @@ def solve_observations(
                     marginal, linear.at(0).jacobian()[0], inliers, sigmas)  # ... and through the fit
                 if np.all(np.isfinite(through)):  # else the shape block alone, as where the sandwich is not
                     joint = joint + through
-            if any(camera.extrinsic_sigma is not None for camera in inliers.cameras):  # their errors, through the fit
+            if declares_extrinsics(inliers.cameras):  # their errors, through the fit
                 joint = joint + extrinsic_covariance(marginal, linear.at(0).jacobian()[0], inliers, world_T_vehicle)
             result.pose_covariance = joint[:6, :6].copy()
             result.keypoint_covariances_world = keypoint_covariances(joint, keys, world_T_vehicle, wireframe)
@@ -625,7 +626,7 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
             inflation = 1.0 if calibrated.all() else inflation
         else:
             obs = obs.scaled(relative)
-    if any(camera.extrinsic_sigma is not None for camera in obs.cameras):  # a camera's error is no outlier
+    if declares_extrinsics(obs.cameras):  # a camera's error is no outlier
         residuals = explained_residuals(obs, world_T_vehicle, points, options.graph.loss)
     else:
         residuals = whitened_residuals(obs, world_T_vehicle, points)
@@ -712,7 +713,7 @@ def _widened_by_residuals(joint: np.ndarray, inflation: float, linear: gtsam.Gau
     try:
         step = linear.optimize()
         rhs = rhs - jacobian @ np.concatenate([step.at(key) for key in projection.keys()])
-        if observations is not None and any(camera.extrinsic_sigma is not None for camera in observations.cameras):
+        if observations is not None and declares_extrinsics(observations.cameras):
             rhs = without_camera_errors(rhs, jacobian[:, :6], observations, world_T_vehicle, loss)
         sandwich = sandwich_covariance(joint / inflation, jacobian, rhs)
         widened, widening = covariance_upper_bound(joint, weight * sandwich)

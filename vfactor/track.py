@@ -32,6 +32,7 @@ import numpy as np
 from vfactor.box import vehicle_box
 from vfactor.camera import Camera
 from vfactor.errors import InputError, check_numbers
+from vfactor.extrinsics import extrinsic_pose_covariance
 from vfactor.factors.body_frame import canonical_gauge
 from vfactor.factors.motion import MotionModel, acceleration_factor, nonholonomic_factor
 from vfactor.factors.projection import KeypointObservations, whitened_pose_jacobian, whitened_residuals
@@ -538,6 +539,8 @@ class Tracker:
 
     def _result(self, track, estimate, key, wireframe, covariance=None, message="") -> VehicleResult:
         pose = estimate.atPose3(key)
+        if covariance is not None and key in track.observed:  # the cameras' declared extrinsic errors
+            covariance = covariance + _extrinsic_term(track.observed[key][1], pose, wireframe, self.options)
         result = VehicleResult(track.id, Status.CONVERGED, world_T_vehicle=pose, wireframe=wireframe,
                                pose_covariance=covariance, message=track.notes.get(key, message),
                                body_type=track.body_type, body_type_probability=track.body_type_probability,
@@ -1365,6 +1368,14 @@ def _considered_offsets(obs: KeypointObservations, offsets: dict[str, int], worl
     return out if np.all(np.isfinite(out)) else np.zeros((6, 6))
 
 
+def _extrinsic_term(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, wireframe: Wireframe,
+                    options: TrackOptions) -> np.ndarray:
+    """(6, 6) what the cameras' declared extrinsic errors add to a track pose's covariance, from its frame's
+    observations (:func:`vfactor.extrinsics.extrinsic_pose_covariance`; docs/factors.md, "Covariances of tracks")."""
+    return extrinsic_pose_covariance(obs, world_T_vehicle, wireframe.vehicle_p_keypoints, INLIER_BOUND,
+                                     options.solve.graph.loss)
+
+
 def _unestimated_offsets(obs: KeypointObservations, offsets: dict[str, int]) -> dict[str, float]:
     """Camera name -> ``shape_sigma`` of the cameras of a frame (``obs``, seen through ``offsets``, camera name ->
     detector offset key) whose detections carry a ``shape_sigma`` but that have no detector offset of their own in
@@ -1861,9 +1872,14 @@ def _smooth_piece(vid: str, index: int, cameras: dict[str, Camera], options: Tra
                   for i in fits)
     for i, _, key in posed:
         pose = estimate.atPose3(key)
+        covariance = None
+        if marginals:  # with the cameras' declared extrinsic errors, from the frame's observations
+            covariance = marginals.marginalCovariance(key)
+            if i in residuals:
+                covariance = covariance + _extrinsic_term(residuals[i][0], pose, wireframe, options)
         results[i] = VehicleResult(
             vid, Status.MAX_ITERATIONS if hit else Status.CONVERGED, world_T_vehicle=pose,
-            wireframe=wireframe, pose_covariance=marginals.marginalCovariance(key) if marginals else None,
+            wireframe=wireframe, pose_covariance=covariance,
             iterations=optimizer.iterations(), final_error=graph.error(estimate),
             body_type=body_type, body_type_probability=probability,
             box=_box(pose, wireframe, body_type, options.solve.box_model))

@@ -322,11 +322,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="tracks: the simulated bodies roll and pitch on their suspension, ROLL and PITCH degrees per g "
                    "of lateral and longitudinal acceleration (vfactor.sim.BodyMotion; default: rigid vehicles)")
     p.add_argument("--extrinsic-error", metavar="DEG,M",
-                   help="frames: the scene's cameras err from the true ones (a survey's error) by draws of DEG degrees "
-                   "and M metres per camera axis, and carry these as their extrinsic_sigma, which the covariances "
-                   "take in (vfactor.sim.ExtrinsicError; default: exact cameras)")
+                   help="frames, tracks: the scene's cameras err from the true ones (a survey's error) by draws of "
+                   "DEG degrees and M metres per camera axis, and carry these as their extrinsic_sigma, which the "
+                   "covariances take in (vfactor.sim.ExtrinsicError; default: exact cameras)")
     p.add_argument("--undeclared-extrinsics", action="store_true",
-                   help="frames, with --extrinsic-error: the cameras carry no extrinsic_sigma (as if taken as exact)")
+                   help="with --extrinsic-error: the cameras carry no extrinsic_sigma (as if taken as exact)")
     p.add_argument("--road-plane", action="store_true",
                    help="frames: the factor graph solves with the simulated road plane given (z = 0, "
                    "SolveOptions.ground_plane), as on a rig whose road is surveyed (default: no plane)")

@@ -56,7 +56,7 @@ def evaluate(args) -> int:
             ("--sweep-frames", args.sweep_frames is not None, ("paper",), None),
             ("--clipped-boxes", args.clipped_boxes, ("images",), None),
             ("--road-plane", args.road_plane, ("frames",), None),
-            ("--extrinsic-error", extrinsic_error is not None, ("frames",), None),
+            ("--extrinsic-error", extrinsic_error is not None, ("frames", "tracks"), None),
             ("--rig", args.rig is not None, ("frames", "tracks"), None),
             ("--detector-offsets", args.detector_offsets is not None, ("images",), None)):
         if given and args.experiment not in takers:
@@ -71,9 +71,7 @@ def evaluate(args) -> int:
                 if args.rig is not None:
                     scenario = _on_rig(scenario, args.rig)
                 if extrinsic_error is not None:
-                    from vfactor.sim import load_scenario
-
-                    scenario = dataclasses.replace(load_scenario(scenario), extrinsic_error=extrinsic_error)
+                    scenario = _with_extrinsic_error(scenario, extrinsic_error)
                 sections = _eval_frames(scenario, frames, args.seed,
                                         _levels(args.levels or "clean,paper,hard"), args.seeds, engine,
                                         args.road_plane)
@@ -81,6 +79,8 @@ def evaluate(args) -> int:
                 scenario = args.scenario or "tracks_3veh"
                 if args.rig is not None:
                     scenario = _on_rig(scenario, args.rig)
+                if extrinsic_error is not None:
+                    scenario = _with_extrinsic_error(scenario, extrinsic_error)
                 sections = _eval_tracks(scenario, frames, args.seed, args.seeds, args.draws,
                                         DEFAULT_LAG if args.lag is None else args.lag, engine, body_motion)
             else:
@@ -258,6 +258,13 @@ def _body_motion(text: str):
         raise InputError("--body-motion", f"expected ROLL and PITCH within [0, {BodyMotion.MAX_DEG_PER_G:g}] degrees "
                                           f"per g, got {text!r}")
     return BodyMotion(roll, pitch)
+
+
+def _with_extrinsic_error(scenario, extrinsic_error):
+    """The scenario (a name, a file or a :class:`~vfactor.sim.Scenario`) whose scene's cameras err so."""
+    from vfactor.sim import load_scenario
+
+    return dataclasses.replace(load_scenario(scenario), extrinsic_error=extrinsic_error)
 
 
 def _extrinsic_error(text: str, declared: bool):

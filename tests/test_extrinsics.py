@@ -85,6 +85,42 @@ def test_extrinsic_covariance_is_the_linear_propagation_of_the_cameras_errors():
     np.testing.assert_array_equal(extrinsic_covariance(P, A, exact, truth.world_T_vehicle), 0.0)
 
 
+def test_with_extrinsics_adds_each_cameras_error_as_variables_under_its_prior():
+    """The augmented system: ``[A, B]`` as the projection's Jacobian, the graph's Hessian and the prior ``S^-1`` on
+    the errors' nonzero components (a camera declaring rotation alone adds three variables, one without a sigma
+    none)."""
+    from vfactor.extrinsics import with_extrinsics
+    from vfactor.shape_evidence import Linearisation
+
+    sim, frame, vid = _one_vehicle()
+    truth = sim.truth[0][vid]
+    names = list(sim.scene.cameras)
+    cameras = dict(sim.scene.cameras)
+    cameras[names[0]] = dataclasses.replace(cameras[names[0]], extrinsic_sigma=extrinsic_sigma(0.3, 0.0))
+    obs = observations_from_detections(frame.detections_of(vid), cameras, GraphConfig())
+    _, pose_jacobian = whitened_pose_jacobian(obs, truth.world_T_vehicle, truth.wireframe.vehicle_p_keypoints)
+    A = pose_jacobian.reshape(-1, 6)
+    rng = np.random.default_rng(1)
+    b = rng.normal(size=len(A))
+    H = A.T @ A + np.eye(6)  # the projection plus some prior
+    lin = Linearisation(H, A.T @ b + 1.0, A.T @ A, A.T @ b, np.zeros((6, 6)), np.zeros(6), np.zeros(36), A, b)
+    out = with_extrinsics(lin, obs, truth.world_T_vehicle)
+    first = obs.camera_index == obs.camera_index[np.flatnonzero(
+        [obs.cameras[c].name == names[0] for c in obs.camera_index])[0]]
+    B = np.zeros((len(A), 3))
+    B[np.repeat(first, 2)] = extrinsic_jacobian(A[np.repeat(first, 2)], truth.world_T_vehicle,
+                                                cameras[names[0]].pose)[:, :3]
+    AB = np.hstack([A, B])
+    np.testing.assert_allclose(out.jacobian, AB, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out.projection, AB.T @ AB, rtol=1e-12)
+    np.testing.assert_allclose(out.total[:6, :6], H, rtol=1e-12)
+    np.testing.assert_allclose(out.total[6:, 6:], B.T @ B + np.eye(3) / np.radians(0.3) ** 2, rtol=1e-12)
+    np.testing.assert_allclose(out.total_eta, np.r_[lin.total_eta, B.T @ b], rtol=1e-12)
+    np.testing.assert_allclose(out.projection_eta, AB.T @ b, rtol=1e-12)
+    exact = observations_from_detections(frame.detections_of(vid), sim.scene.cameras, GraphConfig())
+    assert with_extrinsics(lin, exact, truth.world_T_vehicle) is lin
+
+
 def test_the_solve_adds_the_extrinsic_covariance_and_keeps_the_estimate():
     """The same frame with and without the cameras' sigmas: the same poses and shapes, wider covariances (pose,
     keypoints and box; the keypoints' own noise is then read off with the cameras' errors explained, so no

@@ -36,6 +36,17 @@ def declares_extrinsics(cameras) -> bool:
     return any(camera.extrinsic_sigma is not None for camera in cameras)
 
 
+def _declared(cameras, camera_index: np.ndarray):
+    """(camera index, its rows among the 2n whitened residuals, its sigma, the components whose sigma is not 0) of
+    each camera of ``cameras`` that sees one of the n observations (``camera_index``) and declares an error other
+    than 0."""
+    rows = np.repeat(camera_index, 2)
+    for c in np.unique(camera_index):
+        sigma = cameras[c].extrinsic_sigma
+        if sigma is not None and np.any(sigma > 0):
+            yield c, rows == c, sigma, sigma > 0
+
+
 def extrinsic_jacobian(pose_jacobian: np.ndarray, world_T_vehicle: gtsam.Pose3,
                        world_T_camera: gtsam.Pose3) -> np.ndarray:
     """(2m, 6) derivative of one camera's whitened residuals with respect to its extrinsic's error.
@@ -78,14 +89,10 @@ def extrinsic_covariance(covariance: np.ndarray, jacobian: np.ndarray, observati
     """
     A = np.asarray(jacobian, dtype=float)
     out = np.zeros((A.shape[1], A.shape[1]))
-    rows = np.repeat(observations.camera_index, 2)
-    for c in np.unique(observations.camera_index):
-        camera = observations.cameras[c]
-        if camera.extrinsic_sigma is None or not np.any(camera.extrinsic_sigma > 0):
-            continue
-        A_c = A[rows == c]
-        G = covariance @ (A_c.T @ extrinsic_jacobian(A_c[:, :6], world_T_vehicle, camera.pose))  # (n, 6)
-        out += (G * camera.extrinsic_sigma ** 2) @ G.T
+    for c, rows, sigma, _ in _declared(observations.cameras, observations.camera_index):
+        A_c = A[rows]
+        G = covariance @ (A_c.T @ extrinsic_jacobian(A_c[:, :6], world_T_vehicle, observations.cameras[c].pose))
+        out += (G * sigma ** 2) @ G.T  # G: (n, 6)
     return 0.5 * (out + out.T)
 
 
@@ -129,13 +136,7 @@ def without_camera_errors(residuals: np.ndarray, pose_jacobian: np.ndarray, obs:
         iterations: reweightings of the ridge (with a loss).
     """
     out = np.array(residuals, dtype=float)
-    rows = np.repeat(obs.camera_index, 2)
-    for c in np.unique(obs.camera_index):
-        sigma = obs.cameras[c].extrinsic_sigma
-        if sigma is None or not np.any(sigma > 0):
-            continue
-        free = sigma > 0
-        mine = rows == c
+    for c, mine, sigma, free in _declared(obs.cameras, obs.camera_index):
         B = extrinsic_jacobian(pose_jacobian[mine], world_T_vehicle, obs.cameras[c].pose)[:, free]
         e = out[mine]
         w = np.ones(len(e))  # least squares first: a camera off by far more than its error is then seen so
@@ -173,15 +174,10 @@ def with_extrinsics(lin: Linearisation, obs: KeypointObservations, world_T_vehic
     A, b = lin.jacobian, lin.rhs
     if A is None or A.shape[0] != 2 * len(obs):
         return lin
-    rows = np.repeat(obs.camera_index, 2)
     columns, precision = [], []
-    for c in np.unique(obs.camera_index):
-        sigma = obs.cameras[c].extrinsic_sigma
-        if sigma is None or not np.any(sigma > 0):
-            continue
-        free = sigma > 0
+    for c, rows, sigma, free in _declared(obs.cameras, obs.camera_index):
         B_c = np.zeros((len(A), int(free.sum())))
-        B_c[rows == c] = extrinsic_jacobian(A[rows == c, :6], world_T_vehicle, obs.cameras[c].pose)[:, free]
+        B_c[rows] = extrinsic_jacobian(A[rows, :6], world_T_vehicle, obs.cameras[c].pose)[:, free]
         columns.append(B_c)
         precision.append(sigma[free] ** -2.0)
     if not columns:
@@ -227,12 +223,8 @@ def extrinsic_pose_covariance(obs: KeypointObservations, world_T_vehicle: gtsam.
         H_inv = np.linalg.inv(A.T @ A)
     except np.linalg.LinAlgError:
         return out
-    rows = np.repeat(obs.camera_index[inlier], 2)
-    for c in np.unique(obs.camera_index[inlier]):
-        sigma = obs.cameras[c].extrinsic_sigma
-        if sigma is None:
-            continue
-        A_c = A[rows == c]
+    for c, rows, sigma, _ in _declared(obs.cameras, obs.camera_index[inlier]):
+        A_c = A[rows]
         G = H_inv @ (A_c.T @ extrinsic_jacobian(A_c, world_T_vehicle, obs.cameras[c].pose))
         out += (G * sigma ** 2) @ G.T
     out = 0.5 * (out + out.T)

@@ -585,13 +585,7 @@ def scenario_from_dict(data: dict, default_name: str = "scenario") -> Scenario:
     if data.get("extrinsic_error") is not None:
         value = chk.check_mapping(data["extrinsic_error"], "extrinsic_error",
                                   ("rotation_deg", "translation_m", "declared"))
-        if "declared" in value and not isinstance(value["declared"], bool):
-            raise ScenarioError("extrinsic_error.declared", f"expected true or false, got {value['declared']!r}")
-        kw["extrinsic_error"] = ExtrinsicError(
-            **{key: chk.number(value[key], f"extrinsic_error.{key}", lo=0.0, hi=hi)
-               for key, hi in (("rotation_deg", ExtrinsicError.MAX_ROTATION_DEG),
-                               ("translation_m", ExtrinsicError.MAX_TRANSLATION_M)) if key in value},
-            declared=value.get("declared", True))
+        kw["extrinsic_error"] = ExtrinsicError(**value)  # which checks its fields, naming them
     return Scenario(**kw)
 
 

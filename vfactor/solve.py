@@ -1111,7 +1111,9 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
                 f"which one is off; the joint solve followed {followed!r})")
     if details:
         text += "; " + "; ".join(details)
-    return text + ": check the cameras' world_T_camera", rejected, cut
+    hint = "" if explained is not None else (" (or, where a camera is known only to a survey's accuracy, give its "
+                                             "extrinsic_sigma)")
+    return text + ": check the cameras' world_T_camera" + hint, rejected, cut
 
 
 def solve_vehicle(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import math
 
@@ -183,6 +184,10 @@ def test_a_scenario_moves_onto_given_cameras_where_they_look():
     tracks = scenario_on_cameras(load_scenario("tracks_3veh"), cameras)
     assert tracks.motion == load_scenario("tracks_3veh").motion and tracks.require_visible == "none"
     assert len(simulate(tracks, seed=1).scene.frames) == 30
+    from vfactor.camera import extrinsic_sigma
+
+    surveyed = {name: dataclasses.replace(c, extrinsic_sigma=extrinsic_sigma(0.3, 0.05)) for name, c in cameras.items()}
+    assert all(c.extrinsic_sigma is None for c in scenario_on_cameras(base, surveyed).cameras.values())  # the truth's
     up = pole_camera("up", (0.0, 0.0), 5.0, target=(10.0, 0.0, 9.0))  # looking above the horizon
     with pytest.raises(ScenarioError) as info:
         scenario_on_cameras(base, {"up": up})

@@ -462,7 +462,8 @@ def scenario_on_cameras(base: Scenario, cameras: dict[str, Camera], name: str | 
     plane), is the world origin, around which ``base`` puts its vehicles (its ``region``, or its routes through the
     intersection). Independent frames (``base`` without motion) need each vehicle whole in at least one camera's
     image (``require_visible="any"``): where the views overlap little, some vehicles are seen by one camera, and
-    ``vfactor eval`` reports per camera count; tracks keep ``base``'s requirement.
+    ``vfactor eval`` reports per camera count; tracks keep ``base``'s requirement. The cameras' ``extrinsic_sigma``
+    is dropped: a scenario's cameras are the true ones (its ``extrinsic_error`` simulates a survey's error).
 
     Args:
         base: the scenario to take the vehicles, noise, motion and frames from (``load_scenario("library_2cam")``
@@ -488,7 +489,7 @@ def scenario_on_cameras(base: Scenario, cameras: dict[str, Camera], name: str | 
     for camera_name, camera in cameras.items():
         world_T_camera = camera.world_T_camera.copy()
         world_T_camera[:2, 3] -= (x, y)
-        moved[camera_name] = dataclasses.replace(camera, world_T_camera=world_T_camera)
+        moved[camera_name] = dataclasses.replace(camera, world_T_camera=world_T_camera, extrinsic_sigma=None)
     return dataclasses.replace(
         base, cameras=moved, name=name or f"{base.name} on your cameras",
         description=f"{base.name}'s vehicles seen by {len(moved)} given camera(s), moved by ({-x:.1f}, {-y:.1f}) m "

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import os
 from pathlib import Path
 
 import gtsam
@@ -493,6 +494,11 @@ def test_file_not_found_and_not_json(tmp_path):
     with pytest.raises(SceneError) as info:
         load_scene(missing)
     assert info.value.field == str(missing) and "file not found" in info.value.problem
+    with pytest.raises(SceneError, match="got a directory"):
+        load_scene(tmp_path)
+    if os.path.exists(os.devnull) and not os.path.isfile(os.devnull):  # a character device: no folder
+        with pytest.raises(SceneError, match="expected a regular file, got a device, pipe or socket"):
+            load_scene(os.devnull)
 
     broken = tmp_path / "broken.json"
     broken.write_text('{"cameras": [}', encoding="utf-8")

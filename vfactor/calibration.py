@@ -32,7 +32,7 @@ import numpy as np
 
 from vfactor.camera import Camera, _check_dist, _check_K, check_rigid_transform
 from vfactor.errors import CalibrationError
-from vfactor.jsonio import describe as _kind, is_int as _is_int, is_number as _is_number
+from vfactor.jsonio import describe as _kind, is_int as _is_int, is_number as _is_number, not_a_file
 
 __all__ = [
     "CALIBRATION_FORMATS",
@@ -635,7 +635,7 @@ def _lens_model(value: str, field: str, names: dict) -> str:
 
 def _read_bytes(path: Path, where: str) -> bytes:
     if not path.is_file():
-        raise CalibrationError(where, "file not found" if not path.exists() else "expected a file, got a directory")
+        raise CalibrationError(where, not_a_file(path))
     try:
         size = path.stat().st_size
         if size > MAX_FILE_BYTES:

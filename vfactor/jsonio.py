@@ -37,6 +37,7 @@ __all__ = [
     "describe",
     "is_int",
     "is_number",
+    "not_a_file",
     "MAX_DEPTH",
     "MAX_INT_DIGITS",
     "NonFinite",
@@ -169,6 +170,15 @@ def read_json(path: str | os.PathLike, error: type[InputError] = SceneError):
     return parse_json(read_text(path, error), str(path), error)
 
 
+def not_a_file(path: Path) -> str:
+    """Why ``path``, which is no regular file, cannot be read as one: missing, a folder, or another kind of entry."""
+    if not path.exists():
+        return "file not found"
+    if path.is_dir():
+        return "expected a file, got a directory"
+    return "expected a regular file, got a device, pipe or socket"
+
+
 def read_text(path: str | os.PathLike, error: type[InputError] = SceneError) -> str:
     """The UTF-8 text of a file a user gives (:func:`read_json`'s, a recorded stream's).
 
@@ -177,7 +187,7 @@ def read_text(path: str | os.PathLike, error: type[InputError] = SceneError) -> 
     """
     path = Path(path)
     if not path.is_file():
-        raise error(str(path), "file not found" if not path.exists() else "expected a file, got a directory")
+        raise error(str(path), not_a_file(path))
     try:
         return path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:

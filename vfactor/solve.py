@@ -12,7 +12,7 @@ import dataclasses
 import logging
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from functools import partial
+from functools import cache, partial
 from typing import Callable
 
 import gtsam
@@ -377,8 +377,10 @@ def solve_observations(
         whitened_residuals(strict, world_T_vehicle, wireframe.vehicle_p_keypoints), axis=1))
     explained = None  # a camera off by about the extrinsic error it declares is no camera at odds
     if declares_extrinsics(strict.cameras):
-        explained = options.graph.loss.weight(np.linalg.norm(explained_residuals(
-            strict, world_T_vehicle, wireframe.vehicle_p_keypoints, options.graph.loss), axis=1))
+        @cache
+        def explained():  # only for a camera the check would name, once
+            return options.graph.loss.weight(np.linalg.norm(explained_residuals(
+                strict, world_T_vehicle, wireframe.vehicle_p_keypoints, options.graph.loss), axis=1))
     problem, rejected, cut = _camera_disagreement(strict, strict_weights, mean, options, explained)
     if problem:
         suspects = _cut_views(as_given, exclude=rejected)
@@ -1044,7 +1046,7 @@ def _cut_views(obs: KeypointObservations, exclude=()) -> list[str]:
 
 
 def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: Wireframe, options: SolveOptions,
-                         explained: np.ndarray | None = None) -> tuple[str, list[str], list[str]]:
+                         explained: Callable[[], np.ndarray] | None = None) -> tuple[str, list[str], list[str]]:
     """A message when some camera's keypoints agree among themselves but not with the other cameras, naming it,
     the names of those cameras ("" and [] when none), and the names of the cameras that would be named but whose
     view of the vehicle the image border cuts (``obs.cut``: a detector may draw a whole vehicle in the part it
@@ -1058,9 +1060,10 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
     cameras see it, which points to its ``world_T_camera``. A camera whose
     keypoints are mostly outliers (heavy noise, swaps) is rejected by both fits
     and is not blamed. Measured by benchmarks/disagreement_check.py
-    (docs/reliability.md). ``explained``: the robust-loss weights of the
+    (docs/reliability.md). ``explained``: gives the robust-loss weights of the
     keypoints with each camera's declared extrinsic error's plausible part
-    explained (:func:`vfactor.extrinsics.explained_residuals`); a camera that
+    explained (:func:`vfactor.extrinsics.explained_residuals`; called only
+    where a camera would be named); a camera that
     keeps at least :data:`EXPLAINED_INLIERS` of its keypoints so is off by
     about what it declares, and not at odds. The message also says when, as a
     camera sees it, the vehicle lies behind another camera.
@@ -1088,7 +1091,7 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
             whitened_residuals(obs.subset(rows), own_pose(c), mean.vehicle_p_keypoints), axis=1))
         if float(np.mean(alone > 0.5)) - joint < DISAGREEMENT_MARGIN - 1e-9:
             continue
-        if explained is not None and float(np.mean(explained[rows] > 0.5)) >= EXPLAINED_INLIERS:
+        if explained is not None and float(np.mean(explained()[rows] > 0.5)) >= EXPLAINED_INLIERS:
             continue  # off by about its declared extrinsic error
         (cut if _view_cut(obs, rows) else rejected).append(camera.name)
     if not rejected:

@@ -184,10 +184,12 @@ def _solve(detections: list[Detection], cameras: dict[str, Camera], options: Ass
     from vfactor.sanity import summarise_error
     from vfactor.shape_model import default_shape_model
 
-    solve, prior, hints = options.solve, None, class_hints(detections)
+    solve, prior, hints = options.solve, None, ()
     if quick:
         solve = replace(solve, estimate_noise=False, relabel_swaps=False, num_starts=1, poor_fit_restarts=0)
-        prior, hints = default_shape_model().pooled, ()
+        prior = default_shape_model().pooled
+    else:
+        hints = class_hints(detections)
     try:
         obs = observations_from_detections(detections, cameras, solve.graph)
         start = (initial.world_T_vehicle, initial.wireframe) if initial is not None and initial.ok else None

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import gtsam
 import numpy as np
 import pytest
@@ -13,6 +15,7 @@ from vfactor.wireframe import PRESETS
 
 from ..conftest import K, look_at
 from .contract import FactorContract
+from vfactor.testing import check_factor_jacobians
 from vfactor.camera import Camera
 
 KEYS = KeyScheme()
@@ -147,6 +150,68 @@ class TestProjectionWithDetectorOffset(ProjectionContract):
         np.testing.assert_allclose(with_offset.unwhitenedError(values), plain.unwhitenedError(moved), atol=1e-9)
         assert with_offset.error(values) > 1.0  # a few centimetres and a degree are seen
 
+
+
+CAMERA_KEY = gtsam.symbol("e", 0)
+
+
+def one_camera(obs: KeypointObservations, c: int = 1) -> KeypointObservations:
+    return obs.subset(obs.camera_index == c)
+
+
+class TestProjectionWithCameraError(ProjectionContract):
+    """The last key: the error ``E`` (Pose3) of the one camera the observations come from, its true pose
+    ``world_T_camera * E`` (vfactor.extrinsics_fit); a distorting lens, the Cauchy loss, anisotropic sigmas."""
+
+    loss = RobustLoss("cauchy", 1.0)
+
+    def make_factor(self):
+        obs = one_camera(observations(2.0, np.random.default_rng(11), True, self.cameras))
+        return projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss, camera_key=CAMERA_KEY)
+
+    def make_values(self, rng):
+        values = super().make_values(rng)
+        values.insert(CAMERA_KEY, gtsam.Pose3.Expmap(rng.normal(0, [0.01, 0.01, 0.01, 0.05, 0.05, 0.05])))
+        return values
+
+    def make_truth_values(self):
+        values = super().make_truth_values()
+        values.insert(CAMERA_KEY, gtsam.Pose3())
+        return values
+
+    def test_zero_at_truth(self):
+        obs = one_camera(observations(cameras=self.cameras))
+        factor = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss, camera_key=CAMERA_KEY)
+        assert factor.error(self.make_truth_values()) < 1e-12
+
+    def test_the_error_is_the_cameras_true_pose_against_the_given_one(self):
+        """Keypoints seen by a camera at ``world_T_camera * E`` fit that camera's factor at ``E`` exactly, and the
+        given camera's plain factor not."""
+        E = gtsam.Pose3.Expmap(np.array([0.004, -0.006, 0.005, 0.05, -0.03, 0.04]))
+        given = self.cameras[1]
+        true = dataclasses.replace(given, world_T_camera=given.pose.compose(E).matrix())
+        seen = one_camera(observations(cameras=(self.cameras[0], true)))  # pixels of the true camera
+        obs = KeypointObservations(self.cameras, seen.camera_index, seen.keypoint_index, seen.uv,
+                                   seen.sqrt_information)  # ... given at the surveyed pose
+        values = self.make_truth_values()
+        values.update(CAMERA_KEY, E)
+        factor = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss, camera_key=CAMERA_KEY)
+        assert factor.error(values) < 1e-12
+        assert projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss).error(values) > 1.0
+
+    def test_with_a_detector_offset_too(self):
+        obs = one_camera(observations(2.0, np.random.default_rng(11), True, self.cameras))
+        factor = projection_factor(KEYS.pose_key(), KEYS.layer_keys(), obs, self.loss, offset_key=OFFSET_KEY,
+                                   camera_key=CAMERA_KEY)
+        for seed in (0, 1):
+            rng = np.random.default_rng(seed)
+            values = self.make_values(rng)
+            values.insert(OFFSET_KEY, gtsam.Pose3.Expmap(rng.normal(0, [0.05, 0.05, 0.1, 0.1, 0.1, 0.05])))
+            check_factor_jacobians(factor, values, rtol=self.rtol, atol=self.atol)
+
+    def test_observations_of_several_cameras_are_refused(self):
+        with pytest.raises(ValueError, match="one camera"):
+            projection_factor(KEYS.pose_key(), KEYS.layer_keys(), observations(), self.loss, camera_key=CAMERA_KEY)
 
 def test_detector_offset_prior_is_the_keypoints_sigma_on_rigid_motions():
     """The pose offset's prior costs what ``sigma`` per coordinate costs on the keypoints (and their half turn)

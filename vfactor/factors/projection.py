@@ -342,41 +342,50 @@ def robust_costs(obs: KeypointObservations, world_T_vehicle: np.ndarray, vehicle
     return costs
 
 
-def _error(obs: KeypointObservations, loss_id: int, threshold: float, keys: tuple, out: tuple, this: gtsam.CustomFactor,
-           values: gtsam.Values, H):
+def _error(obs: KeypointObservations, loss_id: int, threshold: float, keys: tuple, offset: bool,
+           world_T_camera: gtsam.Pose3 | None, out: tuple, this: gtsam.CustomFactor, values: gtsam.Values, H):
     """The factor's whitened residuals (and Jacobians into ``H``). What does not change is taken once, when the
     factor is made: the loss's index and threshold, the factor's keys as Python ints (``this.keys()`` builds a new
     list at each call), and ``out``, its (r, H_pose, H_shape) buffers, reused (GTSAM copies ``H[i]`` and the
-    returned ``r``; the kernel writes the same entries of ``H_shape`` at each call, the others stay zero)."""
+    returned ``r``; the kernel writes the same entries of ``H_shape`` at each call, the others stay zero).
+
+    With ``offset`` the fifth key is a detector's pose offset ``vehicle_T_seen``; with ``world_T_camera`` (the
+    pose the observations' one camera is given at) the last key is that camera's error ``E``, its true pose
+    ``world_T_camera * E``. The kernel projects through the given camera, so the vehicle it is handed is the one
+    that camera would see at the true camera's view of it: ``world_T_camera E^-1 camera_T_world world_T_seen``."""
     r, H_pose, H_shape = out
     T = values.atPose3(keys[0]).matrix()
     points = np.concatenate((values.atVector(keys[1]), values.atVector(keys[2]),
                              values.atVector(keys[3]))).reshape(12, 3)
-    offset = len(keys) == 5
     if offset:  # the keypoints as this detector sees them: world_T_seen = world_T_vehicle * vehicle_T_seen
         vehicle_T_seen = values.atPose3(keys[4])
         T = T @ vehicle_T_seen.matrix()
+    if world_T_camera is not None:
+        moved = world_T_camera.compose(values.atPose3(keys[-1]).inverse()).compose(world_T_camera.inverse())
+        T = moved.matrix() @ T
     want = H is not None
     projection_kernel(T[:3, :3], T[:3, 3], points, obs.keypoint_index, obs._R_cw, obs._t_cw, obs._intrinsics_table,
                       obs._lens_table, obs._dist_table, obs.uv, obs.sqrt_information, obs._window_table, obs._sigma_table,
                       loss_id, threshold, _MIN_DEPTH, want, r, H_pose, H_shape)
-    if want:
+    if want:  # H_pose is d/d of the pose the kernel projected (T), right perturbation
         H[1] = H_shape[:, :12]
         H[2] = H_shape[:, 12:24]
         H[3] = H_shape[:, 24:]
-        if offset:  # H_pose is d/d world_T_seen: world_T_vehicle Exp(xi) vehicle_T_seen = world_T_seen Exp(Ad(seen_T_vehicle) xi)
+        if offset:  # world_T_vehicle Exp(xi) vehicle_T_seen = world_T_seen Exp(Ad(seen_T_vehicle) xi)
             H[4] = H_pose
             H[0] = H_pose @ vehicle_T_seen.inverse().AdjointMap()
         else:
             H[0] = H_pose
+        if world_T_camera is not None:  # E Exp(d): T Exp(-Ad(T^-1 world_T_camera) d); the left factor leaves the rest
+            H[len(keys) - 1] = -H_pose @ gtsam.Pose3(T).inverse().compose(world_T_camera).AdjointMap()
     return r
 
 
 def projection_factor(
     pose_key: int, layer_keys, obs: KeypointObservations, loss: RobustLoss = RobustLoss(),
-    offset_key: int | None = None,
+    offset_key: int | None = None, camera_key: int | None = None,
 ) -> gtsam.CustomFactor:
-    """A factor on ``[pose_key, *layer_keys]`` (and ``offset_key``) for all observations in ``obs``.
+    """A factor on ``[pose_key, *layer_keys]`` (and ``offset_key``, ``camera_key``) for all observations in ``obs``.
 
     Args:
         pose_key: key of ``world_T_vehicle`` (``gtsam.Pose3``).
@@ -385,11 +394,26 @@ def projection_factor(
         loss: robust loss applied to each observation's whitened 2-vector.
         offset_key: optional key of a detector's pose offset ``vehicle_T_seen`` (``gtsam.Pose3``): the
             rigid motion of the vehicle, in its body frame, as these observations see it (docs/factors.md).
+        camera_key: optional key of the error of the one camera all of ``obs`` come from (``gtsam.Pose3``
+            ``E``: the camera's true pose is its given ``world_T_camera * E``, as
+            :attr:`vfactor.camera.Camera.extrinsic_sigma` states it; :mod:`vfactor.extrinsics_fit`).
+
+    Raises:
+        ValueError: no observations; a ``camera_key`` with observations of several cameras.
     """
     if len(obs) == 0:
         raise ValueError("projection_factor: no observations")
+    world_T_camera = None
+    if camera_key is not None:
+        seen = np.unique(obs.camera_index)
+        if len(seen) != 1:
+            raise ValueError(f"projection_factor: a camera_key needs the observations of one camera, got "
+                             f"{len(seen)} cameras'")
+        world_T_camera = obs.cameras[int(seen[0])].pose
     noise = gtsam.noiseModel.Unit.Create(2 * len(obs))
     out = (np.empty(2 * len(obs)), np.empty((2 * len(obs), 6)), np.zeros((2 * len(obs), 36)))
-    keys = [pose_key, *layer_keys] + ([] if offset_key is None else [offset_key])
-    fixed = (obs, loss.id, float(loss.threshold), tuple(int(k) for k in keys), out)
+    keys = ([pose_key, *layer_keys] + ([] if offset_key is None else [offset_key])
+            + ([] if camera_key is None else [camera_key]))
+    fixed = (obs, loss.id, float(loss.threshold), tuple(int(k) for k in keys), offset_key is not None, world_T_camera,
+             out)
     return gtsam.CustomFactor(noise, keys, partial(_error, *fixed))

@@ -183,6 +183,31 @@ def build_parser() -> argparse.ArgumentParser:
                    help="accept heatmap and image paths outside the scene file's folder (refused by default)")
     p.set_defaults(save_detections=None)  # of the keypoint network's options (vfactor.cli.common.detect) only --weights
 
+    p = add(
+        "fit-extrinsics", help="fit a rig's camera poses to the vehicles they see; write the scene with them",
+        description="Solve every vehicle of SCENE one frame at a time, then all of them at once with each camera's "
+        "error (its true pose: world_T_camera times that error) as a variable under the prior its extrinsic_sigma "
+        "gives, and write SCENE_OUT: SCENE with each camera moved by its fitted error and the fit's standard "
+        "deviations as its extrinsic_sigma. Vehicles seen by two cameras tell where each camera is relative to the "
+        "others, a road plane the rig's height, roll and pitch; what the traffic does not show stays with the prior "
+        "(docs/factors.md, \"The cameras' errors fitted to the traffic\"; docs/results.md, \"Cameras fitted to "
+        "their traffic\"). Cameras that declare no extrinsic_sigma are held where they are, unless "
+        "--extrinsic-sigma gives them one.",
+    )
+    p.add_argument("scene", help="scene file (JSON, docs/scene-format.md); its cameras declare an extrinsic_sigma")
+    p.add_argument("--out", required=True, help="scene file to write: SCENE with the fitted cameras (atomically)")
+    p.add_argument("--extrinsic-sigma", metavar="DEG,M",
+                   help="the survey's accuracy (degrees and metres per camera axis) of the cameras that declare no "
+                   "extrinsic_sigma, e.g. 0.5,0.1 (default: those cameras are held where they are)")
+    p.add_argument("--traffic", action="append", metavar="FILE",
+                   help="another scene file of the same cameras whose vehicles join the fit (repeatable): more "
+                   "traffic, a better fit")
+    p.add_argument("--weights", help="keypoint-network weights for detections given as image boxes (default: the "
+                   "shipped weights; needs torch); the scene is written with its boxes as given")
+    p.add_argument("--allow-outside-paths", action="store_true",
+                   help="accept heatmap and image paths outside the scene file's folder (refused by default)")
+    p.set_defaults(save_detections=None)
+
     for name, text in NET_COMMANDS.items():
         p = sub.add_parser(name, help=text, add_help=False)
         p.add_argument("net_args", nargs=argparse.REMAINDER)
@@ -439,11 +464,12 @@ def _main(argv=None) -> int:
         return EXIT_OK
     if args.command == "help":
         return _help(parser, args.topic)
-    from vfactor.cli import estimate, evaluate, ground, interop, simulation, tools
+    from vfactor.cli import estimate, evaluate, extrinsics, ground, interop, simulation, tools
 
     handlers = {"solve": estimate.solve, "track": estimate.track, "simulate": simulation.simulate,
                 "demo": simulation.demo, "eval": evaluate.evaluate, "plot": tools.plot, "schema": tools.schema,
-                "import": interop.import_detections, "fit-ground": ground.fit_ground}
+                "import": interop.import_detections, "fit-ground": ground.fit_ground,
+                "fit-extrinsics": extrinsics.fit_extrinsics}
     return _guarded(args.command, lambda: handlers[args.command](args), args.debug)
 
 

@@ -14,14 +14,16 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from vfactor.errors import InputError
 from vfactor.result import Status
 from vfactor.sanity import one_line
 
 __all__ = ["EXIT_OK", "EXIT_INTERNAL", "EXIT_INPUT", "EXIT_UNSOLVED", "EXIT_INTERRUPTED", "EXIT_TERMINATED",
-           "configure_logging", "say",
-           "note", "output", "progress", "missing_extra", "check_positive", "check_out_file", "check_out_dir", "report_unsolved",
-           "detect", "amodal_pass", "check_amodal_pass", "check_outputs", "open_command_engine"]
+           "configure_logging", "say", "note", "output", "progress", "missing_extra", "check_positive",
+           "check_out_file", "check_out_dir", "check_same_rig", "report_unsolved", "detect", "amodal_pass",
+           "check_amodal_pass", "check_outputs", "open_command_engine"]
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_UNSOLVED, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 3, 130, 143
 
@@ -162,6 +164,18 @@ def check_out_dir(path: Path) -> Path:
     path.mkdir(parents=True, exist_ok=True)
     return path
 
+
+def check_same_rig(scene, other, name: str, why: str) -> None:
+    """Raises InputError (``--traffic``) unless ``other`` (the file ``name``) has ``scene``'s cameras where they were:
+    one rig (``why`` says what needs it)."""
+    if set(other.cameras) != set(scene.cameras):
+        raise InputError("--traffic", f"{name} has cameras {sorted(other.cameras)}, the scene {sorted(scene.cameras)}: "
+                                      f"{why}")
+    for camera, given in scene.cameras.items():
+        moved = np.abs(np.asarray(other.cameras[camera].world_T_camera) - np.asarray(given.world_T_camera)).max()
+        if moved > 1e-3:
+            raise InputError("--traffic", f"{name}: camera {camera!r} is not where the scene has it "
+                                          f"(world_T_camera differs by up to {moved:.3g}): one rig only")
 
 def report_unsolved(results, scene, quiet: bool) -> int:
     """Prints a line per vehicle that was not solved or fits its keypoints poorly (status ``poor_fit``: solved, with a

@@ -5,9 +5,7 @@ from __future__ import annotations
 import dataclasses
 import time
 
-import numpy as np
-
-from vfactor.cli.common import EXIT_OK, check_out_file, detect, progress
+from vfactor.cli.common import EXIT_OK, check_out_file, check_same_rig, detect, progress
 from vfactor.cli.estimate import associate
 from vfactor.errors import InputError
 
@@ -34,7 +32,7 @@ def fit_ground(args) -> int:
     for name, other in scenes:
         if other.ground_plane is not None:
             raise InputError("ground_plane", f"{name} gives a road plane already; remove it to fit one")
-        _same_cameras(scene, other, name)
+        check_same_rig(scene, other, name, "a road plane is fitted to the traffic of one rig")
     options = TrackOptions(solve=SolveOptions(covariance=False), covariance=False)
     t0 = time.perf_counter()
     results = []
@@ -58,14 +56,3 @@ def fit_ground(args) -> int:
               f"robust scales; scale {100 * fit.scale:.1f} cm; {hubs}), {time.perf_counter() - t0:.2f} s; wrote {out}")
     return EXIT_OK
 
-
-def _same_cameras(scene, other, name: str) -> None:
-    """Raises InputError (``--traffic``) unless ``other`` has ``scene``'s cameras where they were: one rig."""
-    if set(other.cameras) != set(scene.cameras):
-        raise InputError("--traffic", f"{name} has cameras {sorted(other.cameras)}, the scene {sorted(scene.cameras)}: "
-                                      "a road plane is fitted to the traffic of one rig")
-    for camera, given in scene.cameras.items():
-        moved = np.abs(np.asarray(other.cameras[camera].world_T_camera) - np.asarray(given.world_T_camera)).max()
-        if moved > 1e-3:
-            raise InputError("--traffic", f"{name}: camera {camera!r} is not where the scene has it "
-                                          f"(world_T_camera differs by up to {moved:.3g}): one rig only")

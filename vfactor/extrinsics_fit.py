@@ -11,9 +11,10 @@ a time, then all of them at once with each camera's error ``E_c`` (the true
 pose ``world_T_camera * E_c``) as a variable under the prior its
 ``extrinsic_sigma`` gives:
 
-* each vehicle of each frame keeps its own pose and shape variables, its shape
-  factors and prior (its body type's, as its solve chose) and, where the scene
-  gives a road plane, its ground-plane factor;
+* each vehicle (an id of a scene: a track) has one shape, with its shape
+  factors and prior (the body type its solves chose most often), and a pose
+  in each frame it was solved in, with the ground-plane factor where the
+  scene gives a road plane;
 * each camera's keypoints of it enter through the projection factor with that
   camera's error key (:func:`vfactor.factors.projection.projection_factor`'s
   ``camera_key``), at the solve's sigmas and labels, with the solve's robust

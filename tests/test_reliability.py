@@ -193,6 +193,18 @@ def test_sanity_check_of_estimates(cameras, prius, world_T_vehicle):
     assert status == Status.FAILED and "behind camera 'cam0'" in message
     nan = dataclasses.replace(good, world_T_vehicle=gtsam.Pose3(gtsam.Rot3(), np.array([np.nan, 0.0, 0.0])))
     assert check_estimate(nan, cams)[0] == Status.FAILED
+    # in front of cam0 but far beside its image (the image-border truncation let one camera's cut view walk a
+    # vehicle there): every keypoint more than an image width beyond the border
+    cam0 = cameras["cam0"]
+    beside = cam0.pose.transformFrom(np.array([60.0, 0.0, 20.0]))  # 60 m right at 20 m depth: u about 3000 px off
+    aside = dataclasses.replace(good, world_T_vehicle=gtsam.Pose3(world_T_vehicle.rotation(), beside))
+    status, message = check_estimate(aside, [cam0])
+    assert status == Status.FAILED and "outside the image of camera 'cam0'" in message and "\n" not in message
+    near = cam0.pose.transformFrom(np.array([12.0, 0.0, 20.0]))  # beyond the border, within an image width: kept
+    assert check_estimate(dataclasses.replace(good, world_T_vehicle=gtsam.Pose3(world_T_vehicle.rotation(), near)),
+                          [cam0])[0] == Status.CONVERGED
+    no_size = dataclasses.replace(cam0, image_size=None)  # the image size unknown: not judged
+    assert check_estimate(aside, [no_size])[0] == Status.CONVERGED
     for roll, expected in ((np.radians(25.0), Status.CONVERGED), (np.radians(35.0), Status.POOR_FIT),
                            (np.radians(89.0), Status.POOR_FIT), (np.radians(91.0), Status.FAILED),
                            (np.pi, Status.FAILED)):

@@ -9,7 +9,8 @@ finds its estimate
 * finite (pose and wireframe),
 * within :data:`MAX_DISTANCE` of the nearest camera that sees it,
 * in front of every camera that sees it (the keypoints' centroid at a positive
-  depth),
+  depth), and not wholly outside its image (every keypoint more than
+  :data:`OUTSIDE_IMAGE` image sizes beyond the border),
 * upright: its body's z axis within 90 degrees of the world's (world z is up,
   docs/conventions.md; no vehicle in traffic is upside down, and a solution
   that is explains its pixels with the wheels where the roof is, from a start
@@ -23,7 +24,8 @@ finds its estimate
 * with a pose covariance when one was asked for (GTSAM's marginals fail only
   when the linear system is indeterminate: some direction is not observed);
 
-otherwise it is ``failed`` (non-finite, behind a camera that sees it, upside down or turned front to back) or
+otherwise it is ``failed`` (non-finite, behind or outside the image of a camera that sees it, upside down or
+turned front to back) or
 ``degenerate`` (too far, or no covariance), with a one-line message. The
 solvers call :func:`checked` on every result they return (``solve_observations``,
 the tracker, batch smoothing).
@@ -45,7 +47,7 @@ from vfactor.camera import Camera
 from vfactor.factors.body_frame import turned_front_to_back, upright
 from vfactor.result import Status, VehicleResult
 
-__all__ = ["MAX_DISTANCE", "MAX_TILT_DEG", "check_estimate", "checked", "summarise_error", "one_line"]
+__all__ = ["MAX_DISTANCE", "MAX_TILT_DEG", "OUTSIDE_IMAGE", "check_estimate", "checked", "summarise_error", "one_line"]
 
 #: Farthest a solved vehicle may be from the nearest camera that sees it, metres. Fixed traffic
 #: cameras see vehicles at tens of metres; at 1 km a 4.5 m car spans about 4 pixels at a focal
@@ -55,6 +57,13 @@ MAX_DISTANCE = 1000.0
 #: Largest angle, degrees, between a solved vehicle's up (body z) and the world's (z) that is not reported
 #: ``poor_fit``: the steepest public roads climb about 19 degrees (35 %), a banked curve leans a few.
 MAX_TILT_DEG = 30.0
+
+#: A solved vehicle whose every keypoint projects more than this many image sizes (widths sideways, heights up and
+#: down) outside the image of a camera that sees it explains none of that camera's keypoints: the image-border
+#: truncation's expected pixel of a keypoint predicted far outside sits at the border, where a cut view's keypoints
+#: are, so Levenberg-Marquardt could walk a one-camera vehicle 210 m off along the border
+#: (``association_3cam``, a view of six keypoints cut by the image's left edge).
+OUTSIDE_IMAGE = 1.0
 _MESSAGE_LIMIT = 300
 _ESCAPES = re.compile(r"\x1b\[[0-?]*[ -/]*[@-~]|\x1b\][^\x07\x1b]*(?:\x07|\x1b\\)?|\x1b.?")
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]+")
@@ -138,8 +147,14 @@ def check_estimate(result: VehicleResult, cameras: Iterable[Camera], covariance:
                                        f"'{cameras[nearest].name}', farther than {max_distance:g} m: the views do "
                                        "not fix the vehicle's position")
         for camera in cameras:
-            if camera.to_camera(centre[None])[0, 2] <= 0:
+            camera_p = camera.to_camera(world_p)
+            if camera_p.mean(axis=0)[2] <= 0:
                 return Status.FAILED, f"the estimate lies behind camera '{camera.name}', which sees the vehicle"
+            away = _outside_image(camera, camera_p)
+            if away is not None:
+                return Status.FAILED, (f"the estimate lies outside the image of camera '{camera.name}', which sees "
+                                       f"the vehicle (its keypoints {away:.0f} image widths beyond the border): the "
+                                       "keypoints there do not fix it (a view cut by the border?)")
     if covariance and result.pose_covariance is None:
         why = message.removeprefix("covariance unavailable: ") if message else "not computed"
         return Status.DEGENERATE, f"no pose covariance ({summarise_error(why)})"
@@ -161,3 +176,22 @@ def checked(result: VehicleResult, cameras: Iterable[Camera], covariance: bool =
             result, status=status, message=message)
     return VehicleResult(result.id, status, iterations=result.iterations, final_error=result.final_error,
                          message=message)
+
+
+def _outside_image(camera: Camera, camera_p: np.ndarray) -> float | None:
+    """How far (in image widths) the nearest of the keypoints ``camera_p`` (camera frame, metres) projects beyond
+    ``camera``'s image where every one projects farther than :data:`OUTSIDE_IMAGE` image sizes outside it (a pinhole
+    projection: far outside the image a lens's polynomial is no guide); None where one is nearer, or the image size
+    is unknown."""
+    if camera.image_size is None:
+        return None
+    width, height = camera.image_size
+    z = camera_p[:, 2]
+    if np.any(z <= 0):  # a keypoint at or behind the camera's plane projects anywhere: not judged
+        return None
+    K = np.asarray(camera.K, dtype=float)
+    u = K[0, 0] * camera_p[:, 0] / z + K[0, 1] * camera_p[:, 1] / z + K[0, 2]
+    v = K[1, 1] * camera_p[:, 1] / z + K[1, 2]
+    beyond = np.maximum.reduce([-u / width, (u - width) / width, -v / height, (v - height) / height])
+    nearest = float(beyond.min())
+    return nearest if nearest > OUTSIDE_IMAGE else None

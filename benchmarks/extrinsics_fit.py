@@ -13,7 +13,7 @@ tracked (iSAM2, smoothed) with the surveyed cameras, the fitted ones and the tru
   camera count, and the one-frame pose NEES (the fitted cameras carry the fit's sigma).
 
 Run: ``python benchmarks/extrinsics_fit.py --scenario library_tracks --seed 400 --draws 8 [--traffic 2]
-[--error 0.3,0.05] [--workers 2]``.
+[--error 0.3,0.05] [--rounds 1] [--workers 2]``.
 """
 
 from __future__ import annotations
@@ -41,12 +41,12 @@ def _draw(unit: tuple) -> dict:
     from vfactor.solve import SolveOptions, solve_scene
     from vfactor.track import TrackOptions, track_scene
 
-    name, seed, traffic, rotation_deg, translation_m = unit
+    name, seed, traffic, rotation_deg, translation_m, rounds = unit
     scenario = dataclasses.replace(load_scenario(name), extrinsic_error=ExtrinsicError(rotation_deg, translation_m))
     true = dict(scenario.cameras)
     scenes = [simulate(scenario, seed=seed + i).scene for i in range(traffic)]
     surveyed = scenes[0].cameras
-    fit = fit_extrinsics([dataclasses.replace(scene, cameras=surveyed) for scene in scenes])
+    fit = fit_extrinsics([dataclasses.replace(scene, cameras=surveyed) for scene in scenes], rounds=rounds)
     out = {"poses": fit.vehicles, "cameras": {}, "rows": []}
     for label, cameras in (("surveyed", surveyed), ("fitted", fit.cameras)):
         rotation = [np.degrees(np.linalg.norm(gtsam.Rot3.Logmap(cameras[n].pose.rotation().between(
@@ -97,11 +97,12 @@ def main(argv=None) -> dict:
     parser.add_argument("--draws", type=int, default=8)
     parser.add_argument("--traffic", type=int, default=2, help="scenes of traffic the cameras are fitted to")
     parser.add_argument("--error", default="0.3,0.05", help="the survey's error, DEG,M per camera axis")
+    parser.add_argument("--rounds", type=int, default=1, help="fit_extrinsics' rounds")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args(argv)
     rotation_deg, translation_m = (float(x) for x in args.error.split(","))
     step = args.traffic + 1
-    units = [(args.scenario, args.seed + i * step, args.traffic, rotation_deg, translation_m)
+    units = [(args.scenario, args.seed + i * step, args.traffic, rotation_deg, translation_m, args.rounds)
              for i in range(args.draws)]
     with ProcessPoolExecutor(args.workers) as pool:
         draws = list(pool.map(_draw, units))

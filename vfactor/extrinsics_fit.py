@@ -102,7 +102,7 @@ class ExtrinsicsFit:
 
 def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[FrameResult]] | None = None,
                    options: SolveOptions = SolveOptions(), default_sigma: np.ndarray | None = None,
-                   shared_shape: bool = True) -> ExtrinsicsFit:
+                   shared_shape: bool = True, rounds: int = 1) -> ExtrinsicsFit:
     """Fits the errors of the cameras of ``scenes`` (one rig: the same cameras where each scene has them) to the
     vehicles they see (the module's docstring gives the method).
 
@@ -117,6 +117,8 @@ def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[F
             that declare none; None: those cameras are held where they are given.
         shared_shape: each vehicle id of a scene is one vehicle (a track) with one shape over its frames; False: a
             shape per frame (ids that do not follow one vehicle).
+        rounds: fits; each after the first solves the vehicles again with the cameras as the last one fitted them
+            (the priors stay the survey's).
 
     Returns:
         :class:`ExtrinsicsFit`.
@@ -126,27 +128,60 @@ def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[F
             different rigs, ``results`` that are not one list per scene, fewer than :data:`MIN_VEHICLES` vehicle
             poses seen by two cameras with :data:`MIN_VIEW_KEYPOINTS` keypoints each, or a fit that fails.
     """
-    from vfactor.shape_model import default_shape_model
     from vfactor.solve import solve_scene
 
+    if not isinstance(rounds, int) or isinstance(rounds, bool) or rounds < 1:
+        raise InputError("rounds", f"expected an integer >= 1, got {rounds!r}")
     scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
     if not scenes:
         raise InputError("scenes", "expected at least one scene")
     cameras = _rig(scenes)
     sigmas = _prior_sigmas(cameras, default_sigma)
+    solve = dataclasses.replace(options, covariance=False)
     if results is None:
-        solve = dataclasses.replace(options, covariance=False)
         results = [solve_scene(scene, solve) for scene in scenes]
     elif len(results) != len(scenes):
         raise InputError("results", f"expected one list of frame results per scene ({len(scenes)}), got {len(results)}")
+    corrections = {name: np.zeros(6) for name in sigmas}
+    for round_ in range(rounds):
+        if round_:  # the vehicles solved again with the cameras as fitted: better starts, labels, inliers
+            moved = _moved(cameras, corrections)
+            results = [solve_scene(dataclasses.replace(scene, cameras={**scene.cameras, **moved}), solve)
+                       for scene in scenes]
+        corrections, covariances, count, views, iterations = _joint_fit(scenes, results, sigmas, corrections,
+                                                                        options, shared_shape)
+    fitted = {**cameras, **_moved(cameras, corrections, covariances)}
+    notes = []
+    plausible = chi2_quantile(6, PLAUSIBLE_CORRECTION)
+    for name, xi in corrections.items():
+        if not views[name]:
+            notes.append(f"camera {name!r} saw none of the vehicles fitted: it keeps its given pose and sigma")
+        elif float(np.sum((xi / sigmas[name]) ** 2)) > plausible:
+            notes.append(f"camera {name!r} is off by more than its extrinsic_sigma says (rotation "
+                         f"{np.degrees(np.linalg.norm(xi[:3])):.2f} deg, translation {100 * np.linalg.norm(xi[3:]):.1f}"
+                         " cm): the survey errs more, or the camera moved")
+    return ExtrinsicsFit(fitted, corrections, covariances, count, views, iterations, tuple(notes))
+
+
+def _joint_fit(scenes: list[Scene], results, sigmas: dict[str, np.ndarray], start: dict[str, np.ndarray],
+               options: SolveOptions, shared_shape: bool) -> tuple[dict, dict, int, dict, int]:
+    """One fit of the cameras' errors (the module's docstring) to the solved vehicles of ``results``, from the
+    errors ``start``, under the priors ``sigmas`` about the scenes' cameras as given.
+
+    Returns:
+        (camera name -> fitted error (6,), -> its covariance (6, 6); the vehicle poses fitted; camera name -> how
+        many of them it saw; LM iterations).
+    """
+    from vfactor.shape_model import default_shape_model
+
     model = default_shape_model()
     keys = KeyScheme()
-    error_keys = {name: gtsam.symbol(_ERROR_KEY, i) for i, name in enumerate(cameras) if name in sigmas}
+    error_keys = {name: gtsam.symbol(_ERROR_KEY, i) for i, name in enumerate(sorted(sigmas))}
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     for name, key in error_keys.items():
-        values.insert(key, gtsam.Pose3())
+        values.insert(key, gtsam.Pose3.Expmap(start[name]))
         graph.add(gtsam.PriorFactorPose3(key, gtsam.Pose3(), gtsam.noiseModel.Diagonal.Sigmas(sigmas[name])))
-    views = dict.fromkeys(cameras, 0)
+    views = {name: 0 for scene in scenes for name in scene.cameras}
     tracks: dict[tuple[int, str], list] = {}  # (scene, vehicle id) -> its solved poses: (frame, result, observations)
     for s, (scene, frames) in enumerate(zip(scenes, results)):
         for f, (frame, solved) in enumerate(zip(scene.frames, frames)):
@@ -186,21 +221,19 @@ def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[F
     except RuntimeError as exc:
         raise InputError("scenes", f"the cameras' fit failed: {str(exc).splitlines()[0]}") from None
     corrections = {name: gtsam.Pose3.Logmap(estimate.atPose3(key)) for name, key in error_keys.items()}
-    fitted = dict(cameras)
-    notes = []
-    plausible = chi2_quantile(6, PLAUSIBLE_CORRECTION)
-    for name, xi in corrections.items():
-        given = cameras[name]
-        fitted[name] = dataclasses.replace(given, world_T_camera=given.pose.compose(gtsam.Pose3.Expmap(xi)).matrix(),
-                                           extrinsic_sigma=np.sqrt(np.diag(covariances[name])))
-        if not views[name]:
-            notes.append(f"camera {name!r} saw none of the vehicles fitted: it keeps its given pose and sigma")
-        elif float(np.sum((xi / sigmas[name]) ** 2)) > plausible:
-            notes.append(f"camera {name!r} is off by more than its extrinsic_sigma says (rotation "
-                         f"{np.degrees(np.linalg.norm(xi[:3])):.2f} deg, translation {100 * np.linalg.norm(xi[3:]):.1f}"
-                         " cm): the survey errs more, or the camera moved")
-    return ExtrinsicsFit(fitted, corrections, covariances, count, views, int(optimizer.iterations()), tuple(notes))
+    return corrections, covariances, count, views, int(optimizer.iterations())
 
+
+def _moved(cameras: dict[str, Camera], corrections: dict[str, np.ndarray],
+           covariances: dict[str, np.ndarray] | None = None) -> dict[str, Camera]:
+    """The cameras of ``corrections`` moved by them (``world_T_camera * Exp(xi)``), with the square roots of the
+    ``covariances``' diagonals as their ``extrinsic_sigma`` where given."""
+    out = {}
+    for name, xi in corrections.items():
+        sigma = cameras[name].extrinsic_sigma if covariances is None else np.sqrt(np.diag(covariances[name]))
+        out[name] = dataclasses.replace(cameras[name], extrinsic_sigma=sigma,
+                                        world_T_camera=cameras[name].pose.compose(gtsam.Pose3.Expmap(xi)).matrix())
+    return out
 
 def _rig(scenes: list[Scene]) -> dict[str, Camera]:
     """The cameras of ``scenes`` (the first scene's); InputError where another scene has them elsewhere."""

@@ -13,7 +13,7 @@ tracked (iSAM2, smoothed) with the surveyed cameras, the fitted ones and the tru
   camera count, and the one-frame pose NEES (the fitted cameras carry the fit's sigma).
 
 Run: ``python benchmarks/extrinsics_fit.py --scenario library_tracks --seed 400 --draws 8 [--traffic 2]
-[--error 0.3,0.05] [--rounds 1] [--workers 2]``.
+[--error 0.3,0.05] [--rounds 2] [--workers 2]``.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ def _draw(unit: tuple) -> dict:
     scenes = [simulate(scenario, seed=seed + i).scene for i in range(traffic)]
     surveyed = scenes[0].cameras
     fit = fit_extrinsics([dataclasses.replace(scene, cameras=surveyed) for scene in scenes], rounds=rounds)
-    out = {"poses": fit.vehicles, "cameras": {}, "rows": []}
+    out = {"poses": fit.vehicles, "cameras": {}, "rows": [], "scale": fit.residual_scale}
     for label, cameras in (("surveyed", surveyed), ("fitted", fit.cameras)):
         rotation = [np.degrees(np.linalg.norm(gtsam.Rot3.Logmap(cameras[n].pose.rotation().between(
             true[n].pose.rotation())))) for n in true]
@@ -97,7 +97,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--draws", type=int, default=8)
     parser.add_argument("--traffic", type=int, default=2, help="scenes of traffic the cameras are fitted to")
     parser.add_argument("--error", default="0.3,0.05", help="the survey's error, DEG,M per camera axis")
-    parser.add_argument("--rounds", type=int, default=1, help="fit_extrinsics' rounds")
+    parser.add_argument("--rounds", type=int, default=2, help="fit_extrinsics' rounds")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args(argv)
     rotation_deg, translation_m = (float(x) for x in args.error.split(","))
@@ -115,8 +115,10 @@ def main(argv=None) -> dict:
         r, p, q = np.mean([d["cameras"][label] for d in draws], axis=0)
         print(f"| {label} | {r:.2f} | {p:.1f} | {q:.2f} |")
     nees = np.concatenate([d["nees"] for d in draws])
+    scales = [d["scale"] for d in draws]
     print(f"\nthe fitted cameras' error against the fit's covariance: NEES {nees.mean():.2f} (6 dof), "
-          f"{100 * np.mean(nees < CHI2_6_95):.0f} % under {CHI2_6_95}, {len(nees)} cameras\n")
+          f"{100 * np.mean(nees < CHI2_6_95):.0f} % under {CHI2_6_95}, {len(nees)} cameras; the keypoints' residual "
+          f"scale at the fit {np.mean(scales):.2f} (per draw {', '.join(f'{x:.2f}' for x in scales)})\n")
     rows = [r for d in draws for r in d["rows"]]
     groups = defaultdict(list)
     for r in rows:

@@ -13,7 +13,8 @@ tracked (iSAM2, smoothed) with the surveyed cameras, the fitted ones and the tru
   camera count, and the one-frame pose NEES (the fitted cameras carry the fit's sigma).
 
 Run: ``python benchmarks/extrinsics_fit.py --scenario library_tracks --seed 400 --draws 8 [--traffic 2]
-[--error 0.3,0.05] [--rounds 2] [--workers 2]``.
+[--error 0.3,0.05] [--rounds 2] [--workers 2]``; ``--time``: what the fit costs against the one-frame
+solves of its traffic (``--scenario``, ``--seed``, ``--traffic``).
 """
 
 from __future__ import annotations
@@ -85,6 +86,33 @@ def _draw(unit: tuple) -> dict:
     return out
 
 
+def _time(name: str, seed: int, traffic: int, repeats: int = 2) -> None:
+    """What the fit costs against the one-frame solves of the traffic it is fitted to (``vfactor solve`` of those
+    scenes, without covariances), alternating in one run."""
+    import time
+
+    from vfactor.extrinsics_fit import fit_extrinsics
+    from vfactor.sim import ExtrinsicError, load_scenario, simulate
+    from vfactor.solve import SolveOptions, solve_scene
+
+    scenario = dataclasses.replace(load_scenario(name), extrinsic_error=ExtrinsicError(0.3, 0.05))
+    sims = [simulate(scenario, seed=seed + i) for i in range(traffic)]
+    scenes = [dataclasses.replace(sim.scene, cameras=sims[0].scene.cameras) for sim in sims]
+    solves, fits = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for scene in scenes:
+            solve_scene(scene, SolveOptions(covariance=False))
+        solves.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        fit = fit_extrinsics(scenes)
+        fits.append(time.perf_counter() - t0)
+    ratios = ", ".join(f"{f / s:.2f}x" for f, s in zip(fits, solves))
+    print(f"{name} seeds {seed}-{seed + traffic - 1}, {fit.vehicles} vehicle poses: the one-frame solves "
+          f"{', '.join(f'{s:.2f}' for s in solves)} s, fit_extrinsics {', '.join(f'{f:.2f}' for f in fits)} s: "
+          f"{ratios}")
+
+
 def _cell(rows, key: str) -> str:
     values = [r[key] for r in rows if key in r]
     return f"{np.mean(values):.1f}" if values else "-"
@@ -99,7 +127,12 @@ def main(argv=None) -> dict:
     parser.add_argument("--error", default="0.3,0.05", help="the survey's error, DEG,M per camera axis")
     parser.add_argument("--rounds", type=int, default=2, help="fit_extrinsics' rounds")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--time", action="store_true",
+                        help="time the fit against the one-frame solves of its traffic instead (seeds from --seed)")
     args = parser.parse_args(argv)
+    if args.time:
+        _time(args.scenario, args.seed, args.traffic)
+        return {}
     rotation_deg, translation_m = (float(x) for x in args.error.split(","))
     step = args.traffic + 1
     units = [(args.scenario, args.seed + i * step, args.traffic, rotation_deg, translation_m, args.rounds)

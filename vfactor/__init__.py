@@ -31,6 +31,7 @@ from vfactor.graph import (
     insert_vehicle_values,
     observations_from_detections,
 )
+from vfactor.extrinsics_fit import ExtrinsicsFit, fit_extrinsics
 from vfactor.ground_fit import GroundFit, fit_ground_plane
 from vfactor.keypoints import KEYPOINT_NAMES, LAYERS, LEFT_RIGHT_PAIRS, NUM_KEYPOINTS
 from vfactor.keys import KeyScheme
@@ -86,6 +87,8 @@ __all__ = [
     "default_shape_model",
     "default_shape_prior",
     "fit_ground_plane",
+    "fit_extrinsics",
+    "ExtrinsicsFit",
     "hwc_factor",
     "insert_vehicle_values",
     "load_calibration",

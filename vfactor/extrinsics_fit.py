@@ -173,7 +173,7 @@ def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[F
 
 
 def _joint_fit(scenes: list[Scene], results, sigmas: dict[str, np.ndarray], start: dict[str, np.ndarray],
-               options: SolveOptions, shared_shape: bool) -> tuple[dict, dict, int, dict, int]:
+               options: SolveOptions, shared_shape: bool) -> tuple[dict, dict, int, dict, int, float]:
     """One fit of the cameras' errors (the module's docstring) to the solved vehicles of ``results``, from the
     errors ``start``, under the priors ``sigmas`` about the scenes' cameras as given.
 
@@ -297,9 +297,9 @@ def _fitted_observations(scene: Scene, frame, result: VehicleResult,
         kept = np.ones(len(obs), dtype=bool)
         kept[np.asarray(left_out, dtype=int)] = False
         obs = obs.subset(kept)
-    if np.sum(np.bincount(obs.camera_index, minlength=len(obs.cameras)) >= MIN_VIEW_KEYPOINTS) < 2:
-        return None
     seen = np.bincount(obs.camera_index, minlength=len(obs.cameras)) >= MIN_VIEW_KEYPOINTS
+    if seen.sum() < 2:
+        return None
     obs = obs.subset(seen[obs.camera_index])
     return obs.camera_scaled(result.extras.get("camera_noise_factors")).scaled(
         float(result.extras.get("noise_scale", 1.0)))

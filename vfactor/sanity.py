@@ -9,7 +9,7 @@ finds its estimate
 * finite (pose and wireframe),
 * within :data:`MAX_DISTANCE` of the nearest camera that sees it,
 * in front of every camera that sees it (the keypoints' centroid at a positive
-  depth), and not wholly outside its image (every keypoint more than
+  depth), and not wholly outside the image of one whose keypoints it keeps (every keypoint more than
   :data:`OUTSIDE_IMAGE` image sizes beyond the border),
 * upright: its body's z axis within 90 degrees of the world's (world z is up,
   docs/conventions.md; no vehicle in traffic is upside down, and a solution
@@ -100,7 +100,7 @@ def summarise_error(text) -> str:
 
 
 def check_estimate(result: VehicleResult, cameras: Iterable[Camera], covariance: bool = False,
-                   max_distance: float = MAX_DISTANCE) -> tuple[Status, str]:
+                   max_distance: float = MAX_DISTANCE, in_image: Iterable[str] | None = None) -> tuple[Status, str]:
     """The status and one-line message a solved vehicle deserves.
 
     Args:
@@ -108,6 +108,9 @@ def check_estimate(result: VehicleResult, cameras: Iterable[Camera], covariance:
         cameras: the cameras that see the vehicle (in this frame).
         covariance: a pose covariance was asked for.
         max_distance: see :data:`MAX_DISTANCE`, metres.
+        in_image: the names of those cameras in whose image the estimate must lie (:data:`OUTSIDE_IMAGE`); None:
+            every one. A solve names those whose keypoints it keeps: a camera whose every keypoint it takes for
+            an outlier (a calibration that is wrong) does not fail it.
 
     Returns:
         ``(status, message)``: the result's own status (and its message made one
@@ -150,7 +153,7 @@ def check_estimate(result: VehicleResult, cameras: Iterable[Camera], covariance:
             camera_p = camera.to_camera(world_p)
             if camera_p.mean(axis=0)[2] <= 0:
                 return Status.FAILED, f"the estimate lies behind camera '{camera.name}', which sees the vehicle"
-            away = _outside_image(camera, camera_p)
+            away = _outside_image(camera, camera_p) if in_image is None or camera.name in in_image else None
             if away is not None:
                 return Status.FAILED, (f"the estimate lies outside the image of camera '{camera.name}', which sees "
                                        f"the vehicle (its keypoints {away:.0f} image widths beyond the border): the "
@@ -166,11 +169,11 @@ def check_estimate(result: VehicleResult, cameras: Iterable[Camera], covariance:
 
 
 def checked(result: VehicleResult, cameras: Iterable[Camera], covariance: bool = False,
-            max_distance: float = MAX_DISTANCE) -> VehicleResult:
+            max_distance: float = MAX_DISTANCE, in_image: Iterable[str] | None = None) -> VehicleResult:
     """``result`` after :func:`check_estimate`: unchanged but for a one-line message when it
     passes; ``poor_fit`` with its estimate when tilted; a ``degenerate`` or ``failed`` result without pose, shape or
     covariances when not."""
-    status, message = check_estimate(result, cameras, covariance, max_distance)
+    status, message = check_estimate(result, cameras, covariance, max_distance, in_image)
     if status == result.status or status == Status.POOR_FIT:
         return result if (status, message) == (result.status, result.message) else dataclasses.replace(
             result, status=status, message=message)

@@ -440,7 +440,9 @@ def solve_observations(
             result.message = f"covariance unavailable: {exc}"
     result.box = vehicle_box(world_T_vehicle, wireframe, joint, result.extras.get("body_type_posterior"),
                              options.box_model)
-    final = checked(result, [as_given.cameras[c] for c in np.unique(as_given.camera_index)], options.covariance)
+    kept = {as_given.cameras[c].name for c in np.unique(as_given.camera_index[weights > INLIER_WEIGHT])}
+    final = checked(result, [as_given.cameras[c] for c in np.unique(as_given.camera_index)], options.covariance,
+                    in_image=kept)  # a camera whose every keypoint the solve takes for an outlier does not fail it
     if search is not None and options.poor_fit_restarts > 0 and (final.status == Status.POOR_FIT or not final.ok):
         restarted = _restarted(given, options, vehicle_id, prior, bounds, hints, resize, search, reached,
                                world_T_vehicle, fit_scale if final.ok else None, start_prior)
@@ -494,6 +496,9 @@ def _fit_score(result: VehicleResult) -> float:
 #: once, where the first solution, turned by 180 degrees, kept 24 % of them; solutions within 90 degrees of the truth
 #: keep at least 43 % (hard noise: 15 % outliers, 8 % swaps), 90 % at the median, and 0.9 % of them fewer than 60 %.
 FURTHER_START_INLIERS = 0.6
+#: An observation is an inlier of a solution where its robust-loss weight is above this (its whitened residual
+#: within the loss's threshold).
+INLIER_WEIGHT = 0.5
 
 
 def _restarted(obs: KeypointObservations, options: SolveOptions, vehicle_id: str, prior, bounds, hints, resize,
@@ -545,7 +550,7 @@ def _inlier_share(obs: KeypointObservations, estimate: gtsam.Values, keys: KeySc
     """Share of the observations whose robust-loss weight at ``estimate`` is above 0.5 (whitened residual within the
     loss's threshold)."""
     e = whitened_residuals(obs, estimate.atPose3(keys.pose_key()), wireframe_from_values(estimate, keys).vehicle_p_keypoints)
-    return float(np.mean(options.graph.loss.weight(np.linalg.norm(e, axis=1)) > 0.5))
+    return float(np.mean(options.graph.loss.weight(np.linalg.norm(e, axis=1)) > INLIER_WEIGHT))
 
 
 #: An observation whose whitened residual's square is beyond this (the 99 % point of chi2(2)) is an outlier to the
@@ -1084,7 +1089,7 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
         rows = obs.camera_index == c
         if rows.sum() < options.min_keypoints_in_one_view:
             continue
-        joint = float(np.mean(weights[rows] > 0.5))
+        joint = float(np.mean(weights[rows] > INLIER_WEIGHT))
         if joint >= DISAGREEMENT_JOINT_INLIERS or own_pose(c) is None:  # the joint solve keeps the camera: no PnP
             continue
         alone = options.graph.loss.weight(np.linalg.norm(

@@ -104,6 +104,18 @@ def _common_options(defaults: bool) -> argparse.ArgumentParser:
     return p
 
 
+def _traffic_options(p: argparse.ArgumentParser, what: str, gain: str) -> None:
+    """The options of a command that fits a rig to its traffic (fit-ground, fit-extrinsics): more scenes of the rig,
+    the keypoint network's weights, outside paths."""
+    p.add_argument("--traffic", action="append", metavar="FILE",
+                   help=f"another scene file of the same cameras whose {what} join the fit (repeatable): more "
+                   f"traffic, {gain}")
+    p.add_argument("--weights", help="keypoint-network weights for detections given as image boxes (default: the "
+                   "shipped weights; needs torch); the scene is written with its boxes as given")
+    p.add_argument("--allow-outside-paths", action="store_true",
+                   help="accept heatmap and image paths outside the scene file's folder (refused by default)")
+    p.set_defaults(save_detections=None)  # of the keypoint network's options (vfactor.cli.common.detect) only --weights
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``vfactor`` parser (the network's commands, :data:`NET_COMMANDS`, only as names: their own parser
     lives in :mod:`vfactor.net.commands`)."""
@@ -173,15 +185,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--hub-height", type=float,
                    help="height of the wheel hubs above the road, metres, for every vehicle (default: each vehicle's "
                         "body type's wheel radius, as the ground-plane factor takes it)")
-    p.add_argument("--traffic", action="append", metavar="FILE",
-                   help="another scene file of the same cameras whose tracks join the fit (repeatable): more traffic, "
-                   "a better plane")
     p.add_argument("--batch", action="store_true", help="fit to batch-smoothed tracks instead of iSAM2's")
-    p.add_argument("--weights", help="keypoint-network weights for detections given as image boxes (default: the "
-                   "shipped weights; needs torch); the scene is written with its boxes as given")
-    p.add_argument("--allow-outside-paths", action="store_true",
-                   help="accept heatmap and image paths outside the scene file's folder (refused by default)")
-    p.set_defaults(save_detections=None)  # of the keypoint network's options (vfactor.cli.common.detect) only --weights
+    _traffic_options(p, "tracks", "a better plane")
 
     p = add(
         "fit-extrinsics", help="fit a rig's camera poses to the vehicles they see; write the scene with them",
@@ -199,14 +204,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--extrinsic-sigma", metavar="DEG,M",
                    help="the survey's accuracy (degrees and metres per camera axis) of the cameras that declare no "
                    "extrinsic_sigma, e.g. 0.5,0.1 (default: those cameras are held where they are)")
-    p.add_argument("--traffic", action="append", metavar="FILE",
-                   help="another scene file of the same cameras whose vehicles join the fit (repeatable): more "
-                   "traffic, a better fit")
-    p.add_argument("--weights", help="keypoint-network weights for detections given as image boxes (default: the "
-                   "shipped weights; needs torch); the scene is written with its boxes as given")
-    p.add_argument("--allow-outside-paths", action="store_true",
-                   help="accept heatmap and image paths outside the scene file's folder (refused by default)")
-    p.set_defaults(save_detections=None)
+    _traffic_options(p, "vehicles", "a better fit")
 
     for name, text in NET_COMMANDS.items():
         p = sub.add_parser(name, help=text, add_help=False)

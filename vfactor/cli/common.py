@@ -22,7 +22,7 @@ from vfactor.sanity import one_line
 
 __all__ = ["EXIT_OK", "EXIT_INTERNAL", "EXIT_INPUT", "EXIT_UNSOLVED", "EXIT_INTERRUPTED", "EXIT_TERMINATED",
            "configure_logging", "say", "note", "output", "progress", "missing_extra", "check_positive",
-           "check_out_file", "check_out_dir", "check_same_rig", "report_unsolved", "detect", "amodal_pass",
+           "check_out_file", "check_out_dir", "check_same_rig", "rig_scenes", "report_unsolved", "detect", "amodal_pass",
            "check_amodal_pass", "check_outputs", "open_command_engine"]
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_UNSOLVED, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 3, 130, 143
@@ -164,6 +164,19 @@ def check_out_dir(path: Path) -> Path:
     path.mkdir(parents=True, exist_ok=True)
     return path
 
+
+def rig_scenes(args, why: str) -> tuple[Path, list[tuple[str, object]]]:
+    """The ``--out`` file and the (file name, scene) of SCENE and each ``--traffic`` scene of a command that fits a
+    rig to its traffic (fit-ground, fit-extrinsics), each checked to have SCENE's cameras where SCENE has them
+    (``why`` says what needs it)."""
+    from vfactor.scene import load_scene
+
+    traffic = list(args.traffic or [])
+    out = check_out_file(args.out, "--out", [("scene file", args.scene)] + [("--traffic file", t) for t in traffic])
+    scenes = [(name, load_scene(name, allow_outside_paths=args.allow_outside_paths)) for name in [args.scene, *traffic]]
+    for name, other in scenes[1:]:
+        check_same_rig(scenes[0][1], other, name, why)
+    return out, scenes
 
 def check_same_rig(scene, other, name: str, why: str) -> None:
     """Raises InputError (``--traffic``) unless ``other`` (the file ``name``) has ``scene``'s cameras where they were:

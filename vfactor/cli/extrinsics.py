@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from vfactor.cli.common import EXIT_OK, check_out_file, check_same_rig, detect, note, progress
+from vfactor.cli.common import EXIT_OK, detect, note, progress, rig_scenes
 from vfactor.cli.estimate import associate
 from vfactor.errors import CalibrationError, InputError
 
@@ -23,11 +23,9 @@ def fit_extrinsics(args) -> int:
     error and the fit's sigma as its ``extrinsic_sigma``."""
     from vfactor.camera import extrinsic_sigma
     from vfactor.extrinsics_fit import fit_extrinsics as fit
-    from vfactor.scene import load_scene, save_scene
+    from vfactor.scene import save_scene
     from vfactor.solve import SolveOptions, solve_scene
 
-    traffic = list(args.traffic or [])
-    out = check_out_file(args.out, "--out", [("scene file", args.scene)] + [("--traffic file", t) for t in traffic])
     default = None
     if args.extrinsic_sigma is not None:
         try:
@@ -40,11 +38,8 @@ def fit_extrinsics(args) -> int:
                                                   f"got {args.extrinsic_sigma!r}") from None
         if not np.all(default > 0):
             raise InputError("--extrinsic-sigma", f"expected two numbers > 0, got {args.extrinsic_sigma!r}")
-    scene = load_scene(args.scene, allow_outside_paths=args.allow_outside_paths)
-    scenes = [(args.scene, scene)] + [(t, load_scene(t, allow_outside_paths=args.allow_outside_paths))
-                                      for t in traffic]
-    for name, other in scenes[1:]:
-        check_same_rig(scene, other, name, "the cameras of one rig are fitted to its traffic")
+    out, scenes = rig_scenes(args, "the cameras of one rig are fitted to its traffic")
+    scene = scenes[0][1]
     options = SolveOptions(covariance=False)
     t0 = time.perf_counter()
     detected, results = [], []

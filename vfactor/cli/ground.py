@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import time
 
-from vfactor.cli.common import EXIT_OK, check_out_file, check_same_rig, detect, progress
+from vfactor.cli.common import EXIT_OK, detect, progress, rig_scenes
 from vfactor.cli.estimate import associate
 from vfactor.errors import InputError
 
@@ -18,21 +18,17 @@ def fit_ground(args) -> int:
     boxes through the keypoint network first, detections that name no vehicle associated), fits the road plane to
     all their tracks' hub centres and writes SCENE, as it was given, with the plane as its ``ground_plane``."""
     from vfactor.ground_fit import fit_ground_plane
-    from vfactor.scene import load_scene, save_scene
+    from vfactor.scene import save_scene
     from vfactor.solve import SolveOptions
     from vfactor.track import TrackOptions, smooth_scene, track_scene
 
-    traffic = list(args.traffic or [])
-    out = check_out_file(args.out, "--out", [("scene file", args.scene)] + [("--traffic file", t) for t in traffic])
     if args.hub_height is not None and not (args.hub_height >= 0 and args.hub_height < float("inf")):
         raise InputError("--hub-height", f"expected a non-negative number of metres, got {args.hub_height}")
-    scene = load_scene(args.scene, allow_outside_paths=args.allow_outside_paths)
-    scenes = [(args.scene, scene)] + [(t, load_scene(t, allow_outside_paths=args.allow_outside_paths))
-                                      for t in traffic]
+    out, scenes = rig_scenes(args, "a road plane is fitted to the traffic of one rig")
+    scene = scenes[0][1]
     for name, other in scenes:
         if other.ground_plane is not None:
             raise InputError("ground_plane", f"{name} gives a road plane already; remove it to fit one")
-        check_same_rig(scene, other, name, "a road plane is fitted to the traffic of one rig")
     options = TrackOptions(solve=SolveOptions(covariance=False), covariance=False)
     t0 = time.perf_counter()
     results = []

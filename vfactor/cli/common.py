@@ -22,8 +22,8 @@ from vfactor.sanity import one_line
 
 __all__ = ["EXIT_OK", "EXIT_INTERNAL", "EXIT_INPUT", "EXIT_UNSOLVED", "EXIT_INTERRUPTED", "EXIT_TERMINATED",
            "configure_logging", "say", "note", "output", "progress", "missing_extra", "check_positive",
-           "check_out_file", "check_out_dir", "check_same_rig", "rig_scenes", "report_unsolved", "detect", "amodal_pass",
-           "check_amodal_pass", "check_outputs", "open_command_engine"]
+           "check_out_file", "check_out_dir", "check_same_rig", "rig_scenes", "report_unsolved", "detect",
+           "amodal_pass", "check_amodal_pass", "check_outputs", "open_command_engine"]
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_UNSOLVED, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 3, 130, 143
 

@@ -48,7 +48,7 @@ def _draw(unit: tuple) -> dict:
     scenes = [simulate(scenario, seed=seed + i).scene for i in range(traffic)]
     surveyed = scenes[0].cameras
     fit = fit_extrinsics([dataclasses.replace(scene, cameras=surveyed) for scene in scenes], rounds=rounds)
-    out = {"poses": fit.vehicles, "cameras": {}, "rows": [], "scale": fit.residual_scale}
+    out = {"poses": fit.poses, "cameras": {}, "rows": [], "scale": fit.residual_scale}
     for label, cameras in (("surveyed", surveyed), ("fitted", fit.cameras)):
         rotation = [np.degrees(np.linalg.norm(gtsam.Rot3.Logmap(cameras[n].pose.rotation().between(
             true[n].pose.rotation())))) for n in true]
@@ -108,7 +108,7 @@ def _time(name: str, seed: int, traffic: int, repeats: int = 2) -> None:
         fit = fit_extrinsics(scenes)
         fits.append(time.perf_counter() - t0)
     ratios = ", ".join(f"{f / s:.2f}x" for f, s in zip(fits, solves))
-    print(f"{name} seeds {seed}-{seed + traffic - 1}, {fit.vehicles} vehicle poses: the one-frame solves "
+    print(f"{name} seeds {seed}-{seed + traffic - 1}, {fit.poses} vehicle poses: the one-frame solves "
           f"{', '.join(f'{s:.2f}' for s in solves)} s, fit_extrinsics {', '.join(f'{f:.2f}' for f in fits)} s: "
           f"{ratios}")
 

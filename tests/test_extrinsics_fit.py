@@ -60,7 +60,7 @@ def test_the_fit_finds_how_the_cameras_sit_against_each_other(surveyed, fitted):
     after = _relative_rotation_error_deg(fitted.cameras)
     assert before > 0.5
     assert after < 0.5 * before
-    assert fitted.vehicles >= 2 * MIN_VEHICLES and set(fitted.corrections) == set(SCENARIO.cameras)
+    assert fitted.poses >= 2 * MIN_VEHICLES and set(fitted.corrections) == set(SCENARIO.cameras)
     bound = chi2_quantile(6, 0.999)
     for name, camera in fitted.cameras.items():
         given = surveyed.scene.cameras[name]

@@ -62,7 +62,7 @@ from vfactor.wireframe import Wireframe
 
 __all__ = ["ExtrinsicsFit", "fit_extrinsics", "MIN_VEHICLES", "MIN_VIEW_KEYPOINTS", "PLAUSIBLE_CORRECTION"]
 
-#: At least this many vehicles seen by two cameras make a fit.
+#: At least this many vehicle poses (a vehicle in a frame) seen by two cameras make a fit.
 MIN_VEHICLES = 20
 #: A camera's view of a vehicle counts where it has at least this many keypoints.
 MIN_VIEW_KEYPOINTS = 4
@@ -83,7 +83,7 @@ class ExtrinsicsFit:
             translation m along them; its true pose is the given ``world_T_camera * Exp(xi)``), for the cameras
             fitted.
         covariances: camera name -> (6, 6) the marginal covariance of that error, same order.
-        vehicles: how many vehicle poses (vehicle and frame) the fit rests on.
+        poses: how many vehicle poses (a vehicle in a frame) the fit rests on.
         views: camera name -> how many of those poses it saw.
         iterations: Levenberg-Marquardt iterations.
         residual_scale: the keypoints' whitened residuals at the fit, a robust scale (1: as their sigmas say).
@@ -93,7 +93,7 @@ class ExtrinsicsFit:
     cameras: dict[str, Camera]
     corrections: dict[str, np.ndarray]
     covariances: dict[str, np.ndarray]
-    vehicles: int
+    poses: int
     views: dict[str, int]
     iterations: int
     residual_scale: float

@@ -64,7 +64,7 @@ def fit_extrinsics(args) -> int:
             print(f"camera {name}: turned {np.degrees(np.linalg.norm(xi[:3])):.2f} deg, moved "
                   f"{100 * np.linalg.norm(xi[3:]):.1f} cm; sigma {_sigma(before)} -> {_sigma(after)} "
                   f"({fitted.views[name]} views)")
-        print(f"fitted the cameras to {fitted.vehicles} vehicle poses seen by two cameras or more, of {len(scenes)} "
+        print(f"fitted the cameras to {fitted.poses} vehicle poses seen by two cameras or more, of {len(scenes)} "
               f"scene(s), solved again with the cameras as first fitted (keypoints' residual scale "
               f"{fitted.residual_scale:.2f}), {time.perf_counter() - t0:.2f} s; wrote {out}")
     return EXIT_OK

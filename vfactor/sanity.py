@@ -156,8 +156,8 @@ def check_estimate(result: VehicleResult, cameras: Iterable[Camera], covariance:
             away = _outside_image(camera, camera_p) if in_image is None or camera.name in in_image else None
             if away is not None:
                 return Status.FAILED, (f"the estimate lies outside the image of camera '{camera.name}', which sees "
-                                       f"the vehicle (its keypoints {away:.0f} image widths beyond the border): the "
-                                       "keypoints there do not fix it (a view cut by the border?)")
+                                       f"the vehicle (every keypoint {away:.1f} image sizes or more beyond the "
+                                       "border): its keypoints there do not fix it (a view cut by the border?)")
     if covariance and result.pose_covariance is None:
         why = message.removeprefix("covariance unavailable: ") if message else "not computed"
         return Status.DEGENERATE, f"no pose covariance ({summarise_error(why)})"
@@ -182,7 +182,7 @@ def checked(result: VehicleResult, cameras: Iterable[Camera], covariance: bool =
 
 
 def _outside_image(camera: Camera, camera_p: np.ndarray) -> float | None:
-    """How far (in image widths) the nearest of the keypoints ``camera_p`` (camera frame, metres) projects beyond
+    """How far (in image sizes: widths sideways, heights up and down) the nearest of the keypoints ``camera_p`` (camera frame, metres) projects beyond
     ``camera``'s image where every one projects farther than :data:`OUTSIDE_IMAGE` image sizes outside it (a pinhole
     projection: far outside the image a lens's polynomial is no guide); None where one is nearer, or the image size
     is unknown."""

@@ -139,5 +139,6 @@ def test_fit_extrinsics_bad_input_is_one_line_and_exit_2(tmp_path, capsys, surve
         assert err.startswith(f"vfactor fit-extrinsics: error: {field}") and "\n" not in err
     assert not (tmp_path / "out.json").exists()
     out = tmp_path / "out.json"
-    assert main(["fit-extrinsics", str(scene), "--extrinsic-sigma", "0.3,0.05", "--out", str(out)]) == 0
+    assert main(["fit-extrinsics", str(scene), "--extrinsic-sigma", "0.3,0.05", "--shape-per-frame",
+                 "--out", str(out)]) == 0
     assert all(camera.extrinsic_sigma is not None for camera in load_scene(out).cameras.values())

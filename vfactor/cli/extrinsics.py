@@ -15,7 +15,8 @@ __all__ = ["fit_extrinsics"]
 
 
 def fit_extrinsics(args) -> int:
-    """``vfactor fit-extrinsics SCENE --out SCENE_OUT [--traffic FILE ...] [--extrinsic-sigma DEG,M] [--weights W]``:
+    """``vfactor fit-extrinsics SCENE --out SCENE_OUT [--traffic FILE ...] [--extrinsic-sigma DEG,M] [--shape-per-frame]
+    [--weights W]``:
     solves every vehicle of SCENE and of the ``--traffic`` scenes of the same cameras one frame at a time
     (detections given as image boxes through the keypoint network first, detections that name no vehicle
     associated), fits the errors of the cameras that declare an ``extrinsic_sigma`` (or all, given
@@ -48,7 +49,7 @@ def fit_extrinsics(args) -> int:
         detected.append(found)
         results.append(solve_scene(found, options, progress=progress("solving", not args.quiet)))
     try:
-        fitted = fit(detected, results, options, default)
+        fitted = fit(detected, results, options, default, shared_shape=not args.shape_per_frame)
     except InputError as exc:
         if exc.field != "scenes":
             raise

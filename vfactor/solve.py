@@ -1119,8 +1119,9 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
                 f"which one is off; the joint solve followed {followed!r})")
     if details:
         text += "; " + "; ".join(details)
-    hint = "" if explained is not None else (" (or, where a camera is known only to a survey's accuracy, give its "
-                                             "extrinsic_sigma)")
+    hint = (" (or fit the cameras to their traffic: vfactor fit-extrinsics)" if explained is not None else
+            " (or, where a camera is known only to a survey's accuracy, give its extrinsic_sigma and fit the cameras "
+            "to their traffic: vfactor fit-extrinsics)")
     return text + ": check the cameras' world_T_camera" + hint, rejected, cut
 
 

@@ -24,8 +24,8 @@ pose ``world_T_camera * E_c``) as a variable under the prior its
 * once more (``rounds``, 2 by default), the vehicles solved again with the
   cameras as fitted: solved with the survey's cameras, their keypoints'
   noise scales are widened by the cameras' disagreement (the fit's residuals
-  came out at 0.5-0.7 of their sigmas with a survey off by 1 degree, and its
-  covariances too narrow), and their outliers and relabelled pairs chosen
+  came out at 0.51-0.69 of their sigmas with a survey off by 1 degree, and
+  its covariances too narrow), and their outliers and relabelled pairs chosen
   under it.
 
 The result's cameras are the given ones moved by their fitted errors, each
@@ -51,6 +51,7 @@ import numpy as np
 from vfactor.camera import Camera
 from vfactor.errors import InputError
 from vfactor.factors.projection import KeypointObservations, projection_factor
+from vfactor.factors.robust import RobustLoss
 from vfactor.graph import add_ground_factor, add_shape_factors, insert_vehicle_values, sized_observations
 from vfactor.keys import KeyScheme
 from vfactor.label_swaps import apply_swaps
@@ -69,6 +70,7 @@ MIN_VIEW_KEYPOINTS = 4
 #: The chi2 (6 dof) probability within which a camera's fitted error is plausible under its declared sigma; a
 #: correction beyond it is noted (the survey is further off than it says, or the camera moved).
 PLAUSIBLE_CORRECTION = 0.999
+_NO_LOSS = RobustLoss("none")
 _ERROR_KEY = "e"  # gtsam.Symbol character of the cameras' error variables (vfactor's KeyScheme does not use it)
 
 
@@ -211,9 +213,10 @@ def _joint_fit(scenes: list[Scene], results, sigmas: dict[str, np.ndarray], star
             for c in np.unique(obs.camera_index):
                 name = obs.cameras[c].name
                 views[name] += 1
-                projections.append(graph.size())
-                graph.add(projection_factor(keys.pose_key(v, f), keys.layer_keys(v), obs.subset(obs.camera_index == c),
-                                            options.graph.loss, camera_key=error_keys.get(name)))
+                view = (keys.pose_key(v, f), keys.layer_keys(v), obs.subset(obs.camera_index == c),
+                        error_keys.get(name))
+                projections.append(view)
+                graph.add(_view_factor(view, options.graph.loss))
             add_ground_factor(graph, keys, plane, v, f, options.graph, prior)
             insert_vehicle_values(values, keys, result.world_T_vehicle, None, v, f)
             count += 1
@@ -231,10 +234,18 @@ def _joint_fit(scenes: list[Scene], results, sigmas: dict[str, np.ndarray], star
     except RuntimeError as exc:
         raise InputError("scenes", f"the cameras' fit failed: {str(exc).splitlines()[0]}") from None
     corrections = {name: gtsam.Pose3.Logmap(estimate.atPose3(key)) for name, key in error_keys.items()}
-    squares = np.concatenate([np.sum(np.reshape(graph.at(i).unwhitenedError(estimate), (-1, 2)) ** 2, axis=1)
-                              for i in projections])
+    squares = np.concatenate([  # the whitened residuals themselves, without the robust loss's scaling
+        np.sum(np.reshape(_view_factor(view, _NO_LOSS).unwhitenedError(estimate), (-1, 2)) ** 2, axis=1)
+        for view in projections])
     scale = float(np.sqrt(np.median(squares) / (2.0 * np.log(2.0))))
     return corrections, covariances, count, views, int(optimizer.iterations()), scale
+
+
+def _view_factor(view: tuple, loss: RobustLoss) -> gtsam.CustomFactor:
+    """The projection factor of one camera's keypoints of one vehicle pose: ``view`` is (pose key, layer keys, those
+    observations, the camera's error key or None)."""
+    pose_key, layer_keys, obs, camera_key = view
+    return projection_factor(pose_key, layer_keys, obs, loss, camera_key=camera_key)
 
 
 def _moved(cameras: dict[str, Camera], corrections: dict[str, np.ndarray],
@@ -247,6 +258,7 @@ def _moved(cameras: dict[str, Camera], corrections: dict[str, np.ndarray],
         out[name] = dataclasses.replace(cameras[name], extrinsic_sigma=sigma,
                                         world_T_camera=cameras[name].pose.compose(gtsam.Pose3.Expmap(xi)).matrix())
     return out
+
 
 def _rig(scenes: list[Scene]) -> dict[str, Camera]:
     """The cameras of ``scenes`` (the first scene's); InputError where another scene has them elsewhere."""

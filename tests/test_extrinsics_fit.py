@@ -89,6 +89,15 @@ def test_a_camera_without_a_sigma_is_held_where_it_is(surveyed):
     assert fit.cameras["cam0"].extrinsic_sigma is None
 
 
+def test_the_vehicles_solved_on_an_engine_give_the_same_fit(surveyed):
+    from vfactor.parallel import InProcess
+
+    short = dataclasses.replace(surveyed.scene, frames=surveyed.scene.frames[:12])
+    here, there = fit_extrinsics(short), fit_extrinsics(short, engine=InProcess())
+    for name in here.corrections:
+        np.testing.assert_array_equal(here.corrections[name], there.corrections[name])
+
+
 def test_bad_input_is_refused_naming_the_field(surveyed):
     plain = dataclasses.replace(surveyed.scene, cameras={name: dataclasses.replace(c, extrinsic_sigma=None)
                                                          for name, c in surveyed.scene.cameras.items()})
@@ -134,7 +143,9 @@ def test_fit_extrinsics_bad_input_is_one_line_and_exit_2(tmp_path, capsys, surve
     for argv, field in (([str(scene)], "extrinsic_sigma"),
                         ([str(scene), "--extrinsic-sigma", "0.3"], "--extrinsic-sigma"),
                         ([str(scene), "--extrinsic-sigma", "0.3,-1"], "--extrinsic-sigma"),
-                        ([str(scene), "--extrinsic-sigma", "0.3,0.05", "--traffic", str(other)], "--traffic")):
+                        ([str(scene), "--extrinsic-sigma", "0.3,0.05", "--traffic", str(other)], "--traffic"),
+                        ([str(scene), "--extrinsic-sigma", "0.3,0.05", "--workers", "0"], "--workers"),
+                        ([str(scene), "--workers", "2", "--scheduler", "tcp://h:8786"], "--workers")):
         assert main(["fit-extrinsics", *argv, "--out", str(tmp_path / "out.json")]) == 2
         err = capsys.readouterr().err.strip()
         assert err.startswith(f"vfactor fit-extrinsics: error: {field}") and "\n" not in err

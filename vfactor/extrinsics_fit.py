@@ -112,7 +112,7 @@ class ExtrinsicsFit:
 
 def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[FrameResult]] | None = None,
                    options: SolveOptions = SolveOptions(), default_sigma: np.ndarray | None = None,
-                   shared_shape: bool = True, rounds: int = 2) -> ExtrinsicsFit:
+                   shared_shape: bool = True, rounds: int = 2, engine=None) -> ExtrinsicsFit:
     """Fits the errors of the cameras of ``scenes`` (one rig: the same cameras where each scene has them) to the
     vehicles they see (the module's docstring gives the method).
 
@@ -130,6 +130,8 @@ def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[F
         rounds: fits; each after the first solves the vehicles again with the cameras as the last one fitted them
             (the priors stay the survey's): the first fit takes the vehicles as the survey's cameras solved them,
             their noise scales widened and their outliers chosen by the cameras' disagreement.
+        engine: where the vehicles are solved (:mod:`vfactor.parallel`, e.g. a
+            :class:`~vfactor.parallel.DaskEngine`; default: in this process): the same fit. The joint fit runs here.
 
     Returns:
         :class:`ExtrinsicsFit`.
@@ -150,15 +152,15 @@ def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[F
     sigmas = _prior_sigmas(cameras, default_sigma)
     solve = dataclasses.replace(options, covariance=False)
     if results is None:
-        results = [solve_scene(scene, solve) for scene in scenes]
+        results = [solve_scene(scene, solve, engine=engine) for scene in scenes]
     elif len(results) != len(scenes):
         raise InputError("results", f"expected one list of frame results per scene ({len(scenes)}), got {len(results)}")
     corrections = {name: np.zeros(6) for name in sigmas}
     for round_ in range(rounds):
         if round_:  # the vehicles solved again with the cameras as fitted: better starts, labels, inliers
             moved = _moved(cameras, corrections)
-            results = [solve_scene(dataclasses.replace(scene, cameras={**scene.cameras, **moved}), solve)
-                       for scene in scenes]
+            results = [solve_scene(dataclasses.replace(scene, cameras={**scene.cameras, **moved}), solve,
+                                   engine=engine) for scene in scenes]
         corrections, covariances, count, views, iterations, scale = _joint_fit(scenes, results, sigmas, corrections,
                                                                                options, shared_shape)
     fitted = {**cameras, **_moved(cameras, corrections, covariances)}

@@ -204,6 +204,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--extrinsic-sigma", metavar="DEG,M",
                    help="the survey's accuracy (degrees and metres per camera axis) of the cameras that declare no "
                    "extrinsic_sigma, e.g. 0.5,0.1 (default: those cameras are held where they are)")
+    _scale_options(p, "solve the vehicles (one frame at a time, both rounds) on")
     p.add_argument("--shape-per-frame", action="store_true",
                    help="give each vehicle a shape in each frame (default: one shape per vehicle id over its frames, "
                    "as the scene format's ids follow one vehicle; for scenes whose ids are numbered per frame)")

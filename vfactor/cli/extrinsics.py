@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from vfactor.cli.common import EXIT_OK, detect, note, progress, rig_scenes
+from vfactor.cli.common import EXIT_OK, detect, note, open_command_engine, progress, rig_scenes
 from vfactor.cli.estimate import associate
 from vfactor.errors import CalibrationError, InputError
 
@@ -16,7 +16,7 @@ __all__ = ["fit_extrinsics"]
 
 def fit_extrinsics(args) -> int:
     """``vfactor fit-extrinsics SCENE --out SCENE_OUT [--traffic FILE ...] [--extrinsic-sigma DEG,M] [--shape-per-frame]
-    [--weights W]``:
+    [--workers N | --scheduler ADDRESS] [--weights W]``:
     solves every vehicle of SCENE and of the ``--traffic`` scenes of the same cameras one frame at a time
     (detections given as image boxes through the keypoint network first, detections that name no vehicle
     associated), fits the errors of the cameras that declare an ``extrinsic_sigma`` (or all, given
@@ -24,6 +24,7 @@ def fit_extrinsics(args) -> int:
     error and the fit's sigma as its ``extrinsic_sigma``."""
     from vfactor.camera import extrinsic_sigma
     from vfactor.extrinsics_fit import fit_extrinsics as fit
+    from vfactor.parallel import check_engine_options
     from vfactor.scene import save_scene
     from vfactor.solve import SolveOptions, solve_scene
 
@@ -39,21 +40,26 @@ def fit_extrinsics(args) -> int:
                                                   f"got {args.extrinsic_sigma!r}") from None
         if not np.all(default > 0):
             raise InputError("--extrinsic-sigma", f"expected two numbers > 0, got {args.extrinsic_sigma!r}")
+    check_engine_options(args.workers, args.scheduler)
     out, scenes = rig_scenes(args, "the cameras of one rig are fitted to its traffic")
     scene = scenes[0][1]
     options = SolveOptions(covariance=False)
     t0 = time.perf_counter()
-    detected, results = [], []
-    for _, other in scenes:
-        found, _ = associate(detect(other, args), args, force=False)  # detections that name no vehicle first
-        detected.append(found)
-        results.append(solve_scene(found, options, progress=progress("solving", not args.quiet)))
+    engine = open_command_engine(args.workers, args.scheduler) if args.workers or args.scheduler else None
     try:
-        fitted = fit(detected, results, options, default, shared_shape=not args.shape_per_frame)
+        detected, results = [], []
+        for _, other in scenes:
+            found, _ = associate(detect(other, args, engine), args, force=False)  # detections naming no vehicle first
+            detected.append(found)
+            results.append(solve_scene(found, options, progress=progress("solving", not args.quiet), engine=engine))
+        fitted = fit(detected, results, options, default, shared_shape=not args.shape_per_frame, engine=engine)
     except InputError as exc:
         if exc.field != "scenes":
             raise
         raise InputError(", ".join(name for name, _ in scenes), exc.problem) from None
+    finally:
+        if engine is not None:
+            engine.close()
     save_scene(dataclasses.replace(scene, cameras={name: fitted.cameras[name] for name in scene.cameras}), out)
     for message in fitted.notes:
         note(message)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from vfactor.factors.projection import KeypointObservations, whitened_pose_jacobian
+from vfactor.factors.projection import KeypointObservations, extrinsic_jacobian, whitened_pose_jacobian
 from vfactor.factors.robust import RobustLoss
 from vfactor.shape_evidence import Linearisation
 from vfactor.stats import chi2_quantile
@@ -45,26 +45,6 @@ def _declared(cameras, camera_index: np.ndarray):
         sigma = cameras[c].extrinsic_sigma
         if sigma is not None and np.any(sigma > 0):
             yield c, rows == c, sigma, sigma > 0
-
-
-def extrinsic_jacobian(pose_jacobian: np.ndarray, world_T_vehicle: gtsam.Pose3,
-                       world_T_camera: gtsam.Pose3) -> np.ndarray:
-    """(2m, 6) derivative of one camera's whitened residuals with respect to its extrinsic's error.
-
-    With the true camera ``world_T_camera * Exp(xi)``, the keypoints reach it as
-    ``Exp(-xi) camera_T_vehicle p``, which is ``camera_T_vehicle Exp(eta) p`` with
-    ``eta = -Ad(vehicle_T_camera) xi``: the camera's error acts on its residuals
-    as that change of the vehicle's pose, so their derivative is
-    ``-J_pose Ad(vehicle_T_camera)``.
-
-    Args:
-        pose_jacobian: (2m, 6) the derivative of the camera's m whitened residuals with respect to the vehicle's
-            pose (GTSAM's right perturbation of ``world_T_vehicle``, rotation first).
-        world_T_vehicle: the vehicle's pose (vehicle -> world), metres.
-        world_T_camera: the camera's pose as given (camera -> world), metres.
-    """
-    vehicle_T_camera = world_T_vehicle.inverse().compose(world_T_camera)
-    return -np.asarray(pose_jacobian, dtype=float) @ vehicle_T_camera.AdjointMap()
 
 
 def extrinsic_covariance(covariance: np.ndarray, jacobian: np.ndarray, observations: KeypointObservations,

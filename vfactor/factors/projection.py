@@ -42,7 +42,7 @@ from vfactor.factors.robust import RobustLoss
 from vfactor.factors.shape_terms import cross
 from vfactor.factors.truncation import truncated_means
 
-__all__ = ["KeypointObservations", "projection_factor", "project_keypoints", "whitened_residuals",
+__all__ = ["KeypointObservations", "projection_factor", "project_keypoints", "whitened_residuals", "extrinsic_jacobian",
            "whitened_pose_jacobian", "whitened_residuals_numpy", "robust_costs"]
 
 _MIN_DEPTH = 0.05  # metres; points closer to (or behind) a camera are clamped to this depth
@@ -342,6 +342,26 @@ def robust_costs(obs: KeypointObservations, world_T_vehicle: np.ndarray, vehicle
     return costs
 
 
+def extrinsic_jacobian(pose_jacobian: np.ndarray, world_T_vehicle: gtsam.Pose3,
+                       world_T_camera: gtsam.Pose3) -> np.ndarray:
+    """(2m, 6) derivative of one camera's whitened residuals with respect to its extrinsic's error.
+
+    With the true camera ``world_T_camera * Exp(xi)``, the keypoints reach it as
+    ``Exp(-xi) camera_T_vehicle p``, which is ``camera_T_vehicle Exp(eta) p`` with
+    ``eta = -Ad(vehicle_T_camera) xi``: the camera's error acts on its residuals
+    as that change of the vehicle's pose, so their derivative is
+    ``-J_pose Ad(vehicle_T_camera)``.
+
+    Args:
+        pose_jacobian: (2m, 6) the derivative of the camera's m whitened residuals with respect to the vehicle's
+            pose (GTSAM's right perturbation of ``world_T_vehicle``, rotation first).
+        world_T_vehicle: the vehicle's pose (vehicle -> world), metres.
+        world_T_camera: the camera's pose as given (camera -> world), metres.
+    """
+    vehicle_T_camera = world_T_vehicle.inverse().compose(world_T_camera)
+    return -np.asarray(pose_jacobian, dtype=float) @ vehicle_T_camera.AdjointMap()
+
+
 def _error(obs: KeypointObservations, loss_id: int, threshold: float, keys: tuple, offset: bool,
            world_T_camera: gtsam.Pose3 | None, out: tuple, this: gtsam.CustomFactor, values: gtsam.Values, H):
     """The factor's whitened residuals (and Jacobians into ``H``). What does not change is taken once, when the
@@ -376,8 +396,8 @@ def _error(obs: KeypointObservations, loss_id: int, threshold: float, keys: tupl
             H[0] = H_pose @ vehicle_T_seen.inverse().AdjointMap()
         else:
             H[0] = H_pose
-        if world_T_camera is not None:  # E Exp(d): T Exp(-Ad(T^-1 world_T_camera) d); the left factor leaves the rest
-            H[len(keys) - 1] = -H_pose @ gtsam.Pose3(T).inverse().compose(world_T_camera).AdjointMap()
+        if world_T_camera is not None:  # E Exp(d) moves the vehicle the kernel projected as the camera's error does
+            H[len(keys) - 1] = extrinsic_jacobian(H_pose, gtsam.Pose3(T), world_T_camera)
     return r
 
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from vfactor.factors.projection import KeypointObservations, extrinsic_jacobian, whitened_pose_jacobian
 from vfactor.factors.robust import RobustLoss
-from vfactor.shape_evidence import Linearisation
+from vfactor.shape_evidence import Linearisation, considered_covariance
 from vfactor.stats import chi2_quantile
 
 __all__ = ["declares_extrinsics", "extrinsic_jacobian", "extrinsic_covariance", "extrinsic_pose_covariance",
@@ -68,12 +68,9 @@ def extrinsic_covariance(covariance: np.ndarray, jacobian: np.ndarray, observati
         world_T_vehicle: the solution's pose (vehicle -> world), metres.
     """
     A = np.asarray(jacobian, dtype=float)
-    out = np.zeros((A.shape[1], A.shape[1]))
-    for c, rows, sigma, _ in _declared(observations.cameras, observations.camera_index):
-        A_c = A[rows]
-        G = covariance @ (A_c.T @ extrinsic_jacobian(A_c[:, :6], world_T_vehicle, observations.cameras[c].pose))
-        out += (G * sigma ** 2) @ G.T  # G: (n, 6)
-    return 0.5 * (out + out.T)
+    return considered_covariance(covariance, A, (
+        (rows, extrinsic_jacobian(A[rows, :6], world_T_vehicle, observations.cameras[c].pose), sigma ** 2)
+        for c, rows, sigma, _ in _declared(observations.cameras, observations.camera_index)))
 
 
 def explained_residuals(obs: KeypointObservations, world_T_vehicle: gtsam.Pose3, vehicle_p: np.ndarray,
@@ -203,9 +200,7 @@ def extrinsic_pose_covariance(obs: KeypointObservations, world_T_vehicle: gtsam.
         H_inv = np.linalg.inv(A.T @ A)
     except np.linalg.LinAlgError:
         return out
-    for c, rows, sigma, _ in _declared(obs.cameras, obs.camera_index[inlier]):
-        A_c = A[rows]
-        G = H_inv @ (A_c.T @ extrinsic_jacobian(A_c, world_T_vehicle, obs.cameras[c].pose))
-        out += (G * sigma ** 2) @ G.T
-    out = 0.5 * (out + out.T)
+    out = considered_covariance(H_inv, A, (
+        (rows, extrinsic_jacobian(A[rows], world_T_vehicle, obs.cameras[c].pose), sigma ** 2)
+        for c, rows, sigma, _ in _declared(obs.cameras, obs.camera_index[inlier])))
     return out if np.all(np.isfinite(out)) else np.zeros((6, 6))

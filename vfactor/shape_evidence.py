@@ -28,7 +28,7 @@ from vfactor.shape_model import ANY, ShapeModel, ShapePrior
 from vfactor.stats import chi2_quantile, f_quantile
 
 __all__ = ["Linearisation", "linearise", "median_scale", "noise_scale", "inlier_noise_scale", "camera_noise_factors",
-           "covariance_inflation", "sandwich_covariance",
+           "covariance_inflation", "sandwich_covariance", "considered_covariance",
            "covariance_upper_bound", "symmetric_eigen", "shape_information", "BodyTypeChoice", "choose_body_type",
            "TrackShape", "track_shape", "NOISE_SCALE_RANGE"]
 
@@ -375,6 +375,36 @@ def sandwich_covariance(covariance: np.ndarray, jacobian: np.ndarray, rhs: np.nd
     AP = AP.reshape(-1, P.shape[0])
     return P - AP.T @ AP + gP.T @ gP
 
+
+def considered_covariance(covariance: np.ndarray, jacobian: np.ndarray, errors) -> np.ndarray:
+    """The covariance a least-squares solution takes from errors it does not estimate ("consider" parameters).
+
+    An error ``d`` (covariance ``V``) moves some of the whitened residuals by ``D d``; the solution moves by
+    ``G d``, ``G = P A_d^T D`` (``P = H^-1`` the solution's covariance, ``A_d`` the whitened Jacobian's rows of
+    those residuals), so that independent errors give
+
+    ``C = sum_d G_d V_d G_d^T``.
+
+    The one-frame solve's detector errors shaped like a change of shape and cameras' extrinsic errors
+    (:func:`vfactor.solve.detector_shape_covariance`, :func:`vfactor.extrinsics.extrinsic_covariance`) and a
+    track pose's cameras' errors and detector offsets (:func:`vfactor.extrinsics.extrinsic_pose_covariance`,
+    ``vfactor.track._considered_offsets``) are this.
+
+    Args:
+        covariance: (m, m) ``P``, the variables in the order of the Jacobian's columns.
+        jacobian: (r, m) the whitened Jacobian of the residuals the errors move.
+        errors: (rows, derivative, variance) per error: a boolean mask of the Jacobian's rows it moves, their
+            (k_rows, k) derivative ``D`` by it, and its (k,) variances or (k, k) covariance ``V``.
+
+    Returns:
+        (m, m) ``C``, symmetric.
+    """
+    A = np.asarray(jacobian, dtype=float)
+    out = np.zeros((A.shape[1], A.shape[1]))
+    for rows, derivative, variance in errors:
+        G = covariance @ (A[rows].T @ derivative)
+        out += G @ (np.diag(variance) if np.ndim(variance) == 1 else variance) @ G.T
+    return 0.5 * (out + out.T)
 
 def covariance_upper_bound(model: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, float]:
     """A covariance at least as wide as both ``model`` and ``other`` (in the Loewner order), the least such in ``model``'s

@@ -49,7 +49,7 @@ from vfactor.observations import Detection, Frame, Scene, class_hints
 from vfactor.parallel import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
-from vfactor.shape_evidence import (NOISE_SCALE_RANGE, choose_body_type, covariance_inflation,
+from vfactor.shape_evidence import (NOISE_SCALE_RANGE, choose_body_type, considered_covariance, covariance_inflation,
                                     covariance_upper_bound, inlier_noise_scale, linearise, noise_scale,
                                     sandwich_covariance, shape_information)
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
@@ -689,16 +689,11 @@ def detector_shape_covariance(covariance: np.ndarray, jacobian: np.ndarray, obse
         sigmas: camera name -> ``sigma_c`` (metres; :func:`vfactor.graph.detector_shape_sigmas`).
     """
     A = np.asarray(jacobian, dtype=float)
-    out = np.zeros((A.shape[1], A.shape[1]))
     rows = np.repeat(observations.camera_index, 2)
-    for c in np.unique(observations.camera_index):  # the cameras that see the vehicle, not the scene's
-        sigma = sigmas.get(observations.cameras[c].name)
-        if not sigma:
-            continue
-        A_c = A[rows == c]
-        G = covariance @ (A_c.T @ A_c[:, 6:])  # (42, 36)
-        out += sigma ** 2 * (G @ G.T)
-    return 0.5 * (out + out.T)
+    seen = [(rows == c, sigmas.get(observations.cameras[c].name))  # the cameras that see the vehicle, not the scene's
+            for c in np.unique(observations.camera_index)]
+    return considered_covariance(covariance, A, ((mine, A[mine, 6:], np.full(36, sigma ** 2))
+                                                 for mine, sigma in seen if sigma))
 
 
 def _widened_by_residuals(joint: np.ndarray, inflation: float, linear: gtsam.GaussianFactorGraph, weight: float,

@@ -66,7 +66,7 @@ from vfactor.observations import Detection, Frame, Scene, class_hints
 from vfactor.parallel import InProcess
 from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
-from vfactor.shape_evidence import heavier_kind, median_scale, mixed_kinds, track_shape
+from vfactor.shape_evidence import considered_covariance, heavier_kind, median_scale, mixed_kinds, track_shape
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
 from vfactor.solve import GROSS_OUTLIER_SIGMAS, INLIER_BOUND, POOR_FIT_SCALE, SolveOptions, solve_observations
 from vfactor.wireframe import Wireframe
@@ -1351,20 +1351,18 @@ def _considered_offsets(obs: KeypointObservations, offsets: dict[str, int], worl
     residuals, jacobian = whitened_pose_jacobian(obs, world_T_vehicle, points)
     inlier = np.sum(residuals ** 2, axis=1) < INLIER_BOUND
     A = jacobian[inlier].reshape(-1, 6)
-    H = A.T @ A
     try:
-        H_inv = np.linalg.inv(H)
+        H_inv = np.linalg.inv(A.T @ A)
     except np.linalg.LinAlgError:
         return np.zeros((6, 6))
     names = [camera.name for camera in obs.cameras]
-    out = np.zeros((6, 6))
+    rows = np.repeat(obs.camera_index[inlier], 2)
     priors: dict[float, np.ndarray] = {}  # sigma -> the offset prior's covariance (cameras of one detector share it)
-    for name, sigma in sigmas.items():
+    for sigma in sigmas.values():
         if sigma not in priors:
             priors[sigma] = np.linalg.inv(detector_offset_information(sigma, points, config.shape_sigma_size_exponent))
-        A_c = jacobian[inlier & (obs.camera_index == names.index(name))].reshape(-1, 6)
-        S = H_inv @ (A_c.T @ A_c)
-        out += S @ priors[sigma] @ S.T
+    out = considered_covariance(H_inv, A, ((rows == names.index(name), A[rows == names.index(name)], priors[sigma])
+                                           for name, sigma in sigmas.items()))  # an offset moves the pose it sees
     return out if np.all(np.isfinite(out)) else np.zeros((6, 6))
 
 

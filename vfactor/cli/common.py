@@ -22,8 +22,8 @@ from vfactor.sanity import one_line
 
 __all__ = ["EXIT_OK", "EXIT_INTERNAL", "EXIT_INPUT", "EXIT_UNSOLVED", "EXIT_INTERRUPTED", "EXIT_TERMINATED",
            "configure_logging", "say", "note", "output", "progress", "missing_extra", "check_positive",
-           "check_out_file", "check_out_dir", "check_same_rig", "rig_scenes", "report_unsolved", "detect",
-           "amodal_pass", "check_amodal_pass", "check_outputs", "open_command_engine"]
+           "check_out_file", "check_out_dir", "check_same_rig", "degrees_metres", "rig_scenes", "report_unsolved",
+           "detect", "amodal_pass", "check_amodal_pass", "check_outputs", "open_command_engine"]
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_UNSOLVED, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 3, 130, 143
 
@@ -177,6 +177,19 @@ def rig_scenes(args, why: str) -> tuple[Path, list[tuple[str, object]]]:
     for name, other in scenes[1:]:
         check_same_rig(scenes[0][1], other, name, why)
     return out, scenes
+
+def degrees_metres(text: str, option: str) -> tuple[float, float]:
+    """An option's ``DEG,M`` (degrees and metres per camera axis: a camera pose's error) as two numbers.
+
+    Raises:
+        InputError: (``option``) not two numbers separated by a comma.
+    """
+    try:
+        rotation, translation = (float(part) for part in text.split(","))
+    except ValueError:
+        raise InputError(option, f"expected DEG,M (degrees and metres per camera axis), e.g. 0.3,0.05, "
+                                 f"got {text!r}") from None
+    return rotation, translation
 
 def check_same_rig(scene, other, name: str, why: str) -> None:
     """Raises InputError (``--traffic``) unless ``other`` (the file ``name``) has ``scene``'s cameras where they were:

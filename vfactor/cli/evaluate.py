@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from vfactor.cli.common import (EXIT_OK, check_out_file, check_positive, missing_extra, open_command_engine, output,
-                                progress)
+from vfactor.cli.common import (EXIT_OK, check_out_file, check_positive, degrees_metres, missing_extra,
+                                open_command_engine, output, progress)
 from vfactor.errors import InputError
 from vfactor.jsonio import write_text_atomic
 
@@ -270,11 +270,7 @@ def _extrinsic_error(text: str, declared: bool):
     from vfactor.errors import ScenarioError
     from vfactor.sim import ExtrinsicError
 
-    try:
-        rotation, translation = (float(part) for part in text.split(","))
-    except ValueError:
-        raise InputError("--extrinsic-error", f"expected DEG,M (degrees and metres), e.g. 0.3,0.05, "
-                                              f"got {text!r}") from None
+    rotation, translation = degrees_metres(text, "--extrinsic-error")
     try:
         return ExtrinsicError(rotation, translation, declared)
     except ScenarioError as exc:

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from vfactor.cli.common import EXIT_OK, detect, note, open_command_engine, progress, rig_scenes
+from vfactor.cli.common import EXIT_OK, degrees_metres, detect, note, open_command_engine, progress, rig_scenes
 from vfactor.cli.estimate import associate
 from vfactor.errors import CalibrationError, InputError
 
@@ -31,13 +31,9 @@ def fit_extrinsics(args) -> int:
     default = None
     if args.extrinsic_sigma is not None:
         try:
-            rotation, translation = (float(part) for part in args.extrinsic_sigma.split(","))
-            default = extrinsic_sigma(rotation, translation, "--extrinsic-sigma")
+            default = extrinsic_sigma(*degrees_metres(args.extrinsic_sigma, "--extrinsic-sigma"), "--extrinsic-sigma")
         except CalibrationError as exc:
             raise InputError("--extrinsic-sigma", f"{exc.field.split('.')[-1]}: {exc.problem}") from None
-        except ValueError:
-            raise InputError("--extrinsic-sigma", "expected DEG,M (degrees and metres per camera axis, e.g. 0.5,0.1), "
-                                                  f"got {args.extrinsic_sigma!r}") from None
         if not np.all(default > 0):
             raise InputError("--extrinsic-sigma", f"expected two numbers > 0, got {args.extrinsic_sigma!r}")
     check_engine_options(args.workers, args.scheduler)

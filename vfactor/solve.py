@@ -1089,9 +1089,9 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
             continue
         alone = options.graph.loss.weight(np.linalg.norm(
             whitened_residuals(obs.subset(rows), own_pose(c), mean.vehicle_p_keypoints), axis=1))
-        if float(np.mean(alone > 0.5)) - joint < DISAGREEMENT_MARGIN - 1e-9:
+        if float(np.mean(alone > INLIER_WEIGHT)) - joint < DISAGREEMENT_MARGIN - 1e-9:
             continue
-        if explained is not None and float(np.mean(explained()[rows] > 0.5)) >= EXPLAINED_INLIERS:
+        if explained is not None and float(np.mean(explained()[rows] > INLIER_WEIGHT)) >= EXPLAINED_INLIERS:
             continue  # off by about its declared extrinsic error
         (cut if _view_cut(obs, rows) else rejected).append(camera.name)
     if not rejected:

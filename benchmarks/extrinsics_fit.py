@@ -12,6 +12,9 @@ tracked (iSAM2, smoothed) with the surveyed cameras, the fitted ones and the tru
 * the later scene: one-frame and tracked translation errors (cm, the keypoints' centroid) per body type and per
   camera count, and the one-frame pose NEES (the fitted cameras carry the fit's sigma).
 
+Every solve, the fit's included, takes the shape model learnt without any vehicle of the draw's scenes
+(:func:`vfactor.evaluation.held_out_model`).
+
 Run: ``python benchmarks/extrinsics_fit.py --scenario library_tracks --seed 400 --draws 8 [--traffic 2]
 [--error 0.3,0.05] [--rounds 2] [--workers 2]``; ``--time``: what the fit costs against the one-frame
 solves of its traffic (``--scenario``, ``--seed``, ``--traffic``).
@@ -34,7 +37,7 @@ def _draw(unit: tuple) -> dict:
     """One draw: fit the cameras to ``traffic`` scenes of seed ``seed`` on, evaluate on the next seed's scene."""
     import gtsam
 
-    from vfactor.evaluation import body_type_of
+    from vfactor.evaluation import body_type_of, held_out_model
     from vfactor.extrinsics_fit import fit_extrinsics
     from vfactor.metrics import pose_nees
     from vfactor.sim import load_scenario, simulate
@@ -45,9 +48,12 @@ def _draw(unit: tuple) -> dict:
     name, seed, traffic, rotation_deg, translation_m, rounds = unit
     scenario = dataclasses.replace(load_scenario(name), extrinsic_error=ExtrinsicError(rotation_deg, translation_m))
     true = dict(scenario.cameras)
-    scenes = [simulate(scenario, seed=seed + i).scene for i in range(traffic)]
-    surveyed = scenes[0].cameras
-    fit = fit_extrinsics([dataclasses.replace(scene, cameras=surveyed) for scene in scenes], rounds=rounds)
+    sims = [simulate(scenario, seed=seed + i) for i in range(traffic + 1)]  # the traffic fitted to, then the later
+    later = sims[-1]
+    model = held_out_model(*{v.preset for sim in sims for frame in sim.truth for v in frame.values()})
+    surveyed = sims[0].scene.cameras
+    fit = fit_extrinsics([dataclasses.replace(sim.scene, cameras=surveyed) for sim in sims[:-1]], rounds=rounds,
+                         model=model)
     out = {"poses": fit.poses, "cameras": {}, "rows": [], "scale": fit.residual_scale}
     for label, cameras in (("surveyed", surveyed), ("fitted", fit.cameras)):
         rotation = [np.degrees(np.linalg.norm(gtsam.Rot3.Logmap(cameras[n].pose.rotation().between(
@@ -62,11 +68,10 @@ def _draw(unit: tuple) -> dict:
     for n, xi in fit.corrections.items():
         left = gtsam.Pose3.Logmap(surveyed[n].pose.inverse().compose(true[n].pose)) - xi
         out["nees"].append(float(left @ np.linalg.solve(fit.covariances[n], left)))
-    later = simulate(scenario, seed=seed + traffic)
     for label, cameras in (("surveyed", surveyed), ("fitted", fit.cameras), ("true", true)):
         scene = dataclasses.replace(later.scene, cameras=cameras)
-        frames = solve_scene(scene, SolveOptions())
-        tracked = track_scene(scene, TrackOptions(covariance=False)).frames
+        frames = solve_scene(scene, SolveOptions(), prior=model)
+        tracked = track_scene(scene, TrackOptions(covariance=False), prior=model).frames
         for f, (one, smoothed) in enumerate(zip(frames, tracked)):
             by_id = {v.id: v for v in smoothed.vehicles}
             for v in one.vehicles:

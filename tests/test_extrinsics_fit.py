@@ -89,11 +89,12 @@ def test_a_camera_without_a_sigma_is_held_where_it_is(surveyed):
     assert fit.cameras["cam0"].extrinsic_sigma is None
 
 
-def test_the_vehicles_solved_on_an_engine_give_the_same_fit(surveyed):
+def test_the_vehicles_solved_on_an_engine_with_a_model_given_give_the_same_fit(surveyed):
     from vfactor.parallel import InProcess
+    from vfactor.shape_model import default_shape_model
 
     short = dataclasses.replace(surveyed.scene, frames=surveyed.scene.frames[:12])
-    here, there = fit_extrinsics(short), fit_extrinsics(short, engine=InProcess())
+    here, there = fit_extrinsics(short), fit_extrinsics(short, engine=InProcess(), model=default_shape_model())
     for name in here.corrections:
         np.testing.assert_array_equal(here.corrections[name], there.corrections[name])
 

@@ -57,6 +57,7 @@ from vfactor.keys import KeyScheme
 from vfactor.label_swaps import apply_swaps
 from vfactor.observations import Scene
 from vfactor.result import FrameResult, Status, VehicleResult
+from vfactor.shape_model import ShapeModel, default_shape_model
 from vfactor.solve import SolveOptions
 from vfactor.stats import chi2_quantile
 from vfactor.wireframe import Wireframe
@@ -112,7 +113,8 @@ class ExtrinsicsFit:
 
 def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[FrameResult]] | None = None,
                    options: SolveOptions = SolveOptions(), default_sigma: np.ndarray | None = None,
-                   shared_shape: bool = True, rounds: int = 2, engine=None) -> ExtrinsicsFit:
+                   shared_shape: bool = True, rounds: int = 2, engine=None,
+                   model: ShapeModel | None = None) -> ExtrinsicsFit:
     """Fits the errors of the cameras of ``scenes`` (one rig: the same cameras where each scene has them) to the
     vehicles they see (the module's docstring gives the method).
 
@@ -132,6 +134,8 @@ def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[F
             their noise scales widened and their outliers chosen by the cameras' disagreement.
         engine: where the vehicles are solved (:mod:`vfactor.parallel`, e.g. a
             :class:`~vfactor.parallel.DaskEngine`; default: in this process): the same fit. The joint fit runs here.
+        model: the body-type shape model of the solves and the fit (default:
+            :func:`~vfactor.shape_model.default_shape_model`).
 
     Returns:
         :class:`ExtrinsicsFit`.
@@ -143,6 +147,7 @@ def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[F
     """
     from vfactor.solve import solve_scene
 
+    model = default_shape_model() if model is None else model
     if not isinstance(rounds, int) or isinstance(rounds, bool) or rounds < 1:
         raise InputError("rounds", f"expected an integer >= 1, got {rounds!r}")
     scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
@@ -152,7 +157,7 @@ def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[F
     sigmas = _prior_sigmas(cameras, default_sigma)
     solve = dataclasses.replace(options, covariance=False)
     if results is None:
-        results = [solve_scene(scene, solve, engine=engine) for scene in scenes]
+        results = [solve_scene(scene, solve, engine=engine, prior=model) for scene in scenes]
     elif len(results) != len(scenes):
         raise InputError("results", f"expected one list of frame results per scene ({len(scenes)}), got {len(results)}")
     corrections = {name: np.zeros(6) for name in sigmas}
@@ -160,9 +165,9 @@ def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[F
         if round_:  # the vehicles solved again with the cameras as fitted: better starts, labels, inliers
             moved = _moved(cameras, corrections)
             results = [solve_scene(dataclasses.replace(scene, cameras={**scene.cameras, **moved}), solve,
-                                   engine=engine) for scene in scenes]
+                                   engine=engine, prior=model) for scene in scenes]
         corrections, covariances, count, views, iterations, scale = _joint_fit(scenes, results, sigmas, corrections,
-                                                                               options, shared_shape)
+                                                                               options, shared_shape, model)
     fitted = {**cameras, **_moved(cameras, corrections, covariances)}
     notes = []
     plausible = chi2_quantile(6, PLAUSIBLE_CORRECTION)
@@ -177,17 +182,16 @@ def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[F
 
 
 def _joint_fit(scenes: list[Scene], results, sigmas: dict[str, np.ndarray], start: dict[str, np.ndarray],
-               options: SolveOptions, shared_shape: bool) -> tuple[dict, dict, int, dict, int, float]:
+               options: SolveOptions, shared_shape: bool,
+               model: ShapeModel) -> tuple[dict, dict, int, dict, int, float]:
     """One fit of the cameras' errors (the module's docstring) to the solved vehicles of ``results``, from the
-    errors ``start``, under the priors ``sigmas`` about the scenes' cameras as given.
+    errors ``start``, under the priors ``sigmas`` about the scenes' cameras as given, each track's shape under
+    ``model``'s prior of its body type.
 
     Returns:
         (camera name -> fitted error (6,), -> its covariance (6, 6); the vehicle poses fitted; camera name -> how
         many of them it saw; LM iterations; the robust scale of the keypoints' whitened residuals at the fit).
     """
-    from vfactor.shape_model import default_shape_model
-
-    model = default_shape_model()
     keys = KeyScheme()
     error_keys = {name: gtsam.symbol(_ERROR_KEY, i) for i, name in enumerate(sorted(sigmas))}
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()

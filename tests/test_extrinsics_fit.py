@@ -83,7 +83,8 @@ def test_other_traffic_of_the_rig_is_solved_closer_with_the_fitted_cameras(surve
 def test_a_camera_without_a_sigma_is_held_where_it_is(surveyed):
     cameras = dict(surveyed.scene.cameras)
     cameras["cam0"] = dataclasses.replace(cameras["cam0"], extrinsic_sigma=None)
-    fit = fit_extrinsics(dataclasses.replace(surveyed.scene, cameras=cameras))
+    fit = fit_extrinsics(dataclasses.replace(surveyed.scene, cameras=cameras, frames=surveyed.scene.frames[:12]),
+                         rounds=1)
     assert "cam0" not in fit.corrections and set(fit.corrections) == {"cam1", "cam2"}
     np.testing.assert_array_equal(fit.cameras["cam0"].world_T_camera, cameras["cam0"].world_T_camera)
     assert fit.cameras["cam0"].extrinsic_sigma is None
@@ -94,7 +95,8 @@ def test_the_vehicles_solved_on_an_engine_with_a_model_given_give_the_same_fit(s
     from vfactor.shape_model import default_shape_model
 
     short = dataclasses.replace(surveyed.scene, frames=surveyed.scene.frames[:12])
-    here, there = fit_extrinsics(short), fit_extrinsics(short, engine=InProcess(), model=default_shape_model())
+    here = fit_extrinsics(short, rounds=1)
+    there = fit_extrinsics(short, rounds=1, engine=InProcess(), model=default_shape_model())
     for name in here.corrections:
         np.testing.assert_array_equal(here.corrections[name], there.corrections[name])
 
@@ -122,16 +124,17 @@ def test_bad_input_is_refused_naming_the_field(surveyed):
 
 def test_fit_extrinsics_writes_the_scene_with_the_fitted_cameras(tmp_path, capsys, surveyed):
     scene, out = tmp_path / "scene.json", tmp_path / "fitted.json"
-    save_scene(surveyed.scene, scene)
+    given = dataclasses.replace(surveyed.scene, frames=surveyed.scene.frames[:12])  # enough poses, and quick
+    save_scene(given, scene)
     assert main(["fit-extrinsics", str(scene), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "camera cam0: turned" in printed and f"wrote {out}" in printed
     written = load_scene(out)
-    assert len(written.frames) == len(surveyed.scene.frames)  # the scene as it was, its cameras fitted
+    assert len(written.frames) == len(given.frames)  # the scene as it was, its cameras fitted
     for name, camera in written.cameras.items():
-        given = surveyed.scene.cameras[name]
-        assert np.abs(camera.world_T_camera - given.world_T_camera).max() > 1e-5
-        assert np.all(camera.extrinsic_sigma <= given.extrinsic_sigma + 1e-12)
+        before = given.cameras[name]
+        assert np.abs(camera.world_T_camera - before.world_T_camera).max() > 1e-5
+        assert np.all(camera.extrinsic_sigma <= before.extrinsic_sigma + 1e-12)
 
 
 def test_fit_extrinsics_bad_input_is_one_line_and_exit_2(tmp_path, capsys, surveyed):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import gtsam
 import numpy as np
 import pytest
@@ -73,9 +75,22 @@ def world_T_vehicle():
 def pytest_addoption(parser):
     parser.addoption("--fuzz-long", action="store_true", default=False,
                      help="run the long fuzzing profile (over 5,000 cases; also VFACTOR_FUZZ=long)")
+    parser.addoption("--slow", action="store_true", default=False,
+                     help="also run the tests marked slow (statistical checks of several seconds each whose code "
+                          "paths quicker tests also run; also VFACTOR_SLOW=1)")
 
 
 def pytest_configure(config):
     from tests import fuzzing
 
     fuzzing.configure(long=config.getoption("--fuzz-long"))
+    config.addinivalue_line("markers", "slow: a statistical check of several seconds, run with --slow or VFACTOR_SLOW=1")
+
+
+def pytest_collection_modifyitems(config, items):
+    if config.getoption("--slow") or os.environ.get("VFACTOR_SLOW", "") not in ("", "0"):
+        return
+    skip = pytest.mark.skip(reason="slow: run with --slow (or VFACTOR_SLOW=1)")
+    for item in items:
+        if "slow" in item.keywords:
+            item.add_marker(skip)

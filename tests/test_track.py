@@ -391,6 +391,7 @@ def _with_detector_bias(sim, bias_sigma, seed: int, shape_sigma: float | None = 
     return _seen_moved(sim, lambda d: bias[d.vehicle], bias_sigma=tuple(bias_sigma), shape_sigma=shape_sigma)
 
 
+@pytest.mark.slow  # 6 s each; test_detector_offsets_model_errors_that_repeat_from_frame_to_frame runs the offsets
 @pytest.mark.parametrize("plane", [False, True])
 def test_a_detector_bias_keeps_track_covariances_near_errors_that_no_frame_averages(plane):
     """Each vehicle seen moved by one rigid motion in every frame and camera (the detector's bias): a track that

@@ -84,6 +84,8 @@ def build() -> dict:
     model = models["shape_model"]
     for body_type in {body_type for body_type, _ in model.components()}:  # each type's prior with its Cholesky
         model.prior(body_type).evidence_terms()  # factor; the wider ones are derived from it on first use
+    for body_type in model.types:  # which types a solve starts again from (a process's first solve paid 1 ms)
+        model.far_from_pooled(body_type)
     return models
 
 

@@ -25,8 +25,8 @@ import numpy as np
 
 from vfactor.errors import CalibrationError
 
-__all__ = ["Camera", "DIST_SIZES", "LENS_FISHEYE", "LENS_FULL", "LENS_MODELS", "LENS_PLAIN", "as_pose3",
-           "check_rigid_transform", "extrinsic_sigma", "project_pinhole", "tilt_matrix"]
+__all__ = ["Camera", "DIST_SIZES", "LENS_FISHEYE", "LENS_FULL", "LENS_MODELS", "LENS_PLAIN", "SAME_PLACE", "as_pose3",
+           "check_rigid_transform", "extrinsic_sigma", "moved", "project_pinhole", "tilt_matrix"]
 
 _ROTATION_TOL = 1e-4
 
@@ -93,6 +93,16 @@ def extrinsic_sigma(rotation_deg, translation_m, field_name: str = "extrinsic_si
             raise CalibrationError(f"{field_name}.{name}", f"expected one or three finite numbers >= 0, got {value!r}")
         parts.append(np.broadcast_to(x.ravel() * unit, (3,)))
     return np.concatenate(parts)
+
+
+#: Largest difference of two ``world_T_camera`` matrices' entries (rotation, metres) at which they are one camera's
+#: pose: a rig's cameras in several scene files (the traffic ``vfactor fit-extrinsics`` and ``fit-ground`` pool).
+SAME_PLACE = 1e-3
+
+
+def moved(camera: "Camera", other: "Camera") -> float:
+    """The largest difference of the two cameras' ``world_T_camera`` entries (compare with :data:`SAME_PLACE`)."""
+    return float(np.abs(np.asarray(camera.world_T_camera) - np.asarray(other.world_T_camera)).max())
 
 
 def as_pose3(matrix) -> gtsam.Pose3:

@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
-from vfactor.camera import Camera
+from vfactor.camera import SAME_PLACE, Camera, moved
 from vfactor.errors import InputError
 from vfactor.factors.projection import KeypointObservations, projection_factor
 from vfactor.factors.robust import RobustLoss
@@ -274,10 +274,10 @@ def _rig(scenes: list[Scene]) -> dict[str, Camera]:
             if name not in cameras:
                 cameras[name] = camera
                 continue
-            moved = np.abs(np.asarray(camera.world_T_camera) - np.asarray(cameras[name].world_T_camera)).max()
-            if moved > 1e-3:
+            difference = moved(camera, cameras[name])
+            if difference > SAME_PLACE:
                 raise InputError(f"scenes[{i}].cameras.{name}", "not where the first scene has it (world_T_camera "
-                                 f"differs by up to {moved:.3g}): the cameras of one rig are fitted together")
+                                 f"differs by up to {difference:.3g}): the cameras of one rig are fitted together")
     return cameras
 
 

@@ -14,8 +14,7 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
+from vfactor.camera import SAME_PLACE, moved
 from vfactor.errors import InputError
 from vfactor.result import Status
 from vfactor.sanity import one_line
@@ -198,10 +197,10 @@ def check_same_rig(scene, other, name: str, why: str) -> None:
         raise InputError("--traffic", f"{name} has cameras {sorted(other.cameras)}, the scene {sorted(scene.cameras)}: "
                                       f"{why}")
     for camera, given in scene.cameras.items():
-        moved = np.abs(np.asarray(other.cameras[camera].world_T_camera) - np.asarray(given.world_T_camera)).max()
-        if moved > 1e-3:
+        difference = moved(other.cameras[camera], given)
+        if difference > SAME_PLACE:
             raise InputError("--traffic", f"{name}: camera {camera!r} is not where the scene has it "
-                                          f"(world_T_camera differs by up to {moved:.3g}): one rig only")
+                                          f"(world_T_camera differs by up to {difference:.3g}): one rig only")
 
 def report_unsolved(results, scene, quiet: bool) -> int:
     """Prints a line per vehicle that was not solved or fits its keypoints poorly (status ``poor_fit``: solved, with a

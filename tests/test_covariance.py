@@ -274,3 +274,67 @@ def test_smoothed_track_covariances_are_near_the_errors():
     assert summary["count"] > 120
     assert 0.8 * 6 <= summary["mean"] <= 1.25 * 6
     assert 0.90 <= summary["under_95"] <= 0.99
+
+
+def _linear_shape_problem(seed: int = 0):
+    """A linear least-squares problem in a pose (6) and a shape (36) with a shape prior: (A, R, prior mean, P)."""
+    from vfactor.shape_model import ShapePrior
+
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(30, 42))  # keypoints that reach the pose and part of the shape
+    A[:, 6 + 18:] *= 0.05
+    L = rng.normal(size=(36, 36)) * 0.02
+    prior = ShapePrior(mean=rng.normal(size=(12, 3)), covariance=L @ L.T + 1e-3 * np.eye(36))
+    R = prior.sqrt_information()
+    H = A.T @ A
+    H[6:, 6:] += R.T @ R
+    return A, prior, np.linalg.inv(H)
+
+
+def test_prior_misfit_is_nothing_for_a_shape_the_prior_describes_and_the_nearest_type_decides():
+    from vfactor.shape_evidence import prior_misfit_covariance
+    from vfactor.shape_model import ShapePrior
+
+    _, prior, P = _linear_shape_problem()
+    C, excess = prior_misfit_covariance(P, prior, 1.0, np.asarray(prior.mean), 6.0)
+    assert excess == 0.0 and not C.any()
+    far = np.asarray(prior.mean) + 5 * np.sqrt(np.diag(prior.covariance)).reshape(12, 3)  # d^2 = 5^2 36 >> chi2(6)
+    C, excess = prior_misfit_covariance(P, prior, 1.0, far, 6.0)
+    assert excess > 0
+    # the prior's mean error a^2 Sigma carried through least squares: a^2 P[:, shape] R^T R P[shape, :]
+    Hp = prior.sqrt_information().T @ prior.sqrt_information()
+    np.testing.assert_allclose(C, excess * P[:, 6:] @ Hp @ P[6:, :], rtol=1e-9, atol=1e-15)
+    # a body type whose region holds the shape: nothing, whichever prior pulls the solution
+    there = ShapePrior(mean=far, covariance=prior.covariance)
+    C, excess = prior_misfit_covariance(P, prior, 1.0, far, 6.0, references=[prior, there])
+    assert excess == 0.0 and not C.any()
+
+
+def test_prior_misfit_covariance_is_the_spread_of_solutions_whose_prior_mean_errs():
+    """Least squares with a prior whose mean is off by ``d ~ N(0, a^2 Sigma)``: the solutions spread by
+    ``P + a^2 G Sigma G^T`` (4000 draws of the keypoints' noise and of ``d``)."""
+    from vfactor.shape_evidence import prior_misfit_covariance
+
+    A, prior, P = _linear_shape_problem(1)
+    R = prior.sqrt_information()
+    mean = np.asarray(prior.mean).ravel()
+    rng = np.random.default_rng(2)
+    x_true = np.r_[rng.normal(size=6), mean]
+    a2 = 3.0
+    shape = (mean + np.sqrt(a2 + 1) * np.linalg.cholesky(prior.covariance) @ rng.normal(size=36)).reshape(12, 3)
+    C, excess = prior_misfit_covariance(P, prior, 1.0, shape, 36.0, level=0.5)
+    errors = []
+    for _ in range(4000):
+        d = np.sqrt(a2) * np.linalg.cholesky(prior.covariance) @ rng.normal(size=36)  # the vehicle's own shape
+        truth = x_true.copy()
+        truth[6:] = mean + d
+        y = A @ truth + rng.normal(size=len(A))
+        x = P @ (A.T @ y + np.r_[np.zeros(6), R.T @ R @ mean])
+        errors.append(x - truth)
+    errors = np.array(errors)
+    # the solution's error about the vehicle's own shape: P's prior part counts d as drawn from Sigma, not a^2 Sigma
+    G = P[:, 6:] @ R.T @ R
+    expected = P + (a2 - 1.0) * G @ prior.covariance @ G.T
+    empirical = np.cov(errors.T)
+    assert np.abs(np.diag(empirical) / np.diag(expected) - 1).max() < 0.15
+    np.testing.assert_allclose(C / excess, G @ prior.covariance @ G.T, rtol=1e-9, atol=1e-15)

@@ -16,6 +16,7 @@ docs/factors.md gives the maths.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -28,7 +29,8 @@ from vfactor.shape_model import ANY, ShapeModel, ShapePrior
 from vfactor.stats import chi2_quantile, f_quantile
 
 __all__ = ["Linearisation", "linearise", "median_scale", "noise_scale", "inlier_noise_scale", "camera_noise_factors",
-           "covariance_inflation", "sandwich_covariance", "considered_covariance",
+           "covariance_inflation", "sandwich_covariance", "considered_covariance", "prior_misfit_covariance",
+           "PRIOR_MISFIT_LEVEL",
            "covariance_upper_bound", "symmetric_eigen", "shape_information", "BodyTypeChoice", "choose_body_type",
            "TrackShape", "track_shape", "NOISE_SCALE_RANGE"]
 
@@ -405,6 +407,60 @@ def considered_covariance(covariance: np.ndarray, jacobian: np.ndarray, errors) 
         G = covariance @ (A[rows].T @ derivative)
         out += G @ (np.diag(variance) if np.ndim(variance) == 1 else variance) @ G.T
     return 0.5 * (out + out.T)
+
+#: A solved shape further from its prior than this quantile of chi2(p) (p: the shape parameters the keypoints
+#: determine) is taken as one the prior does not describe (:func:`prior_misfit_covariance`).
+PRIOR_MISFIT_LEVEL = 0.95
+
+
+def prior_misfit_covariance(covariance: np.ndarray, prior, weight: float, vehicle_p_keypoints: np.ndarray,
+                            shape_parameters: float, references=(),
+                            level: float = PRIOR_MISFIT_LEVEL) -> tuple[np.ndarray, float]:
+    """The covariance a solution takes from a shape prior that does not describe the vehicle, and the excess.
+
+    The posterior covariance holds where the vehicle is drawn from the prior. A
+    vehicle unlike those the prior was learnt from (a shape of another design,
+    keypoints placed by another convention) is pulled towards the prior's mean
+    by more than its covariance says: the prior's mean error, read as a
+    consider parameter with covariance ``a^2 Sigma_prior``, moves the prior's
+    whitened residuals by ``-R d`` and the solution by ``G d``,
+    ``G = -P[:, shape] R^T R`` (:func:`considered_covariance`). ``a^2`` is read
+    off the solution: with the vehicle drawn from a body type's prior, the
+    solved shape's squared Mahalanobis distance ``d^2`` from that prior's mean
+    is about ``chi2(p)`` (``p`` the shape parameters the keypoints determine,
+    the hat matrix's trace less the pose's 6; the prior keeps the others at its
+    mean), so ``a^2 = max(0, min_k d_k^2 / chi2_level(p) - 1)`` over the
+    ``references`` (a shape model's body types; none given: the prior itself):
+    nothing for a shape within some type's ``level`` region, the excess beyond
+    the nearest one otherwise (docs/factors.md, "Covariances", item 8). The
+    graph's prior, a mixture of the types' moment-matched, is wider than any
+    of them between types, and a shape between them is one the model describes.
+
+    Args:
+        covariance: (42, 42) ``P``, the solution's covariance of pose (6) and shape (36, the layers' keypoints in
+            the keypoint order).
+        prior: the :class:`~vfactor.shape_model.ShapePrior` of the graph, with ``weight`` multiplying its
+            information: what pulls the solution.
+        vehicle_p_keypoints: (12, 3) the solved shape, metres.
+        shape_parameters: ``p``; below 1, 1.
+        references: the priors whose regions describe the vehicles the model knows (each body type's own).
+        level: the quantile of ``chi2(p)`` within which a prior is taken to describe the vehicle.
+
+    Returns:
+        ((42, 42) the covariance to add, zero within the region; ``a^2``).
+    """
+    shape = np.asarray(vehicle_p_keypoints, dtype=float).ravel()
+    nearest = min(float(np.sum((reference.sqrt_information() @ (shape - np.asarray(reference.mean).ravel())) ** 2))
+                  for reference in (references or (prior,)))
+    excess = nearest / chi2_quantile(round(max(float(shape_parameters), 1.0), 1), level) - 1.0
+    if not excess > 0:
+        return np.zeros((42, 42)), 0.0
+    R = prior.sqrt_information() * math.sqrt(weight)
+    jacobian = np.zeros((36, 42))
+    jacobian[:, 6:] = R
+    every = np.ones(36, dtype=bool)
+    return considered_covariance(covariance, jacobian, [(every, -R, excess * np.linalg.inv(R.T @ R))]), excess
+
 
 def covariance_upper_bound(model: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, float]:
     """A covariance at least as wide as both ``model`` and ``other`` (in the Loewner order), the least such in ``model``'s

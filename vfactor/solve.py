@@ -51,7 +51,7 @@ from vfactor.result import FrameResult, Status, VehicleResult
 from vfactor.sanity import checked, summarise_error
 from vfactor.shape_evidence import (NOISE_SCALE_RANGE, choose_body_type, considered_covariance, covariance_inflation,
                                     covariance_upper_bound, inlier_noise_scale, linearise, noise_scale,
-                                    sandwich_covariance, shape_information)
+                                    prior_misfit_covariance, sandwich_covariance, shape_information)
 from vfactor.shape_model import HwcBounds, ShapeModel, ShapePrior, resolve_shape_prior
 from vfactor.wireframe import Wireframe
 
@@ -317,6 +317,7 @@ def solve_observations(
             as_given, obs, resized = sized, apply_swaps(sized, swaps) if swaps else sized, change
     extras = {}
     nominal = obs
+    graph_prior = first_prior  # the shape prior of the graph the estimate is the solution of
     if refining:
         try:  # at other sigmas than the first solution's: one LM at them first (_rerefined)
             best, obs, extras, refined_prior = (_refine if resized is None else _rerefined)(
@@ -326,6 +327,7 @@ def solve_observations(
             (as_given, obs), resized = unsized, None  # the first solve's own sigmas
             nominal = obs
         else:
+            graph_prior = refined_prior
             if (options.relabel_swaps and extras["noise_scale"] > SWAP_SEARCH_SCALE
                     and len(np.unique(nominal.camera_index)) >= 2):
                 best, obs, nominal, extras, refined_prior, found, hypotheses = _searched_swaps(
@@ -335,6 +337,7 @@ def solve_observations(
             if fit_scale > REFIT_SCALE and options.graph.loss.name != "none":  # least squares asked: as it is
                 best, obs, nominal, extras, refined_prior, left_out = _refitted_without_gross_outliers(
                     best, obs, nominal, extras, refined_prior, options, model, hints, keys, bounds, terms, hwc)
+            graph_prior = refined_prior
     estimate, error, iterations, hit_limit, graph = best
     pose_key = keys.pose_key()
     world_T_vehicle = estimate.atPose3(pose_key)
@@ -412,7 +415,7 @@ def solve_observations(
     joint = None
     if options.covariance:
         try:
-            covariance_graph, inflation, inliers, covariance_scale = _covariance_graph(
+            covariance_graph, inflation, inliers, covariance_scale, parameters = _covariance_graph(
                 graph, obs, nominal.camera_scaled(extras.get("camera_noise_factors")),
                 float(extras.get("noise_scale", 1.0)), estimate, keys, options)
             linear = covariance_graph.linearize(estimate)  # once: the marginals and the sandwich's residuals
@@ -434,6 +437,12 @@ def solve_observations(
                     joint = joint + through
             if declares_extrinsics(inliers.cameras):  # their errors, through the fit
                 joint = joint + extrinsic_covariance(marginal, linear.at(0).jacobian()[0], inliers, world_T_vehicle)
+            if parameters is not None:  # a shape the prior does not describe (item 8)
+                misfit, excess = prior_misfit_covariance(
+                    inflation * marginal, graph_prior, options.graph.shape_prior_weight, wireframe.vehicle_p_keypoints,
+                    parameters - 6.0, [model.prior(t) for t in model.types] if model is not None else ())
+                joint = joint + misfit
+                result.extras["prior_misfit"] = excess
             result.pose_covariance = joint[:6, :6].copy()
             result.keypoint_covariances_world = keypoint_covariances(joint, keys, world_T_vehicle, wireframe)
         except (RuntimeError, np.linalg.LinAlgError) as exc:
@@ -566,10 +575,12 @@ MIN_SCALE_CANDIDATES = 6
 
 def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservations, nominal: KeypointObservations,
                       scale: float, estimate: gtsam.Values, keys: KeyScheme,
-                      options: SolveOptions) -> tuple[gtsam.NonlinearFactorGraph, float, KeypointObservations, float]:
+                      options: SolveOptions) -> tuple[gtsam.NonlinearFactorGraph, float, KeypointObservations, float,
+                                                      float | None]:
     """The graph whose marginals, times the returned factor, are the result's covariances, with that factor, the
-    observations of its projection factor (the inliers, at the covariances' sigmas) and their noise scale (what
+    observations of its projection factor (the inliers, at the covariances' sigmas), their noise scale (what
     the nominal sigmas are multiplied by; calibrated ones are not narrowed by it: ``scale`` without
+    ``options.estimate_noise``) and the parameters the keypoints determine (the hat matrix's trace; None without
     ``options.estimate_noise``).
 
     * **Inliers at full weight.** The Gauss-Newton information of a robust
@@ -610,7 +621,7 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
     pose_key, layer_keys = keys.pose_key(), keys.layer_keys(0)
     world_T_vehicle = estimate.atPose3(pose_key)
     points = wireframe_from_values(estimate, keys).vehicle_p_keypoints
-    inflation, noise = 1.0, scale
+    inflation, noise, parameters = 1.0, scale, None
     if options.estimate_noise:
         floored = nominal.with_min_sigma(options.graph.covariance_min_pixel_sigma)
         obs = floored.scaled(scale)
@@ -625,7 +636,7 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
         raw = projection_factor(pose_key, layer_keys, fitted, RobustLoss("none"))
         at_scale.replace(0, raw)
         lin = with_extrinsics(linearise(at_scale, raw, None, estimate, keys), fitted, world_T_vehicle)
-        relative, _, dof = inlier_noise_scale(whitened, lin)
+        relative, parameters, dof = inlier_noise_scale(whitened, lin)
         inflation, noise = covariance_inflation(dof), scale * relative
         calibrated = nominal.calibrated
         if calibrated is not None and noise < 1.0:  # calibrated sigmas are not narrowed
@@ -644,7 +655,7 @@ def _covariance_graph(graph: gtsam.NonlinearFactorGraph, obs: KeypointObservatio
     inliers = obs.subset(within)
     out = copy_graph(graph)
     out.replace(0, projection_factor(pose_key, layer_keys, inliers, RobustLoss("none")))
-    return out, inflation, inliers, noise
+    return out, inflation, inliers, noise, parameters
 
 
 def detector_shape_variance(obs: KeypointObservations, vehicle_p_keypoints: np.ndarray | None = None,

@@ -58,7 +58,7 @@ from vfactor.wireframe import Wireframe
 log = logging.getLogger(__name__)
 
 __all__ = ["SolveOptions", "solve_vehicle", "solve_observations", "solve_frame", "solve_scene", "iter_solve_scene",
-           "POOR_FIT_SCALE",
+           "POOR_FIT_SCALE", "RESCUE_SCALE",
            "pose_shape_covariance", "keypoint_covariances", "detector_shape_variance",
            "detector_shape_covariance"]
 
@@ -452,6 +452,7 @@ def solve_observations(
     kept = {as_given.cameras[c].name for c in np.unique(as_given.camera_index[weights > INLIER_WEIGHT])}
     final = checked(result, [as_given.cameras[c] for c in np.unique(as_given.camera_index)], options.covariance,
                     in_image=kept)  # a camera whose every keypoint the solve takes for an outlier does not fail it
+    first = final
     if search is not None and options.poor_fit_restarts > 0 and (final.status == Status.POOR_FIT or not final.ok):
         restarted = _restarted(given, options, vehicle_id, prior, bounds, hints, resize, search, reached,
                                world_T_vehicle, fit_scale if final.ok else None, start_prior)
@@ -466,6 +467,22 @@ def solve_observations(
         for body_type in far:
             final = _typed_start(final, body_type, given, options, vehicle_id, prior, bounds, initial, hints, resize,
                                  model)
+    return _rescued(first, final)
+
+
+def _rescued(first: VehicleResult, final: VehicleResult) -> VehicleResult:
+    """``final``, ``poor_fit`` where it is another start's solution of a vehicle whose first solution fitted poorly
+    (``fit_noise_scale`` at least :data:`POOR_FIT_SCALE`) and it fits no better than :data:`RESCUE_SCALE`: two
+    basins that both fit poorly do not say which is right."""
+    before, after = first.extras.get("fit_noise_scale"), final.extras.get("fit_noise_scale")
+    if (final is first or final.status != Status.CONVERGED or before is None or after is None
+            or before < POOR_FIT_SCALE or after < RESCUE_SCALE):
+        return final
+    final.status = Status.POOR_FIT
+    note = (f"poor fit: the keypoints fit {after:.3g} times worse than their sigmas in the best basin found, "
+            f"{before:.3g} in the first (another start's solution is taken where it fits below {RESCUE_SCALE:g}); "
+            "the estimate may be grossly wrong and its covariance too narrow")
+    final.message = f"{note}; {final.message}" if final.message else note
     return final
 
 
@@ -903,6 +920,11 @@ def _rerefined(refined, obs: KeypointObservations, options: SolveOptions, model:
 #: more than 30 degrees off; at paper-like noise (3 %, 5 % outliers) none of 840 reached 1.4. A detector whose sigmas are half its
 #: real errors makes every vehicle a poor fit: its sigmas are wrong (docs/reliability.md).
 POOR_FIT_SCALE = 2.0
+#: A poor fit (at least :data:`POOR_FIT_SCALE`) that a further start (a restart, or a far type's start) solves in
+#: another basin is ``converged`` only where that solution fits below this: a basin that fits a little under the
+#: threshold is no answer to which basin is right (hard noise, library_2cam seeds 489-513 and 599-628: three such
+#: solutions at 1.59-1.99, 23-36 degrees off, where the first fit 2.0-3.3; one at 1.6, 4.6 degrees off).
+RESCUE_SCALE = 1.5
 
 
 #: The refined solution searches for left/right swaps the relabelling missed (:func:`_searched_swaps`) when its noise

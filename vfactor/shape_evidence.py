@@ -433,8 +433,9 @@ def prior_misfit_covariance(covariance: np.ndarray, prior, weight: float, vehicl
     ``references`` (a shape model's body types; none given: the prior itself):
     nothing for a shape within some type's ``level`` region, the excess beyond
     the nearest one otherwise (docs/factors.md, "Covariances", item 8). The
-    graph's prior, a mixture of the types' moment-matched, is wider than any
-    of them between types, and a shape between them is one the model describes.
+    graph's prior, the types' priors moment-matched into one, is wider than
+    any of them between types; a shape between two types is one the model
+    describes.
 
     Args:
         covariance: (42, 42) ``P``, the solution's covariance of pose (6) and shape (36, the layers' keypoints in

@@ -924,8 +924,9 @@ def _rerefined(refined, obs: KeypointObservations, options: SolveOptions, model:
 POOR_FIT_SCALE = 2.0
 #: A poor fit (at least :data:`POOR_FIT_SCALE`) that a further start (a restart, or a far type's start) solves in
 #: another basin is ``converged`` only where that solution fits below this: a basin that fits a little under the
-#: threshold is no answer to which basin is right (hard noise, library_2cam seeds 489-513 and 599-628: three such
-#: solutions at 1.59-1.99, 23-36 degrees off, where the first fit 2.0-3.3; one at 1.6, 4.6 degrees off).
+#: threshold is no answer to which basin is right (hard noise, library_2cam seeds 489-513: a Passat and a Superb at
+#: 1.59 and 1.99, 23 and 25 degrees off, where the first fit 2.1 and 3.3; seeds 489-513 and 599-628: two CAD cars at
+#: 1.60 and 1.98, 5 and 7 degrees off, are now poor fits too).
 RESCUE_SCALE = 1.5
 #: A further start's solution of a poor fit replaces the first only where its ``fit_noise_scale`` is lower by more
 #: than this factor: about one standard deviation of a scale estimated from some 30 degrees of freedom

@@ -84,7 +84,8 @@ def pytest_configure(config):
     from tests import fuzzing
 
     fuzzing.configure(long=config.getoption("--fuzz-long"))
-    config.addinivalue_line("markers", "slow: a statistical check of several seconds, run with --slow or VFACTOR_SLOW=1")
+    config.addinivalue_line("markers",
+                            "slow: a statistical check of several seconds, run with --slow or VFACTOR_SLOW=1")
 
 
 def pytest_collection_modifyitems(config, items):

@@ -57,6 +57,7 @@ from vfactor.keys import KeyScheme
 from vfactor.label_swaps import apply_swaps
 from vfactor.observations import Scene
 from vfactor.result import FrameResult, Status, VehicleResult
+from vfactor.shape_evidence import median_scale
 from vfactor.shape_model import ShapeModel, default_shape_model
 from vfactor.solve import SolveOptions
 from vfactor.stats import chi2_quantile
@@ -163,8 +164,8 @@ def fit_extrinsics(scenes: Scene | Sequence[Scene], results: Sequence[Sequence[F
     corrections = {name: np.zeros(6) for name in sigmas}
     for round_ in range(rounds):
         if round_:  # the vehicles solved again with the cameras as fitted: better starts, labels, inliers
-            moved = _moved(cameras, corrections)
-            results = [solve_scene(dataclasses.replace(scene, cameras={**scene.cameras, **moved}), solve,
+            fitted = _moved(cameras, corrections)
+            results = [solve_scene(dataclasses.replace(scene, cameras={**scene.cameras, **fitted}), solve,
                                    engine=engine, prior=model) for scene in scenes]
         corrections, covariances, count, views, iterations, scale = _joint_fit(scenes, results, sigmas, corrections,
                                                                                options, shared_shape, model)
@@ -243,8 +244,7 @@ def _joint_fit(scenes: list[Scene], results, sigmas: dict[str, np.ndarray], star
     squares = np.concatenate([  # the whitened residuals themselves, without the robust loss's scaling
         np.sum(np.reshape(_view_factor(view, _NO_LOSS).unwhitenedError(estimate), (-1, 2)) ** 2, axis=1)
         for view in projections])
-    scale = float(np.sqrt(np.median(squares) / (2.0 * np.log(2.0))))
-    return corrections, covariances, count, views, int(optimizer.iterations()), scale
+    return corrections, covariances, count, views, int(optimizer.iterations()), median_scale(squares)
 
 
 def _view_factor(view: tuple, loss: RobustLoss) -> gtsam.CustomFactor:

@@ -43,7 +43,7 @@ from typing import Iterable
 
 import numpy as np
 
-from vfactor.camera import Camera
+from vfactor.camera import Camera, project_pinhole
 from vfactor.factors.body_frame import turned_front_to_back, upright
 from vfactor.result import Status, VehicleResult
 
@@ -182,19 +182,18 @@ def checked(result: VehicleResult, cameras: Iterable[Camera], covariance: bool =
 
 
 def _outside_image(camera: Camera, camera_p: np.ndarray) -> float | None:
-    """How far (in image sizes: widths sideways, heights up and down) the nearest of the keypoints ``camera_p`` (camera frame, metres) projects beyond
-    ``camera``'s image where every one projects farther than :data:`OUTSIDE_IMAGE` image sizes outside it (a pinhole
-    projection: far outside the image a lens's polynomial is no guide); None where one is nearer, or the image size
-    is unknown."""
+    """How far (in image sizes: widths sideways, heights up and down) the nearest of the keypoints ``camera_p``
+    (camera frame, metres) projects beyond ``camera``'s image where every one projects farther than
+    :data:`OUTSIDE_IMAGE` image sizes outside it (the ideal pinhole: far outside the image a lens's polynomial is no
+    guide); None where one is nearer, or the image size is unknown."""
     if camera.image_size is None:
         return None
     width, height = camera.image_size
-    z = camera_p[:, 2]
-    if np.any(z <= 0):  # a keypoint at or behind the camera's plane projects anywhere: not judged
+    if np.any(camera_p[:, 2] <= 0):  # a keypoint at or behind the camera's plane projects anywhere: not judged
         return None
     K = np.asarray(camera.K, dtype=float)
-    u = K[0, 0] * camera_p[:, 0] / z + K[0, 1] * camera_p[:, 1] / z + K[0, 2]
-    v = K[1, 1] * camera_p[:, 1] / z + K[1, 2]
+    uv, _ = project_pinhole(camera_p, K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2], jacobian=False)
+    u, v = uv[:, 0], uv[:, 1]
     beyond = np.maximum.reduce([-u / width, (u - width) / width, -v / height, (v - height) / height])
     nearest = float(beyond.min())
     return nearest if nearest > OUTSIDE_IMAGE else None

@@ -460,7 +460,8 @@ def prior_misfit_covariance(covariance: np.ndarray, prior, weight: float, vehicl
     jacobian = np.zeros((36, 42))
     jacobian[:, 6:] = R
     every = np.ones(36, dtype=bool)
-    return considered_covariance(covariance, jacobian, [(every, -R, excess * np.linalg.inv(R.T @ R))]), excess
+    sigma = np.asarray(prior.covariance, dtype=float) / weight  # the prior's covariance in the graph
+    return considered_covariance(covariance, jacobian, [(every, -R, excess * sigma)]), excess
 
 
 def covariance_upper_bound(model: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, float]:

@@ -104,9 +104,12 @@ def _common_options(defaults: bool) -> argparse.ArgumentParser:
     return p
 
 
-def _traffic_options(p: argparse.ArgumentParser, what: str, gain: str) -> None:
-    """The options of a command that fits a rig to its traffic (fit-ground, fit-extrinsics): more scenes of the rig,
-    the keypoint network's weights, outside paths."""
+def _rig_fit_options(p: argparse.ArgumentParser, scene: str, out: str, what: str, gain: str) -> None:
+    """The arguments of a command that fits a rig to its traffic (fit-ground, fit-extrinsics): SCENE (``scene``
+    says what it must hold), ``--out`` (``out``: what is written), more scenes of the rig, the keypoint network's
+    weights, outside paths."""
+    p.add_argument("scene", help=f"scene file (JSON, docs/scene-format.md) {scene}")
+    p.add_argument("--out", required=True, help=f"scene file to write: SCENE with {out} (atomically)")
     p.add_argument("--traffic", action="append", metavar="FILE",
                    help=f"another scene file of the same cameras whose {what} join the fit (repeatable): more "
                    f"traffic, {gain}")
@@ -115,6 +118,7 @@ def _traffic_options(p: argparse.ArgumentParser, what: str, gain: str) -> None:
     p.add_argument("--allow-outside-paths", action="store_true",
                    help="accept heatmap and image paths outside the scene file's folder (refused by default)")
     p.set_defaults(save_detections=None)  # of the keypoint network's options (vfactor.cli.common.detect) only --weights
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``vfactor`` parser (the network's commands, :data:`NET_COMMANDS`, only as names: their own parser
@@ -180,13 +184,11 @@ def build_parser() -> argparse.ArgumentParser:
         "height, roll and pitch to the road (docs/factors.md, \"A plane nobody surveyed\"; docs/results.md, \"The "
         "road plane from the traffic\").",
     )
-    p.add_argument("scene", help="scene file (JSON, docs/scene-format.md) without a ground_plane")
-    p.add_argument("--out", required=True, help="scene file to write: SCENE with the fitted ground_plane (atomically)")
+    _rig_fit_options(p, "without a ground_plane", "the fitted ground_plane", "tracks", "a better plane")
     p.add_argument("--hub-height", type=float,
                    help="height of the wheel hubs above the road, metres, for every vehicle (default: each vehicle's "
                         "body type's wheel radius, as the ground-plane factor takes it)")
     p.add_argument("--batch", action="store_true", help="fit to batch-smoothed tracks instead of iSAM2's")
-    _traffic_options(p, "tracks", "a better plane")
 
     p = add(
         "fit-extrinsics", help="fit a rig's camera poses to the vehicles they see; write the scene with them",
@@ -199,8 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
         "their traffic\"). Cameras that declare no extrinsic_sigma are held where they are, unless "
         "--extrinsic-sigma gives them one.",
     )
-    p.add_argument("scene", help="scene file (JSON, docs/scene-format.md); its cameras declare an extrinsic_sigma")
-    p.add_argument("--out", required=True, help="scene file to write: SCENE with the fitted cameras (atomically)")
+    _rig_fit_options(p, "whose cameras declare an extrinsic_sigma", "the fitted cameras", "vehicles", "a better fit")
     p.add_argument("--extrinsic-sigma", metavar="DEG,M",
                    help="the survey's accuracy (degrees and metres per camera axis) of the cameras that declare no "
                    "extrinsic_sigma, e.g. 0.5,0.1 (default: those cameras are held where they are)")
@@ -208,7 +209,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--shape-per-frame", action="store_true",
                    help="give each vehicle a shape in each frame (default: one shape per vehicle id over its frames, "
                    "as the scene format's ids follow one vehicle; for scenes whose ids are numbered per frame)")
-    _traffic_options(p, "vehicles", "a better fit")
 
     for name, text in NET_COMMANDS.items():
         p = sub.add_parser(name, help=text, add_help=False)

@@ -177,6 +177,7 @@ def rig_scenes(args, why: str) -> tuple[Path, list[tuple[str, object]]]:
         check_same_rig(scenes[0][1], other, name, why)
     return out, scenes
 
+
 def degrees_metres(text: str, option: str) -> tuple[float, float]:
     """An option's ``DEG,M`` (degrees and metres per camera axis: a camera pose's error) as two numbers.
 
@@ -190,6 +191,7 @@ def degrees_metres(text: str, option: str) -> tuple[float, float]:
                                  f"got {text!r}") from None
     return rotation, translation
 
+
 def check_same_rig(scene, other, name: str, why: str) -> None:
     """Raises InputError (``--traffic``) unless ``other`` (the file ``name``) has ``scene``'s cameras where they were:
     one rig (``why`` says what needs it)."""
@@ -201,6 +203,7 @@ def check_same_rig(scene, other, name: str, why: str) -> None:
         if difference > SAME_PLACE:
             raise InputError("--traffic", f"{name}: camera {camera!r} is not where the scene has it "
                                           f"(world_T_camera differs by up to {difference:.3g}): one rig only")
+
 
 def report_unsolved(results, scene, quiet: bool) -> int:
     """Prints a line per vehicle that was not solved or fits its keypoints poorly (status ``poor_fit``: solved, with a

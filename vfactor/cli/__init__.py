@@ -334,7 +334,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--levels",
                    help="frames, association: keypoint noise levels, comma-separated, of clean, paper, hard, "
                    "noisy, noisy_hard (6 %% of the box: twice the solve's nominal sigma), sharp (1 %%: a good "
-                   "detector) (default: clean, paper, hard for frames; the scenario's own, the paper's, for "
+                   "detector), gross (25 %% outliers), sharp_hard (1 %% with hard's gross errors), occluded (35 %% "
+                   "missing) (default: clean, paper, hard for frames; the scenario's own, the paper's, for "
                    "association)")
     p.add_argument("--frames", type=int, help="number of scenes or frames (default: the scenario's)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")

@@ -119,7 +119,9 @@ class AssociationOptions:
         max_track_residual: see ``min_track_frames``.
         min_hit_ratio: a track never seen by two cameras at once must also be seen in this share of the frames
             from its first to its last (false detections chained by the linking come and go).
-        solve: settings of the single-view and joint solves (no covariances).
+        solve: settings of the single-view and joint solves (no covariances, and no further starts for a poor
+            fit, ``poor_fit_restarts=0``: each solve is a hypothesis, most poor fits are detections of different
+            vehicles, and the vehicles found are solved again in full by whoever takes the association).
     """
 
     gate_distance: float = 8.0
@@ -143,7 +145,7 @@ class AssociationOptions:
     single_view_weight: float = 0.1
     single_view_depth: float = 0.1
     tentative_missed: float = 0.3
-    solve: SolveOptions = field(default_factory=lambda: SolveOptions(covariance=False))
+    solve: SolveOptions = field(default_factory=lambda: SolveOptions(covariance=False, poor_fit_restarts=0))
 
     def __post_init__(self):
         for name in ("gate_distance", "gate_cost", "gate_cost_weak", "quick_gate", "strong_keypoints",

@@ -407,10 +407,8 @@ def solve_observations(
                     alone.extras["outliers_left_out"] = rows[np.asarray(alone.extras["outliers_left_out"], dtype=int)]
                 return alone
         failed = VehicleResult(vehicle_id, Status.FAILED, message=problem, extras={"disagreeing_cameras": rejected})
-        every = None if search is None else StartSearch(given, mean, options.graph.loss,
-                                                           options.min_keypoints_in_one_view, True)
-        return _agreeing_restart(failed, given, options, vehicle_id, prior, bounds, hints, resize, every,
-                                 world_T_vehicle, start_prior)
+        return failed if search is None else _agreeing_restart(  # no start search: solved from a given pose
+            failed, given, options, vehicle_id, prior, bounds, hints, resize, mean, world_T_vehicle, start_prior)
     if cut:  # a view cut by the image border: a detector's keypoints there may be a whole vehicle drawn in the part seen
         result.extras["disagreeing_cut_cameras"] = cut
         note = (f"the keypoints of camera(s) {', '.join(repr(n) for n in cut)} disagree with the other cameras where "
@@ -482,12 +480,19 @@ def _rescued(first: VehicleResult, final: VehicleResult) -> VehicleResult:
     if (final is first or final.status != Status.CONVERGED or before is None or after is None
             or before < POOR_FIT_SCALE or after < RESCUE_SCALE):
         return final
-    final.status = Status.POOR_FIT
-    note = (f"poor fit: the keypoints fit {after:.3g} times worse than their sigmas in the best basin found, "
-            f"{before:.3g} in the first (another start's solution is taken where it fits below {RESCUE_SCALE:g}); "
-            "the estimate may be grossly wrong and its covariance too narrow")
-    final.message = f"{note}; {final.message}" if final.message else note
-    return final
+    return _poor_fit_in_another_basin(final, after, before)
+
+
+def _poor_fit_in_another_basin(result: VehicleResult, scale: float, first: float | None = None) -> VehicleResult:
+    """``result``, another start's solution that fits at ``scale`` (the first solution at ``first``, where it had
+    one), made ``poor_fit``: it fits no better than :data:`RESCUE_SCALE` (:func:`_rescued`, :func:`_agreeing_restart`)."""
+    result.status = Status.POOR_FIT
+    note = (f"poor fit: the keypoints fit {scale:.3g} times worse than their sigmas in the best basin found"
+            + ("" if first is None else f", {first:.3g} in the first")
+            + f" (another start's solution is taken where it fits below {RESCUE_SCALE:g}); the estimate may be "
+            "grossly wrong and its covariance too narrow")
+    result.message = f"{note}; {result.message}" if result.message else note
+    return result
 
 
 def _typed_start(first: VehicleResult, body_type: str, obs: KeypointObservations, options: SolveOptions,
@@ -579,33 +584,32 @@ def _restarted(obs: KeypointObservations, options: SolveOptions, vehicle_id: str
 
 
 def _agreeing_restart(failed: VehicleResult, obs: KeypointObservations, options: SolveOptions, vehicle_id: str,
-                      prior, bounds, hints, resize, search: StartSearch | None, solution: gtsam.Pose3,
+                      prior, bounds, hints, resize, mean: Wireframe, solution: gtsam.Pose3,
                       start_prior: ShapePrior | None) -> VehicleResult:
     """A vehicle whose solution the check of cameras at odds failed (``failed``), solved again from further starts
-    (``search``'s, RANSAC under both labellings of each camera; :func:`_restarted`, as a solution that is not sane):
-    the best fit among their solutions that keep every camera's keypoints (each is solved in full and checked as the
-    first was), where it fits below :data:`POOR_FIT_SCALE`, noting the cameras the first one rejected
-    (``extras["cameras_at_odds_first"]``), and ``poor_fit`` unless it fits below :data:`RESCUE_SCALE` (as a poor
-    fit's further start, :func:`_rescued`); ``failed`` where none does, or where there is no start search (a solve
-    from a given pose, as a restart's or a tracker's).
+    (``mean`` placed by PnP with RANSAC under both labellings of each camera, as the check's own fits are;
+    :func:`_restarted`, as a solution that is not sane): the best fit among their solutions that keep every camera's
+    keypoints (each is solved in full and checked as the first was), where it fits below :data:`POOR_FIT_SCALE`,
+    noting the cameras the first one rejected (``extras["cameras_at_odds_first"]``), and ``poor_fit`` unless it fits
+    below :data:`RESCUE_SCALE` (as a poor fit's further start, :func:`_rescued`); ``failed`` where none does, or with
+    ``options.poor_fit_restarts`` 0.
 
     With gross detection errors a camera's own keypoints can fit a vehicle of their own (a turned one, with its
     swapped pairs and outliers), and a joint solution that followed the other camera's keypoints then looks like a
     wrong ``world_T_camera``. A wrong extrinsic leaves no joint solution that keeps every camera's keypoints and
     fits them (benchmarks/disagreement_check.py; docs/reliability.md, "Cameras at odds with the others").
     """
-    if search is None or options.poor_fit_restarts == 0:
+    if options.poor_fit_restarts == 0:
         return failed
+    search = StartSearch(obs, mean, options.graph.loss, options.min_keypoints_in_one_view, True)
     restarted = _restarted(obs, options, vehicle_id, prior, bounds, hints, resize, search, [], solution, None,
                            start_prior)
     scale = None if restarted is None else restarted.extras.get("fit_noise_scale")
     if restarted is None or not restarted.ok or scale is None or scale >= POOR_FIT_SCALE:
         return failed  # no start explains both cameras' keypoints: at odds, as the first solution says
     names = failed.extras["disagreeing_cameras"]
-    if restarted.status == Status.CONVERGED and scale >= RESCUE_SCALE:
-        restarted.status = Status.POOR_FIT  # as a poor fit's further start (_rescued): two basins, neither clear
-        _add_note(restarted, f"poor fit: the keypoints fit {scale:.3g} times worse than their sigmas in the best "
-                             f"basin found (another start's solution is taken where it fits below {RESCUE_SCALE:g})")
+    if restarted.status == Status.CONVERGED and scale >= RESCUE_SCALE:  # two basins, neither clearly right
+        _poor_fit_in_another_basin(restarted, scale)
     _add_note(restarted, f"the first solution rejected the keypoints of camera(s) {', '.join(map(repr, names))}, "
                          "which fit a vehicle of their own; another start's solution keeps every camera's")
     restarted.extras["cameras_at_odds_first"] = names

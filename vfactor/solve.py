@@ -485,7 +485,8 @@ def _rescued(first: VehicleResult, final: VehicleResult) -> VehicleResult:
 
 def _poor_fit_in_another_basin(result: VehicleResult, scale: float, first: float | None = None) -> VehicleResult:
     """``result``, another start's solution that fits at ``scale`` (the first solution at ``first``, where it had
-    one), made ``poor_fit``: it fits no better than :data:`RESCUE_SCALE` (:func:`_rescued`, :func:`_agreeing_restart`)."""
+    one), made ``poor_fit``: it fits no better than :data:`RESCUE_SCALE` (:func:`_rescued`,
+    :func:`_agreeing_restart`)."""
     result.status = Status.POOR_FIT
     note = (f"poor fit: the keypoints fit {scale:.3g} times worse than their sigmas in the best basin found"
             + ("" if first is None else f", {first:.3g} in the first")

@@ -597,8 +597,9 @@ def _agreeing_restart(failed: VehicleResult, obs: KeypointObservations, options:
 
     With gross detection errors a camera's own keypoints can fit a vehicle of their own (a turned one, with its
     swapped pairs and outliers), and a joint solution that followed the other camera's keypoints then looks like a
-    wrong ``world_T_camera``. A wrong extrinsic leaves no joint solution that keeps every camera's keypoints and
-    fits them (benchmarks/disagreement_check.py; docs/reliability.md, "Cameras at odds with the others").
+    wrong ``world_T_camera``. Of a camera whose extrinsic is wrong, no vehicle found a start whose solution keeps
+    every camera's keypoints and fits them in benchmarks/disagreement_check.py (docs/reliability.md, "Gross errors
+    that fit a vehicle of their own").
     """
     if options.poor_fit_restarts == 0:
         return failed

@@ -327,7 +327,6 @@ def solve_observations(
             (as_given, obs), resized = unsized, None  # the first solve's own sigmas
             nominal = obs
         else:
-            graph_prior = refined_prior
             if (options.relabel_swaps and extras["noise_scale"] > SWAP_SEARCH_SCALE
                     and len(np.unique(nominal.camera_index)) >= 2):
                 best, obs, nominal, extras, refined_prior, found, hypotheses = _searched_swaps(
@@ -337,7 +336,7 @@ def solve_observations(
             if fit_scale > REFIT_SCALE and options.graph.loss.name != "none":  # least squares asked: as it is
                 best, obs, nominal, extras, refined_prior, left_out = _refitted_without_gross_outliers(
                     best, obs, nominal, extras, refined_prior, options, model, hints, keys, bounds, terms, hwc)
-            graph_prior = refined_prior
+            graph_prior = refined_prior  # the refinement's (the swap search's or the refit's where they solved again)
     estimate, error, iterations, hit_limit, graph = best
     pose_key = keys.pose_key()
     world_T_vehicle = estimate.atPose3(pose_key)

@@ -1467,8 +1467,8 @@ def _along_one_ray(obs: KeypointObservations, predicted: gtsam.Pose3, found: gts
     center = obs.cameras[int(cameras[0])].center
     ray = predicted.translation() - center
     ray /= np.linalg.norm(ray)
-    moved = found.translation() - predicted.translation()
-    back = gtsam.Pose3(found.rotation(), found.translation() - (moved @ ray) * ray)
+    step = found.translation() - predicted.translation()
+    back = gtsam.Pose3(found.rotation(), found.translation() - (step @ ray) * ray)
     return not _jump(predicted, back, dt, options)
 
 

@@ -438,9 +438,9 @@ def solve_observations(
                     joint = joint + through
             if declares_extrinsics(inliers.cameras):  # their errors, through the fit
                 joint = joint + extrinsic_covariance(marginal, linear.at(0).jacobian()[0], inliers, world_T_vehicle)
-            if parameters is not None:  # a shape the prior does not describe (item 8)
+            if parameters is not None:  # a shape the prior does not describe (item 8), through the fit as 6 and 7
                 misfit, excess = prior_misfit_covariance(
-                    inflation * marginal, graph_prior, options.graph.shape_prior_weight, wireframe.vehicle_p_keypoints,
+                    marginal, graph_prior, options.graph.shape_prior_weight, wireframe.vehicle_p_keypoints,
                     parameters - 6.0, [model.prior(t) for t in model.types] if model is not None else ())
                 joint = joint + misfit
                 result.extras["prior_misfit"] = excess

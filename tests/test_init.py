@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from vfactor.graph import observations_from_detections
-from vfactor.init import best_candidates, cross_projection_cost, triangulate_keypoints, umeyama
+from vfactor.init import best_candidates, cross_projection_cost, own_pose, triangulate_keypoints, umeyama
 from vfactor.factors.projection import robust_costs, whitened_residuals
 from vfactor.factors.robust import LOSSES, RobustLoss
 from vfactor.shape_model import default_shape_prior
@@ -56,3 +56,26 @@ def test_candidates_are_scored_in_one_pass_as_by_their_residuals(cameras, prius,
         assert np.allclose(costs, expected, rtol=1e-9), name
     assert cross_projection_cost(obs, poses[0], prius, RobustLoss()) == pytest.approx(
         robust_costs(obs, poses[0].matrix()[None], prius.vehicle_p_keypoints[None], RobustLoss())[0])
+
+
+def test_a_cameras_own_pose_is_fitted_once_per_view(cameras, prius, world_T_vehicle, monkeypatch):
+    """own_pose (the check of cameras at odds) is best_candidates' RANSAC fit of that camera's keypoints alone, kept
+    by its inputs: the same view in another vehicle's observations is not fitted again, another view is."""
+    import vfactor.init as init
+
+    rng = np.random.default_rng(5)
+    detections = detections_for(cameras, prius, world_T_vehicle, noise_px=2.0, rng=rng)
+    obs = observations_from_detections(detections, cameras)
+    mean, loss = Wireframe(default_shape_prior().mean), RobustLoss()
+    fits = []
+    monkeypatch.setattr(init, "best_candidates", lambda *a, **k: fits.append(a[0]) or best_candidates(*a, **k))
+    monkeypatch.setattr(init, "_own_poses", type(init._own_poses)())
+    first = own_pose(obs, 0, mean, loss)
+    expected = best_candidates(obs.subset(obs.camera_index == 0), mean, loss, 1, ransac_every_labelling=True)[0]
+    assert first.equals(expected.world_T_vehicle, 1e-12)
+    alone = observations_from_detections([d for d in detections if d.camera == obs.cameras[0].name], cameras)
+    assert own_pose(alone, 0, mean, loss) is first and len(fits) == 1  # the same view, other observations around it
+    moved = observations_from_detections([d for d in detections_for(cameras, prius, world_T_vehicle.compose(
+        gtsam.Pose3(gtsam.Rot3(), np.array([0.5, 0.0, 0.0])))) if d.camera == obs.cameras[0].name], cameras)
+    assert not own_pose(moved, 0, mean, loss).equals(first, 1e-6) and len(fits) == 2
+    assert own_pose(obs, 0, mean, RobustLoss("huber")) is not first and len(fits) == 3  # the loss is an input

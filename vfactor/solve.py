@@ -42,7 +42,7 @@ from vfactor.graph import (
     resized_observations,
     wireframe_from_values,
 )
-from vfactor.init import StartSearch, best_candidates, distinct_poses
+from vfactor.init import StartSearch, distinct_poses, own_pose as camera_own_pose
 from vfactor.keys import KeyScheme
 from vfactor.label_swaps import SWAP_MARGIN, apply_swaps, merge_findings, relabel_swaps, suspect_pairs, swapped_rows
 from vfactor.observations import Detection, Frame, Scene, class_hints
@@ -1160,9 +1160,7 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
             # RANSAC under both labellings, as before issue 14: with only the labelling its plain fit favours,
             # a wrong camera's own fit kept fewer of its keypoints and the check caught 88 % of cameras rotated by
             # 20 deg instead of 98 % (benchmarks/disagreement_check.py)
-            own = best_candidates(obs.subset(obs.camera_index == c), mean, options.graph.loss, 1,
-                                  ransac_every_labelling=True)
-            own_poses[c] = own[0].world_T_vehicle if own else None
+            own_poses[c] = camera_own_pose(obs, c, mean, options.graph.loss)
         return own_poses[c]
 
     for c, camera in enumerate(obs.cameras):

@@ -512,8 +512,7 @@ def _typed_start(first: VehicleResult, body_type: str, obs: KeypointObservations
                                start_prior=model.prior(body_type))
     if not again.ok:
         return first
-    margin = RESTART_MARGIN if first.status == Status.POOR_FIT else 1.0  # a poor fit's: as for its restarts
-    if first.ok and _fit_score(first) <= margin * _fit_score(again):
+    if first.ok and not _fits_better(_fit_score(again), _fit_score(first), first.status == Status.POOR_FIT):
         return first
     again.extras["typed_start"] = body_type
     return again
@@ -524,6 +523,13 @@ def _fit_score(result: VehicleResult) -> float:
     or, where the solve estimates no noise scale (the sigmas as given, the same for all), its final error."""
     scale = result.extras.get("fit_noise_scale")
     return result.final_error if scale is None else scale
+
+
+def _fits_better(score: float, than: float, poor_fit: bool) -> bool:
+    """Whether a solution of a vehicle that fits at ``score`` (:func:`_fit_score`) replaces one that fits at ``than``:
+    by any margin, or by more than :data:`RESTART_MARGIN` where that one is a poor fit (another basin that fits a few
+    per cent better is no likelier right; a poor fit's further starts and its typed start)."""
+    return score * (RESTART_MARGIN if poor_fit else 1.0) < than
 
 
 #: A further start (up to ``SolveOptions.num_starts``) is optimised only while the best solution so far keeps fewer than
@@ -569,7 +575,7 @@ def _restarted(obs: KeypointObservations, options: SolveOptions, vehicle_id: str
             continue
         reached.append(result.world_T_vehicle)
         scale, score = result.extras.get("fit_noise_scale"), _fit_score(result)
-        better = fit_scale is None or (scale is not None and scale * RESTART_MARGIN < fit_scale
+        better = fit_scale is None or (scale is not None and _fits_better(scale, fit_scale, True)
                                        and distinct_poses(result.world_T_vehicle, solution))
         if better and (best is None or score < best[0]):
             best = score, result, candidate.source

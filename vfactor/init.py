@@ -332,8 +332,8 @@ def own_pose(obs: KeypointObservations, camera: int, wireframe: Wireframe, loss:
     odds fits each camera (:func:`vfactor.solve.solve_observations`).
 
     The fit is deterministic (OpenCV's RANSAC draws from a fixed seed), so it is kept by its inputs (the camera, its
-    keypoints, their sigmas and windows, the wireframe and the loss; :data:`OWN_POSE_MEMO`) and the same view is
-    fitted once however many solves check it.
+    keypoints, their sigmas and truncation windows, the wireframe and the loss; :data:`OWN_POSE_MEMO`) and the same
+    view is fitted once however many solves check it.
 
     Args:
         obs: the vehicle's observations (every camera's; those of ``camera`` are fitted).
@@ -346,7 +346,7 @@ def own_pose(obs: KeypointObservations, camera: int, wireframe: Wireframe, loss:
     digest = hashlib.blake2b(digest_size=20)
     digest.update(f"{cam.name}|{cam.model}|{loss.name}|{loss.threshold!r}|".encode())
     for array in (cam.K, cam.world_T_camera, cam.dist, mine.uv, mine.keypoint_index, mine.sqrt_information,
-                  mine.window, wireframe.vehicle_p_keypoints):
+                  mine._window_table, mine._sigma_table, wireframe.vehicle_p_keypoints):  # all the fit reads
         digest.update(b"-" if array is None else np.ascontiguousarray(array).tobytes() + b"|")
     key = digest.digest()
     with _own_poses_lock:

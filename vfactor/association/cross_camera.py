@@ -480,9 +480,10 @@ def join_test(det: list[Detection], k: int, group: list[int], result: VehicleRes
     """The second pass's test of detection ``k`` joining ``group`` (solved as ``result``; no detection of
     ``k``'s camera), with both gates ``relax`` times wider.
 
-    The group and the detection are solved together; the detection joins when that solve is sane, each of the
-    group's detections' cost per keypoint rises by at most ``leftover_rise`` and the detection's own keypoints cost
-    at most ``leftover_cost`` each.
+    The group and the detection are solved together, from the group's solution (the joint vehicle must stay where
+    the group's detections put it: their rises are the test); the detection joins when that solve is sane, each of
+    the group's detections' cost per keypoint rises by at most ``leftover_rise`` and the detection's own keypoints
+    cost at most ``leftover_cost`` each.
 
     Args:
         det: the frame's detections.
@@ -499,7 +500,7 @@ def join_test(det: list[Detection], k: int, group: list[int], result: VehicleRes
             own[m] = _observations(det[m], cameras, options)
     if own[k] is None or len(own[k]) == 0:
         return None  # no keypoint to test
-    together = _solve([det[m] for m in group] + [det[k]], cameras, options, name)
+    together = _solve([det[m] for m in group] + [det[k]], cameras, options, name, initial=result)
     if not together.ok:
         return None
     rises = [_rise(own[m], det[m], result, together, options) for m in group]

@@ -42,7 +42,7 @@ from vfactor.graph import (
     resized_observations,
     wireframe_from_values,
 )
-from vfactor.init import StartSearch, distinct_poses, own_pose as camera_own_pose
+from vfactor.init import StartSearch, distinct_poses, own_pose
 from vfactor.keys import KeyScheme
 from vfactor.label_swaps import SWAP_MARGIN, apply_swaps, merge_findings, relabel_swaps, suspect_pairs, swapped_rows
 from vfactor.observations import Detection, Frame, Scene, class_hints
@@ -1159,25 +1159,18 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
     about what it declares, and not at odds. The message also says when, as a
     camera sees it, the vehicle lies behind another camera.
     """
-    own_poses, rejected, cut = {}, [], []
-
-    def own_pose(c):  # the camera's own PnP pose of the mean shape (computed once, only where needed)
-        if c not in own_poses:
-            # RANSAC under both labellings, as before issue 14: with only the labelling its plain fit favours,
-            # a wrong camera's own fit kept fewer of its keypoints and the check caught 88 % of cameras rotated by
-            # 20 deg instead of 98 % (benchmarks/disagreement_check.py)
-            own_poses[c] = camera_own_pose(obs, c, mean, options.graph.loss)
-        return own_poses[c]
-
+    rejected, cut, loss = [], [], options.graph.loss
     for c, camera in enumerate(obs.cameras):
         rows = obs.camera_index == c
         if rows.sum() < options.min_keypoints_in_one_view:
             continue
         joint = float(np.mean(weights[rows] > INLIER_WEIGHT))
-        if joint >= DISAGREEMENT_JOINT_INLIERS or own_pose(c) is None:  # the joint solve keeps the camera: no PnP
+        if joint >= DISAGREEMENT_JOINT_INLIERS:  # the joint solve keeps the camera: no PnP
             continue
-        alone = options.graph.loss.weight(np.linalg.norm(
-            whitened_residuals(obs.subset(rows), own_pose(c), mean.vehicle_p_keypoints), axis=1))
+        own = own_pose(obs, c, mean, loss)  # the camera's own PnP pose of the mean shape (fitted once per view)
+        if own is None:
+            continue
+        alone = loss.weight(np.linalg.norm(whitened_residuals(obs.subset(rows), own, mean.vehicle_p_keypoints), axis=1))
         if float(np.mean(alone > INLIER_WEIGHT)) - joint < DISAGREEMENT_MARGIN - 1e-9:
             continue
         if explained is not None and float(np.mean(explained()[rows] > INLIER_WEIGHT)) >= EXPLAINED_INLIERS:
@@ -1187,9 +1180,11 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
         return "", [], cut
     details = []
     for c in range(len(obs.cameras)):
-        if (obs.camera_index == c).sum() < options.min_keypoints_in_one_view or own_pose(c) is None:
+        own = None if (obs.camera_index == c).sum() < options.min_keypoints_in_one_view else own_pose(
+            obs, c, mean, loss)
+        if own is None:
             continue
-        world = mean.in_world(own_pose(c))
+        world = mean.in_world(own)
         for d, other in enumerate(obs.cameras):
             if d != c and (obs.camera_index == d).any() and np.median(other.to_camera(world)[:, 2]) <= 0:
                 details.append(f"as camera '{obs.cameras[c].name}' sees it, the vehicle lies behind camera "

@@ -39,6 +39,17 @@ def test_help_texts_have_no_literal_percent_escapes(capsys):
         assert "%%" not in capsys.readouterr().out, command
 
 
+def test_eval_help_names_every_noise_level(capsys):
+    """The CLI keeps vfactor.evaluation (and GTSAM) out of its import, so the --levels help lists the levels by hand:
+    a level added to NOISE_LEVELS must be named there too."""
+    from vfactor.evaluation import NOISE_LEVELS
+
+    assert main(["help", "eval"]) == 0
+    levels_help = capsys.readouterr().out.split("\n  --levels LEVELS", 1)[1].split("\n  --frames FRAMES", 1)[0]
+    named = set(re.findall(r"[a-z_]+", levels_help))
+    assert set(NOISE_LEVELS) <= named, sorted(set(NOISE_LEVELS) - named)
+
+
 @pytest.mark.parametrize("command", sorted(NET_COMMANDS))
 def test_network_commands_are_reachable_from_vfactor(command, capsys):
     pytest.importorskip("torch")

@@ -13,6 +13,7 @@ solve (docs/performance.md, "Scale-out (issue 15)").
 * :mod:`kernels.robust` — the robust losses' scale per residual norm
 * :mod:`kernels.motion` — Pose3 between, Logmap and Jacobians of the motion factors
 * :mod:`kernels.ground_plane` — the ground-plane factor
+* :mod:`kernels.hwc` — the hierarchical wireframe constraint's terms
 * :mod:`kernels.shape_evidence` — the noise scale's fixed point and the body types' evidence
 * :mod:`kernels.linalg` — the eigen-decomposition of the per-vehicle covariances, single-threaded
 

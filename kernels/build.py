@@ -22,6 +22,7 @@ from numba.pycc import CC
 
 from kernels import source_digest
 from kernels.ground_plane import ground_plane_kernel
+from kernels.hwc import distance_bounds_kernel, layer_offset_kernel, layer_plane_kernel, trapezoid_kernel
 from kernels.linalg import symmetric_eigen_kernel
 from kernels.motion import acceleration_kernel, nonholonomic_kernel, step_twist_kernel
 from kernels.projection import projection_kernel, robust_cost_kernel
@@ -37,6 +38,7 @@ MODULE = "vfactor._kernels"
 _F8, _I8, _B1 = types.float64, types.int64, types.boolean
 _V1, _V2, _V3 = (types.Array(_F8, ndim, "A") for ndim in (1, 2, 3))
 _IDX = types.Array(_I8, 1, "A")
+_IDX2 = types.Array(_I8, 2, "A")
 _DIGEST = source_digest()
 
 #: Observation tables of the projection kernels: keypoint_index .. sigma (kernels.projection.projection_kernel).
@@ -57,6 +59,10 @@ EXPORTS = {
     "nonholonomic_kernel": (nonholonomic_kernel, types.void(_V2, _V2, _V1, _B1, _V1, _V2, _V2)),
     "acceleration_kernel": (acceleration_kernel, types.void(_V2, _V2, _V2, _V1, _B1, _V1, _V2, _V2, _V2)),
     "ground_plane_kernel": (ground_plane_kernel, types.void(_V2, _V1, _B1, _V1, _V2)),
+    "layer_plane_kernel": (layer_plane_kernel, types.void(_V2, _IDX2, _F8, _F8, _B1, _V1, _V2)),
+    "trapezoid_kernel": (trapezoid_kernel, types.void(_V2, _IDX2, _V1, _V1, _F8, _F8, _B1, _V1, _V2)),
+    "distance_bounds_kernel": (distance_bounds_kernel, types.void(_V2, _IDX2, _V1, _V1, _F8, _B1, _V1, _V2)),
+    "layer_offset_kernel": (layer_offset_kernel, types.void(_V2, _IDX2, _V2, _V2, _F8, _B1, _V1, _V2)),
     "fit_at_scale_kernel": (fit_at_scale_kernel, _F8(_V2, _V2, _V1, _V1, _V2, _V1, _F8, _F8, _V1, _V1)),
     "log_evidence_kernel": (log_evidence_kernel, types.void(_V2, _V1, _V3, _V2, _V1, _V1)),
     "symmetric_eigen_kernel": (symmetric_eigen_kernel, _I8(_V2, _V1, _V2)),

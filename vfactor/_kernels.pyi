@@ -9,7 +9,8 @@ dimensions, any strides; the compiled wrapper checks only the item size.
 import numpy as np
 
 __all__ = ["projection_kernel", "robust_cost_kernel", "robust_scale", "truncated_means_kernel", "step_twist_kernel",
-           "nonholonomic_kernel", "acceleration_kernel", "ground_plane_kernel", "fit_at_scale_kernel",
+           "nonholonomic_kernel", "acceleration_kernel", "ground_plane_kernel", "layer_plane_kernel",
+           "trapezoid_kernel", "distance_bounds_kernel", "layer_offset_kernel", "fit_at_scale_kernel",
            "log_evidence_kernel", "symmetric_eigen_kernel", "source_digest"]
 
 def projection_kernel(R: np.ndarray, t: np.ndarray, points: np.ndarray, keypoint_index: np.ndarray, R_cw: np.ndarray,
@@ -45,6 +46,22 @@ def acceleration_kernel(M0: np.ndarray, M1: np.ndarray, M2: np.ndarray, params: 
 
 def ground_plane_kernel(M: np.ndarray, params: np.ndarray, want_jacobian: bool, r: np.ndarray, J: np.ndarray) -> None:
     """kernels.ground_plane.ground_plane_kernel."""
+
+def layer_plane_kernel(points: np.ndarray, indices: np.ndarray, sigma_m: float, sigma_rad: float,
+                       want_jacobian: bool, r: np.ndarray, J: np.ndarray) -> None:
+    """kernels.hwc.layer_plane_kernel."""
+
+def trapezoid_kernel(points: np.ndarray, indices: np.ndarray, lo: np.ndarray, hi: np.ndarray, sigma_rad: float,
+                     sigma_ratio: float, want_jacobian: bool, r: np.ndarray, J: np.ndarray) -> None:
+    """kernels.hwc.trapezoid_kernel."""
+
+def distance_bounds_kernel(points: np.ndarray, pairs: np.ndarray, lo: np.ndarray, hi: np.ndarray, sigma: float,
+                           want_jacobian: bool, r: np.ndarray, J: np.ndarray) -> None:
+    """kernels.hwc.distance_bounds_kernel."""
+
+def layer_offset_kernel(points: np.ndarray, indices: np.ndarray, lo: np.ndarray, hi: np.ndarray, sigma: float,
+                        want_jacobian: bool, r: np.ndarray, J: np.ndarray) -> None:
+    """kernels.hwc.layer_offset_kernel."""
 
 def fit_at_scale_kernel(total: np.ndarray, projection: np.ndarray, total_eta: np.ndarray, projection_eta: np.ndarray,
                         jacobian: np.ndarray, rhs: np.ndarray, w: float, max_leverage: float, q_out: np.ndarray,

@@ -170,6 +170,63 @@ def test_every_preset_satisfies_hwc(name):
     assert np.abs(r).max() < 1e-6
 
 
+def _reference_hwc(points, config, bounds):
+    """The four HWC terms as docs/factors.md writes them, in plain NumPy (the oracle of the compiled kernels)."""
+    from vfactor.keypoints import LAYER_NAMES, LAYERS
+    from vfactor.shape_model import DISTANCE_PAIRS
+
+    def hinge_(q, lo, hi):
+        return np.where(q < lo, q - lo, np.where(q > hi, q - hi, 0.0))
+
+    rows = []
+    for name in LAYER_NAMES:
+        lf, rf, lb, rb = points[list(LAYERS[name])]
+        n = np.cross(rb - lf, lb - rf)
+        n = n / np.linalg.norm(n)
+        rows += [n @ (rf - lf) / config.plane_sigma_m, n[1] / config.plane_sigma_rad]
+    for name, (lo, hi) in bounds.width_ratio.items():
+        lf, rf, lb, rb = points[list(LAYERS[name])]
+        f, b = lf - rf, lb - rb
+        rows += list(np.cross(f / np.linalg.norm(f), b / np.linalg.norm(b)) / config.trapezoid_sigma_rad)
+        rows.append(hinge_(np.linalg.norm(f) / np.linalg.norm(b), lo, hi) / config.width_ratio_sigma)
+    d = np.linalg.norm(points[DISTANCE_PAIRS[:, 0]] - points[DISTANCE_PAIRS[:, 1]], axis=1)
+    distance = np.asarray(bounds.distance)
+    rows += list(hinge_(d, distance[:, 0], distance[:, 1]) / config.hinge_sigma)
+    wheels = points[list(LAYERS["wheel"])].mean(axis=0)
+    for name, box in bounds.layer_offset.items():
+        offset = (points[list(LAYERS[name])].mean(axis=0) - wheels)[[0, 2]]
+        box = np.asarray(box)
+        rows += list(hinge_(offset, box[:, 0], box[:, 1]) / config.hinge_sigma)
+    return np.array(rows)
+
+
+def test_the_compiled_hwc_terms_are_the_documented_maths():
+    """The HWC terms fill their rows in compiled kernels (kernels/hwc.py); against the formulas of docs/factors.md
+    on shapes inside and far outside the bounds, and their Jacobians against central differences."""
+    config, bounds = GraphConfig(), default_hwc_bounds()
+    terms = hwc_terms(config, bounds)
+    rng = np.random.default_rng(3)
+    for trial in range(40):
+        base = PRESETS[sorted(PRESETS)[trial % len(PRESETS)]].wireframe().vehicle_p_keypoints
+        points = base * rng.uniform(0.6, 1.8) + rng.normal(0, (0.02, 0.1, 0.3)[trial % 3], base.shape)
+        r = evaluate_terms(terms, points)
+        assert np.allclose(r, _reference_hwc(points, config, bounds), rtol=1e-12, atol=1e-12)
+        if trial % 3 == 2:
+            assert np.abs(r).max() > 1.0  # the bounds' side of the hinges is exercised
+        J = np.concatenate([t.jacobian_at(points.ravel()) for t in terms])
+        x = points.ravel()
+
+        def at(shift):
+            return evaluate_terms(terms, (x + shift).reshape(12, 3))
+
+        numeric = np.stack([(at(h) - at(-h)) / 2e-7 for h in 1e-7 * np.eye(36)], axis=1)
+        assert np.allclose(J, numeric, atol=1e-4 * (1 + np.abs(J).max()))
+    batched = evaluate_terms(terms, np.stack([base, 1.7 * base]))
+    assert batched.shape == (2, 84) and np.allclose(batched[1], evaluate_terms(terms, 1.7 * base))
+    with pytest.raises(TypeError, match="real points"):
+        terms[0].residual(base + 1e-30j)
+
+
 def test_hinge_is_zero_inside_and_linear_outside():
     q = np.array([0.5, 1.0, 1.5, 2.5])
     assert np.allclose(hinge(q, 1.0, 2.0), [-0.5, 0.0, 0.0, 0.5])

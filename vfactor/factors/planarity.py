@@ -7,6 +7,8 @@ For a layer ``(lf, rf, lb, rb)``: the diagonals ``d1 = rb - lf`` and
   (zero iff the four points are coplanar), metres, over ``sigma_m``;
 * perpendicularity: ``n_y``, the sine of the angle between the layer's plane
   and the direction normal to the medial (x-z) plane, over ``sigma_rad``.
+
+Residual and Jacobian (complex step) in one compiled call: :func:`kernels.hwc.layer_plane_kernel`.
 """
 
 from __future__ import annotations
@@ -15,24 +17,18 @@ from functools import partial
 
 import numpy as np
 
-from vfactor.factors.shape_terms import ShapeTerm, cnorm, cross
+from vfactor._kernels import layer_plane_kernel
+from vfactor.factors.shape_terms import ShapeTerm, compiled_term
 from vfactor.keypoints import LAYER_NAMES, LAYERS
 
 __all__ = ["layer_plane_term"]
 
 
-def _residual(indices, sigma_m, sigma_rad, points):
-    quads = points[..., indices, :]  # (..., layers, 4, 3), corners (lf, rf, lb, rb)
-    lf, rf, lb, rb = quads[..., 0, :], quads[..., 1, :], quads[..., 2, :], quads[..., 3, :]
-    n = cross(rb - lf, lb - rf)
-    n = n / cnorm(n)[..., None]
-    planar = np.sum(n * (rf - lf), axis=-1) / sigma_m  # (..., layers)
-    perpendicular = n[..., 1] / sigma_rad
-    return np.stack([planar, perpendicular], axis=-1).reshape(*points.shape[:-2], -1)
+def _fill(indices, sigma_m, sigma_rad, points, want_jacobian, r, J):
+    layer_plane_kernel(points, indices, sigma_m, sigma_rad, want_jacobian, r, J)
 
 
 def layer_plane_term(layers=LAYER_NAMES, sigma_m: float = 0.02, sigma_rad: float = 0.05) -> ShapeTerm:
     """Planarity and perpendicularity of ``layers`` (two rows each)."""
-    indices = np.array([LAYERS[name] for name in layers])
-    row_layers = np.repeat([LAYER_NAMES.index(name) for name in layers], 2)
-    return ShapeTerm("layer_plane", partial(_residual, indices, sigma_m, sigma_rad), 2 * len(layers), row_layers)
+    indices = np.array([LAYERS[name] for name in layers], dtype=np.int64)
+    return compiled_term("layer_plane", 2 * len(layers), partial(_fill, indices, float(sigma_m), float(sigma_rad)))

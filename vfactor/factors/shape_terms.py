@@ -7,8 +7,12 @@ several terms into a single ``gtsam.CustomFactor`` on ``[wheel, light, roof]``;
 the graph builder fuses all HWC terms of a vehicle into one factor, one Python
 call per linearisation.
 
-Jacobians are analytic where a term gives them (the hinge terms), else they
-come from the complex step: ``J = Im(r(x + i h e_k)) / h``, exact to machine
+The four HWC terms of vfactor are compiled (:mod:`kernels.hwc`, in
+:mod:`vfactor._kernels`): each fills its rows of the residual and of the
+Jacobian in one call (:func:`compiled_term`; ``ShapeTerm.fill``), and the fused
+factor fills all of them into one array. A term of your own is a residual
+function: its Jacobian is analytic where it gives one, else it comes from the
+complex step: ``J = Im(r(x + i h e_k)) / h``, exact to machine
 precision with no cancellation, for all directions in one batched evaluation.
 A term whose every row depends on a single layer (``row_layers``) needs only 12
 probes, each moving the same coordinate of all three layers at once. Residuals
@@ -25,7 +29,7 @@ from typing import Callable
 import gtsam
 import numpy as np
 
-__all__ = ["ShapeTerm", "shape_terms_factor", "evaluate_terms", "cnorm", "cross", "hinge"]
+__all__ = ["ShapeTerm", "compiled_term", "shape_terms_factor", "evaluate_terms", "cnorm", "cross", "hinge"]
 
 _STEP = 1e-30
 _SHARED_PROBES = np.tile(np.eye(12), (1, 3))  # probe k moves coordinate k of every layer
@@ -42,6 +46,8 @@ class ShapeTerm:
         row_layers: optional (size,) layer index (0 wheel, 1 light, 2 roof) of
             each row, when each row depends on that layer's points only.
         jacobian: optional analytic Jacobian, points (12, 3) -> (size, 36).
+        fill: optional compiled form (:func:`compiled_term`): ``fill(points (12, 3), want_jacobian, r (size,),
+            J (size, 36))`` writes the residual and, where asked, the Jacobian (``J`` zero on entry).
     """
 
     name: str
@@ -49,6 +55,7 @@ class ShapeTerm:
     size: int
     row_layers: np.ndarray | None = None
     jacobian: Callable[[np.ndarray], np.ndarray] | None = None
+    fill: Callable[[np.ndarray, bool, np.ndarray, np.ndarray], None] | None = None
 
     def jacobian_at(self, x: np.ndarray) -> np.ndarray:
         """(size, 36) Jacobian of the residual at the flattened points ``x`` (36,)."""
@@ -64,6 +71,33 @@ class ShapeTerm:
             rows = self.row_layers == layer
             J[rows, 12 * layer : 12 * layer + 12] = local[rows]
         return J
+
+
+_NO_JACOBIAN = np.zeros((0, 36))
+
+
+def compiled_term(name: str, size: int, fill: Callable[[np.ndarray, bool, np.ndarray, np.ndarray], None]) -> ShapeTerm:
+    """A term whose residual and Jacobian one compiled call fills (``ShapeTerm.fill``): its ``residual`` takes real
+    points (..., 12, 3) (no complex step: the Jacobian is its own) and its ``jacobian`` points (12, 3)."""
+    return ShapeTerm(name, partial(_filled_residual, fill, size), size, jacobian=partial(_filled_jacobian, fill, size),
+                     fill=fill)
+
+
+def _filled_residual(fill, size: int, points: np.ndarray) -> np.ndarray:
+    points = np.asarray(points)
+    if np.iscomplexobj(points):
+        raise TypeError("a compiled shape term takes real points (its Jacobian is analytic, not by the complex step)")
+    flat = np.ascontiguousarray(points, dtype=float).reshape(-1, 12, 3)
+    out = np.zeros((len(flat), size))
+    for k in range(len(flat)):
+        fill(flat[k], False, out[k], _NO_JACOBIAN)
+    return out.reshape(*points.shape[:-2], size)
+
+
+def _filled_jacobian(fill, size: int, points: np.ndarray) -> np.ndarray:
+    r, J = np.zeros(size), np.zeros((size, 36))
+    fill(np.ascontiguousarray(points, dtype=float).reshape(12, 3), True, r, J)
+    return J
 
 
 def cnorm(v: np.ndarray, axis: int = -1) -> np.ndarray:
@@ -86,15 +120,31 @@ def hinge(q: np.ndarray, lo, hi) -> np.ndarray:
 
 def evaluate_terms(terms, points: np.ndarray) -> np.ndarray:
     """Stacked residuals of ``terms`` at ``points`` (..., 12, 3)."""
+    if np.ndim(points) == 2 and all(t.fill is not None for t in terms):
+        return _filled(terms, np.ascontiguousarray(points, dtype=float), False)[0]
     return np.concatenate([t.residual(points) for t in terms], axis=-1)
 
 
-def _error(terms, this: gtsam.CustomFactor, values: gtsam.Values, H):
+def _filled(terms, points: np.ndarray, want_jacobian: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(r, J) of compiled ``terms`` at ``points`` (12, 3), each term filling its rows (J: 0 rows unless asked)."""
+    size = sum(t.size for t in terms)
+    r, J = np.zeros(size), np.zeros((size, 36)) if want_jacobian else _NO_JACOBIAN
+    row = 0
+    for t in terms:
+        t.fill(points, want_jacobian, r[row : row + t.size], J[row : row + t.size] if want_jacobian else J)
+        row += t.size
+    return r, J
+
+
+def _error(terms, compiled: bool, this: gtsam.CustomFactor, values: gtsam.Values, H):
     keys = this.keys()
     x = np.concatenate([values.atVector(k) for k in keys])
-    r = evaluate_terms(terms, x.reshape(12, 3))
+    if compiled:
+        r, J = _filled(terms, x.reshape(12, 3), H is not None)
+    else:
+        r = evaluate_terms(terms, x.reshape(12, 3))
+        J = np.concatenate([t.jacobian_at(x) for t in terms], axis=0) if H is not None else None  # (m, 36)
     if H is not None:
-        J = np.concatenate([t.jacobian_at(x) for t in terms], axis=0)  # (m, 36)
         for j in range(3):
             H[j] = np.ascontiguousarray(J[:, 12 * j : 12 * j + 12])
     return r
@@ -106,4 +156,5 @@ def shape_terms_factor(layer_keys, terms) -> gtsam.CustomFactor:
     size = sum(t.size for t in terms)
     if size == 0:
         raise ValueError("shape_terms_factor: no residual rows")
-    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(size), list(layer_keys), partial(_error, terms))
+    compiled = all(t.fill is not None for t in terms)
+    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(size), list(layer_keys), partial(_error, terms, compiled))

@@ -6,6 +6,8 @@ For a layer ``(lf, rf, lb, rb)`` with front edge ``f = lf - rf`` and back edge
 * parallel sides: ``f/|f| x b/|b|`` (3 rows, unitless) over ``sigma_rad``;
 * width ratio within bounds: ``hinge(|f| / |b|, lo, hi)`` (1 row) over ``sigma_ratio``;
   zero inside the bounds.
+
+Residual and Jacobian (complex step) in one compiled call: :func:`kernels.hwc.trapezoid_kernel`.
 """
 
 from __future__ import annotations
@@ -14,27 +16,22 @@ from functools import partial
 
 import numpy as np
 
-from vfactor.factors.shape_terms import ShapeTerm, cnorm, cross, hinge
-from vfactor.keypoints import LAYER_NAMES, LAYERS
+from vfactor._kernels import trapezoid_kernel
+from vfactor.factors.shape_terms import ShapeTerm, compiled_term
+from vfactor.keypoints import LAYERS
 
 __all__ = ["trapezoid_term"]
 
 
-def _residual(indices, lo, hi, sigma_rad, sigma_ratio, points):
-    quads = points[..., indices, :]  # (..., layers, 4, 3)
-    f = quads[..., 0, :] - quads[..., 1, :]
-    b = quads[..., 2, :] - quads[..., 3, :]
-    nf, nb = cnorm(f), cnorm(b)
-    parallel = cross(f / nf[..., None], b / nb[..., None]) / sigma_rad  # (..., layers, 3)
-    ratio = hinge(nf / nb, lo, hi)[..., None] / sigma_ratio  # (..., layers, 1)
-    return np.concatenate([parallel, ratio], axis=-1).reshape(*points.shape[:-2], -1)
+def _fill(indices, lo, hi, sigma_rad, sigma_ratio, points, want_jacobian, r, J):
+    trapezoid_kernel(points, indices, lo, hi, sigma_rad, sigma_ratio, want_jacobian, r, J)
 
 
 def trapezoid_term(width_ratio: dict, sigma_rad: float = 0.05, sigma_ratio: float = 0.02) -> ShapeTerm:
     """Trapezoid residuals for each layer in ``width_ratio`` (layer -> (min, max) of front/back width)."""
     names = list(width_ratio)
-    indices = np.array([LAYERS[name] for name in names])
+    indices = np.array([LAYERS[name] for name in names], dtype=np.int64).reshape(-1, 4)
     lo = np.array([width_ratio[name][0] for name in names], float)
     hi = np.array([width_ratio[name][1] for name in names], float)
-    row_layers = np.repeat([LAYER_NAMES.index(name) for name in names], 4)
-    return ShapeTerm("trapezoid", partial(_residual, indices, lo, hi, sigma_rad, sigma_ratio), 4 * len(names), row_layers)
+    return compiled_term("trapezoid", 4 * len(names), partial(_fill, indices, lo, hi, float(sigma_rad),
+                                                              float(sigma_ratio)))

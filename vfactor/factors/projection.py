@@ -50,6 +50,15 @@ _EMPTY = np.empty((0, 0))
 _NO_LOSS = RobustLoss("none").id
 
 
+def _largest_singular_value(L: np.ndarray) -> np.ndarray:
+    """(n,) the largest singular value of each 2x2 matrix of ``L`` (n, 2, 2), in closed form (``np.linalg.norm(L,
+    2, axis=(1, 2))`` takes an SVD of each): ``sqrt((f + sqrt(f^2 - 4 det^2)) / 2)``, ``f`` the squared Frobenius
+    norm."""
+    f = np.einsum("nij,nij->n", L, L)
+    det = L[:, 0, 0] * L[:, 1, 1] - L[:, 0, 1] * L[:, 1, 0]
+    return np.sqrt(0.5 * (f + np.sqrt(np.maximum(f * f - 4.0 * det * det, 0.0))))
+
+
 @dataclass(frozen=True)
 class KeypointObservations:
     """Pixel observations of one vehicle's keypoints.
@@ -130,15 +139,18 @@ class KeypointObservations:
             L = np.asarray(self.sqrt_information, dtype=float)[truncated]
             sigma[truncated] = np.sqrt(np.diagonal(np.linalg.inv(np.einsum("nki,nkj->nij", L, L)), axis1=1, axis2=2))
         object.__setattr__(self, "_sigma_table", sigma)
-        # per-observation camera parameters, so that projection is one vectorised pass
-        cams = [self.cameras[c] for c in self.camera_index]
-        K = np.array([c.K for c in cams]).reshape(n, 3, 3)
-        object.__setattr__(self, "_R_cw", np.array([c.camera_T_world[:3, :3] for c in cams]).reshape(n, 3, 3))
-        object.__setattr__(self, "_t_cw", np.array([c.camera_T_world[:3, 3] for c in cams]).reshape(n, 3))
+        # per-observation camera parameters, so that projection is one vectorised pass: each camera's once, then
+        # taken by the observations' camera index
+        index = np.asarray(self.camera_index, dtype=np.int64)
+        if n and (index.min() < 0 or index.max() >= len(self.cameras)):
+            raise IndexError(f"KeypointObservations.camera_index: expected 0..{len(self.cameras) - 1}")
+        camera_T_world = np.array([c.camera_T_world for c in self.cameras]).reshape(-1, 4, 4)
+        K = np.array([c.K for c in self.cameras]).reshape(-1, 3, 3)[index]
+        object.__setattr__(self, "_R_cw", np.ascontiguousarray(camera_T_world[index, :3, :3]))
+        object.__setattr__(self, "_t_cw", np.ascontiguousarray(camera_T_world[index, :3, 3]))
         object.__setattr__(self, "_intrinsics", (K[:, 0, 0], K[:, 1, 1], K[:, 0, 1], K[:, 0, 2], K[:, 1, 2]))
         # the lens of each camera as the kernel takes it: a code and 14 coefficients (Camera.kernel_lens)
         lenses = [c.kernel_lens() for c in self.cameras]
-        index = np.asarray(self.camera_index, dtype=np.int64)
         codes = np.array([code for code, _ in lenses], dtype=np.int64)[index]
         dist_table = np.array([d for _, d in lenses], dtype=float).reshape(-1, 14)[index]
         fisheye = codes == LENS_FISHEYE
@@ -204,7 +216,7 @@ class KeypointObservations:
         if not np.all(factor > 0):
             raise ValueError(f"noise_scale: expected > 0, got {noise_scale}")
         if self.min_sigma > 0 and len(L):
-            smallest_sigma = 1.0 / np.linalg.norm(L, ord=2, axis=(1, 2))
+            smallest_sigma = 1.0 / _largest_singular_value(L)
             factor = np.maximum(factor, self.min_sigma / smallest_sigma)
         # the camera tables stay; only the noise (and the truncation's marginal sigmas) change
         truncated = np.isfinite(self._window_table[:, 0])

@@ -406,6 +406,11 @@ def test_window_shape_is_checked():
     with pytest.raises(ValueError, match="window"):
         KeypointObservations(obs.cameras, obs.camera_index, obs.keypoint_index, obs.uv, obs.sqrt_information,
                              np.zeros((3, 4)))
+    for wrong in (-1, len(obs.cameras)):  # a negative index named the last camera without a word
+        index = obs.camera_index.copy()
+        index[0] = wrong
+        with pytest.raises(IndexError, match="camera_index"):
+            KeypointObservations(obs.cameras, index, obs.keypoint_index, obs.uv, obs.sqrt_information)
     upside_down = np.tile([0.0, 0.0, 640.0, 480.0], (len(obs), 1))
     upside_down[3] = [0.0, 480.0, 640.0, 0.0]
     with pytest.raises(ValueError, match="v_lo < v_hi"):

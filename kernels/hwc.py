@@ -12,12 +12,14 @@ Every kernel takes ``points`` (12, 3), the wireframe in keypoint order (metres, 
 (its rows, whitened) and, where ``want_jacobian``, ``J`` (its rows, 36 columns: ``3 k + axis`` for keypoint ``k``;
 zero on entry). The Jacobians of the layer and trapezoid terms are taken by the complex step, ``Im(r(x + i h e)) /
 h`` with ``h = 1e-30``, exact to rounding as the NumPy terms' were; those of the hinge terms are analytic (a hinge
-at its kink takes the inner side: zero, as the NumPy terms did).
+at its kink takes the inner side: zero, as the NumPy terms did). A degenerate wireframe (a layer or an edge of no
+extent, coincident points, NaN) gives NaN rows, as NumPy's ``0 / 0`` did, never a division error.
 """
 
 from __future__ import annotations
 
 import cmath
+import math
 
 import numpy as np
 from numba import njit
@@ -45,7 +47,10 @@ def _plane_rows(quad, sigma_m, sigma_rad):
     n0 = d1[1] * d2[2] - d1[2] * d2[1]
     n1 = d1[2] * d2[0] - d1[0] * d2[2]
     n2 = d1[0] * d2[1] - d1[1] * d2[0]
-    norm = cmath.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    squared = n0 * n0 + n1 * n1 + n2 * n2
+    if squared == 0.0:  # a layer collapsed to a line or a point: no plane (NaN, as NumPy's 0 / 0)
+        return complex(math.nan, 0.0), complex(math.nan, 0.0)
+    norm = cmath.sqrt(squared)
     e = quad[1] - quad[0]  # rf - lf
     planar = (n0 * e[0] + n1 * e[1] + n2 * e[2]) / norm / sigma_m
     return planar, n1 / norm / sigma_rad
@@ -88,6 +93,10 @@ def _trapezoid_rows(quad, lo, hi, sigma_rad, sigma_ratio, out):
     b = quad[2] - quad[3]
     nf = cmath.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
     nb = cmath.sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2])
+    if nf == 0.0 or nb == 0.0:  # an edge of no length: no direction (NaN, as NumPy's 0 / 0)
+        for k in range(4):
+            out[k] = complex(math.nan, 0.0)
+        return
     f0, f1, f2 = f[0] / nf, f[1] / nf, f[2] / nf
     b0, b1, b2 = b[0] / nb, b[1] / nb, b[2] / nb
     out[0] = (f1 * b2 - f2 * b1) / sigma_rad
@@ -152,10 +161,10 @@ def distance_bounds_kernel(points, pairs, lo, hi, sigma, want_jacobian, r, J):
         elif d > hi[p]:
             r[p] = (d - hi[p]) / sigma
         else:
-            r[p] = 0.0
+            r[p] = 0.0 * d  # NaN for a NaN distance, as NumPy's hinge
             continue
         if want_jacobian:
-            scale = 1.0 / (d * sigma)
+            scale = 1.0 / (d * sigma) if d > 0.0 else math.nan  # no direction between coincident points
             J[p, 3 * i] = d0 * scale
             J[p, 3 * i + 1] = d1 * scale
             J[p, 3 * i + 2] = d2 * scale
@@ -191,7 +200,7 @@ def layer_offset_kernel(points, indices, lo, hi, sigma, want_jacobian, r, J):
             elif offset > hi[layer, a]:
                 r[row] = (offset - hi[layer, a]) / sigma
             else:
-                r[row] = 0.0
+                r[row] = 0.0 * offset  # NaN for a NaN offset, as NumPy's hinge
                 continue
             if want_jacobian:
                 for k in range(4):

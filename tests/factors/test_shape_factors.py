@@ -227,6 +227,20 @@ def test_the_compiled_hwc_terms_are_the_documented_maths():
         terms[0].residual(base + 1e-30j)
 
 
+def test_a_degenerate_wireframe_gives_nan_rows_not_an_error():
+    """The NumPy terms gave NaN for a collapsed layer or coincident points (0 / 0); the first compiled kernels
+    raised ZeroDivisionError out of the HWC check and the factor."""
+    terms = hwc_terms(GraphConfig(), default_hwc_bounds())
+    collapsed = np.zeros((12, 3))
+    r = evaluate_terms(terms, collapsed)
+    assert np.isnan(r[:14]).all()  # the layers' planes and the trapezoids' directions
+    lo = np.asarray(default_hwc_bounds().distance)[:, 0]  # every distance 0: below each positive lower bound
+    assert np.allclose(r[14:80], -np.maximum(lo, 0.0) / GraphConfig().hinge_sigma)
+    for t in terms:
+        t.jacobian_at(collapsed.ravel())
+    assert np.isnan(evaluate_terms(terms, np.full((12, 3), np.nan))).all()
+
+
 def test_hinge_is_zero_inside_and_linear_outside():
     q = np.array([0.5, 1.0, 1.5, 2.5])
     assert np.allclose(hinge(q, 1.0, 2.0), [-0.5, 0.0, 0.0, 0.5])

@@ -30,5 +30,5 @@ def _fill(indices, sigma_m, sigma_rad, points, want_jacobian, r, J):
 
 def layer_plane_term(layers=LAYER_NAMES, sigma_m: float = 0.02, sigma_rad: float = 0.05) -> ShapeTerm:
     """Planarity and perpendicularity of ``layers`` (two rows each)."""
-    indices = np.array([LAYERS[name] for name in layers], dtype=np.int64)
+    indices = np.array([LAYERS[name] for name in layers], dtype=np.int64).reshape(-1, 4)
     return compiled_term("layer_plane", 2 * len(layers), partial(_fill, indices, float(sigma_m), float(sigma_rad)))

@@ -241,6 +241,16 @@ def test_a_degenerate_wireframe_gives_nan_rows_not_an_error():
     assert np.isnan(evaluate_terms(terms, np.full((12, 3), np.nan))).all()
 
 
+def test_a_terms_sigma_must_be_positive():
+    bounds = default_hwc_bounds()
+    for make, name in ((lambda: layer_plane_term(sigma_m=0.0), "sigma_m"),
+                       (lambda: trapezoid_term(bounds.width_ratio, sigma_ratio=-1.0), "sigma_ratio"),
+                       (lambda: distance_bounds_term(bounds.distance, sigma=float("nan")), "sigma"),
+                       (lambda: layer_offset_term(bounds.layer_offset, sigma="1"), "sigma")):
+        with pytest.raises(ValueError, match=f"{name} must be a positive number"):
+            make()
+
+
 def test_hinge_is_zero_inside_and_linear_outside():
     q = np.array([0.5, 1.0, 1.5, 2.5])
     assert np.allclose(hinge(q, 1.0, 2.0), [-0.5, 0.0, 0.0, 0.5])

@@ -29,7 +29,7 @@ from typing import Callable
 import gtsam
 import numpy as np
 
-__all__ = ["ShapeTerm", "compiled_term", "shape_terms_factor", "evaluate_terms", "cnorm", "cross", "hinge"]
+__all__ = ["ShapeTerm", "compiled_term", "positive_sigmas", "shape_terms_factor", "evaluate_terms", "cnorm", "cross", "hinge"]
 
 _STEP = 1e-30
 _SHARED_PROBES = np.tile(np.eye(12), (1, 3))  # probe k moves coordinate k of every layer
@@ -74,6 +74,15 @@ class ShapeTerm:
 
 
 _NO_JACOBIAN = np.zeros((0, 36))
+
+
+def positive_sigmas(term: str, **sigmas: float) -> tuple[float, ...]:
+    """The sigmas of a term as floats; ValueError naming the one that is not a positive finite number (a compiled
+    term divides by it as Python does: a zero would raise inside the factor)."""
+    for name, value in sigmas.items():
+        if not (isinstance(value, (int, float, np.floating, np.integer)) and np.isfinite(value) and value > 0):
+            raise ValueError(f"{term}: {name} must be a positive number, got {value!r}")
+    return tuple(float(v) for v in sigmas.values())
 
 
 def compiled_term(name: str, size: int, fill: Callable[[np.ndarray, bool, np.ndarray, np.ndarray], None]) -> ShapeTerm:

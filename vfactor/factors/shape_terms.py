@@ -29,7 +29,8 @@ from typing import Callable
 import gtsam
 import numpy as np
 
-__all__ = ["ShapeTerm", "compiled_term", "positive_sigmas", "shape_terms_factor", "evaluate_terms", "cnorm", "cross", "hinge"]
+__all__ = ["ShapeTerm", "compiled_term", "positive_sigmas", "shape_terms_factor", "evaluate_terms", "cnorm", "cross",
+           "hinge"]
 
 _STEP = 1e-30
 _SHARED_PROBES = np.tile(np.eye(12), (1, 3))  # probe k moves coordinate k of every layer

@@ -1180,8 +1180,9 @@ def _camera_disagreement(obs: KeypointObservations, weights: np.ndarray, mean: W
         return "", [], cut
     details = []
     for c in range(len(obs.cameras)):
-        own = None if (obs.camera_index == c).sum() < options.min_keypoints_in_one_view else own_pose(
-            obs, c, mean, loss)
+        if (obs.camera_index == c).sum() < options.min_keypoints_in_one_view:
+            continue
+        own = own_pose(obs, c, mean, loss)
         if own is None:
             continue
         world = mean.in_world(own)

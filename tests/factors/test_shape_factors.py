@@ -243,11 +243,12 @@ def test_a_degenerate_wireframe_gives_nan_rows_not_an_error():
 
 def test_a_terms_sigma_must_be_positive():
     bounds = default_hwc_bounds()
-    for make, name in ((lambda: layer_plane_term(sigma_m=0.0), "sigma_m"),
-                       (lambda: trapezoid_term(bounds.width_ratio, sigma_ratio=-1.0), "sigma_ratio"),
-                       (lambda: distance_bounds_term(bounds.distance, sigma=float("nan")), "sigma"),
-                       (lambda: layer_offset_term(bounds.layer_offset, sigma="1"), "sigma")):
-        with pytest.raises(ValueError, match=f"{name} must be a positive number"):
+    for make, name in (
+            (lambda: layer_plane_term(sigma_m=0.0), "layer_plane_term.sigma_m"),
+            (lambda: trapezoid_term(bounds.width_ratio, sigma_ratio=-1.0), "trapezoid_term.sigma_ratio"),
+            (lambda: distance_bounds_term(bounds.distance, sigma=float("nan")), "distance_bounds_term.sigma"),
+            (lambda: layer_offset_term(bounds.layer_offset, sigma="1"), "layer_offset_term.sigma")):
+        with pytest.raises(ValueError, match=f"{name}: expected a number > 0"):
             make()
 
 

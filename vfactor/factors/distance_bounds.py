@@ -12,11 +12,13 @@ call: :func:`kernels.hwc.distance_bounds_kernel`.
 from __future__ import annotations
 
 from functools import partial
+from types import SimpleNamespace
 
 import numpy as np
 
 from vfactor._kernels import distance_bounds_kernel
-from vfactor.factors.shape_terms import ShapeTerm, compiled_term, positive_sigmas
+from vfactor.errors import check_numbers
+from vfactor.factors.shape_terms import ShapeTerm, compiled_term
 from vfactor.shape_model import DISTANCE_PAIRS
 
 __all__ = ["distance_bounds_term"]
@@ -30,6 +32,6 @@ def distance_bounds_term(bounds: np.ndarray, pairs: np.ndarray = DISTANCE_PAIRS,
     """Hinge residuals for ``pairs`` (P, 2) with ``bounds`` (P, 2) = ``[min, max]`` metres."""
     bounds = np.asarray(bounds, float)
     pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
-    sigma, = positive_sigmas("distance_bounds_term", sigma=sigma)
+    check_numbers("distance_bounds_term", SimpleNamespace(sigma=sigma), ("sigma",))
     return compiled_term("distance_bounds", len(pairs), partial(
-        _fill, pairs, np.ascontiguousarray(bounds[:, 0]), np.ascontiguousarray(bounds[:, 1]), sigma))
+        _fill, pairs, np.ascontiguousarray(bounds[:, 0]), np.ascontiguousarray(bounds[:, 1]), float(sigma)))

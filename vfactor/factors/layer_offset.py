@@ -12,11 +12,13 @@ layer's and the wheels' points for an active row.
 from __future__ import annotations
 
 from functools import partial
+from types import SimpleNamespace
 
 import numpy as np
 
 from vfactor._kernels import layer_offset_kernel
-from vfactor.factors.shape_terms import ShapeTerm, compiled_term, positive_sigmas
+from vfactor.errors import check_numbers
+from vfactor.factors.shape_terms import ShapeTerm, compiled_term
 from vfactor.keypoints import LAYERS
 
 __all__ = ["layer_offset_term"]
@@ -31,6 +33,6 @@ def layer_offset_term(layer_offset: dict, sigma: float = 0.01) -> ShapeTerm:
     names = list(layer_offset)
     indices = np.array([LAYERS["wheel"]] + [LAYERS[name] for name in names], dtype=np.int64)
     b = np.array([np.asarray(layer_offset[name], float) for name in names]).reshape(-1, 2, 2)  # (layers, axes, 2)
-    sigma, = positive_sigmas("layer_offset_term", sigma=sigma)
+    check_numbers("layer_offset_term", SimpleNamespace(sigma=sigma), ("sigma",))
     return compiled_term("layer_offset", 2 * len(names), partial(
-        _fill, indices, np.ascontiguousarray(b[..., 0]), np.ascontiguousarray(b[..., 1]), sigma))
+        _fill, indices, np.ascontiguousarray(b[..., 0]), np.ascontiguousarray(b[..., 1]), float(sigma)))

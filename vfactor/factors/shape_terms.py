@@ -29,8 +29,7 @@ from typing import Callable
 import gtsam
 import numpy as np
 
-__all__ = ["ShapeTerm", "compiled_term", "positive_sigmas", "shape_terms_factor", "evaluate_terms", "cnorm", "cross",
-           "hinge"]
+__all__ = ["ShapeTerm", "compiled_term", "shape_terms_factor", "evaluate_terms", "cnorm", "cross", "hinge"]
 
 _STEP = 1e-30
 _SHARED_PROBES = np.tile(np.eye(12), (1, 3))  # probe k moves coordinate k of every layer
@@ -77,37 +76,25 @@ class ShapeTerm:
 _NO_JACOBIAN = np.zeros((0, 36))
 
 
-def positive_sigmas(term: str, **sigmas: float) -> tuple[float, ...]:
-    """The sigmas of a term as floats; ValueError naming the one that is not a positive finite number (a compiled
-    term divides by it as Python does: a zero would raise inside the factor)."""
-    for name, value in sigmas.items():
-        if not (isinstance(value, (int, float, np.floating, np.integer)) and np.isfinite(value) and value > 0):
-            raise ValueError(f"{term}: {name} must be a positive number, got {value!r}")
-    return tuple(float(v) for v in sigmas.values())
-
-
 def compiled_term(name: str, size: int, fill: Callable[[np.ndarray, bool, np.ndarray, np.ndarray], None]) -> ShapeTerm:
     """A term whose residual and Jacobian one compiled call fills (``ShapeTerm.fill``): its ``residual`` takes real
     points (..., 12, 3) (no complex step: the Jacobian is its own) and its ``jacobian`` points (12, 3)."""
-    return ShapeTerm(name, partial(_filled_residual, fill, size), size, jacobian=partial(_filled_jacobian, fill, size),
+    parts = ((fill, size),)
+    return ShapeTerm(name, partial(_filled_residual, parts), size, jacobian=partial(_filled_jacobian, parts),
                      fill=fill)
 
 
-def _filled_residual(fill, size: int, points: np.ndarray) -> np.ndarray:
+def _filled_residual(parts, points: np.ndarray) -> np.ndarray:
     points = np.asarray(points)
     if np.iscomplexobj(points):
         raise TypeError("a compiled shape term takes real points (its Jacobian is analytic, not by the complex step)")
     flat = np.ascontiguousarray(points, dtype=float).reshape(-1, 12, 3)
-    out = np.zeros((len(flat), size))
-    for k in range(len(flat)):
-        fill(flat[k], False, out[k], _NO_JACOBIAN)
-    return out.reshape(*points.shape[:-2], size)
+    out = np.stack([_filled(parts, p, False)[0] for p in flat]) if len(flat) else np.zeros((0, parts[0][1]))
+    return out.reshape(*points.shape[:-2], -1)
 
 
-def _filled_jacobian(fill, size: int, points: np.ndarray) -> np.ndarray:
-    r, J = np.zeros(size), np.zeros((size, 36))
-    fill(np.ascontiguousarray(points, dtype=float).reshape(12, 3), True, r, J)
-    return J
+def _filled_jacobian(parts, points: np.ndarray) -> np.ndarray:
+    return _filled(parts, np.ascontiguousarray(points, dtype=float).reshape(12, 3), True)[1]
 
 
 def cnorm(v: np.ndarray, axis: int = -1) -> np.ndarray:
@@ -131,26 +118,32 @@ def hinge(q: np.ndarray, lo, hi) -> np.ndarray:
 def evaluate_terms(terms, points: np.ndarray) -> np.ndarray:
     """Stacked residuals of ``terms`` at ``points`` (..., 12, 3)."""
     if np.ndim(points) == 2 and all(t.fill is not None for t in terms):
-        return _filled(terms, np.ascontiguousarray(points, dtype=float), False)[0]
+        return _filled(_parts(terms), np.ascontiguousarray(points, dtype=float), False)[0]
     return np.concatenate([t.residual(points) for t in terms], axis=-1)
 
 
-def _filled(terms, points: np.ndarray, want_jacobian: bool) -> tuple[np.ndarray, np.ndarray]:
-    """(r, J) of compiled ``terms`` at ``points`` (12, 3), each term filling its rows (J: 0 rows unless asked)."""
-    size = sum(t.size for t in terms)
+def _parts(terms) -> tuple:
+    """The (fill, size) of each compiled term, in order."""
+    return tuple((t.fill, t.size) for t in terms)
+
+
+def _filled(parts, points: np.ndarray, want_jacobian: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(r, J) at ``points`` (12, 3) of the compiled terms ``parts`` ((fill, size) each), each filling its rows (J: 0
+    rows unless asked)."""
+    size = sum(rows for _, rows in parts)
     r, J = np.zeros(size), np.zeros((size, 36)) if want_jacobian else _NO_JACOBIAN
     row = 0
-    for t in terms:
-        t.fill(points, want_jacobian, r[row : row + t.size], J[row : row + t.size] if want_jacobian else J)
-        row += t.size
+    for fill, rows in parts:
+        fill(points, want_jacobian, r[row : row + rows], J[row : row + rows] if want_jacobian else J)
+        row += rows
     return r, J
 
 
-def _error(terms, compiled: bool, this: gtsam.CustomFactor, values: gtsam.Values, H):
+def _error(terms, compiled: tuple | None, this: gtsam.CustomFactor, values: gtsam.Values, H):
     keys = this.keys()
     x = np.concatenate([values.atVector(k) for k in keys])
-    if compiled:
-        r, J = _filled(terms, x.reshape(12, 3), H is not None)
+    if compiled is not None:  # every term compiled: their (fill, size), taken once when the factor was made
+        r, J = _filled(compiled, x.reshape(12, 3), H is not None)
     else:
         r = evaluate_terms(terms, x.reshape(12, 3))
         J = np.concatenate([t.jacobian_at(x) for t in terms], axis=0) if H is not None else None  # (m, 36)
@@ -166,5 +159,5 @@ def shape_terms_factor(layer_keys, terms) -> gtsam.CustomFactor:
     size = sum(t.size for t in terms)
     if size == 0:
         raise ValueError("shape_terms_factor: no residual rows")
-    compiled = all(t.fill is not None for t in terms)
+    compiled = _parts(terms) if all(t.fill is not None for t in terms) else None
     return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(size), list(layer_keys), partial(_error, terms, compiled))

@@ -13,11 +13,13 @@ Residual and Jacobian (complex step) in one compiled call: :func:`kernels.hwc.tr
 from __future__ import annotations
 
 from functools import partial
+from types import SimpleNamespace
 
 import numpy as np
 
 from vfactor._kernels import trapezoid_kernel
-from vfactor.factors.shape_terms import ShapeTerm, compiled_term, positive_sigmas
+from vfactor.errors import check_numbers
+from vfactor.factors.shape_terms import ShapeTerm, compiled_term
 from vfactor.keypoints import LAYERS
 
 __all__ = ["trapezoid_term"]
@@ -33,5 +35,7 @@ def trapezoid_term(width_ratio: dict, sigma_rad: float = 0.05, sigma_ratio: floa
     indices = np.array([LAYERS[name] for name in names], dtype=np.int64).reshape(-1, 4)
     lo = np.array([width_ratio[name][0] for name in names], float)
     hi = np.array([width_ratio[name][1] for name in names], float)
-    sigmas = positive_sigmas("trapezoid_term", sigma_rad=sigma_rad, sigma_ratio=sigma_ratio)
-    return compiled_term("trapezoid", 4 * len(names), partial(_fill, indices, lo, hi, *sigmas))
+    check_numbers("trapezoid_term", SimpleNamespace(sigma_rad=sigma_rad, sigma_ratio=sigma_ratio),
+                  ("sigma_rad", "sigma_ratio"))
+    return compiled_term("trapezoid", 4 * len(names), partial(_fill, indices, lo, hi, float(sigma_rad),
+                                                              float(sigma_ratio)))

@@ -187,6 +187,9 @@ def test_bad_options_are_named():
     with pytest.raises(InputError) as info:
         AssociationOptions(quick_gate=float("nan"))
     assert info.value.field == "AssociationOptions.quick_gate"
+    with pytest.raises(InputError) as info:
+        AssociationOptions(slide_gate=-1.0)
+    assert info.value.field == "AssociationOptions.slide_gate"
 
 
 def test_a_pair_the_quick_solve_refuses_is_the_full_test_s_refusal_too(multi, monkeypatch):
@@ -201,15 +204,45 @@ def test_a_pair_the_quick_solve_refuses_is_the_full_test_s_refusal_too(multi, mo
                         solve(obs, options, name, *args, **kwargs))
     frame, truth = multi.scene.frames[0], [d.vehicle for d in multi.scene.frames[0].detections]
     anonymous_frame = Frame(frame.t, [dataclasses.replace(d, vehicle=UNASSIGNED) for d in frame.detections])
-    full = associate_frame(anonymous_frame, multi.scene.cameras, AssociationOptions(quick_gate=0.0))
+    full = associate_frame(anonymous_frame, multi.scene.cameras, AssociationOptions(quick_gate=0.0, slide_gate=0.0))
     solved.clear()
-    quick = associate_frame(anonymous_frame, multi.scene.cameras, AssociationOptions())
+    quick = associate_frame(anonymous_frame, multi.scene.cameras, AssociationOptions(slide_gate=0.0))
     assert quick.groups == full.groups and set(quick.pairs) == set(full.pairs)
     refused = [(i, j) for i, j in quick.pairs if f"d{i}+d{j}" not in solved]  # the quick solve's refusals
     assert refused and solved.count("quick") == len(quick.pairs)
     assert all(not quick.pairs[pair][0] and quick.pairs[pair][1] > 3.0 for pair in refused)
     assert all(truth[i] != truth[j] and not full.pairs[(i, j)][0] for i, j in refused)
     assert all(quick.pairs[pair] == full.pairs[pair] for pair in quick.pairs if pair not in refused)
+
+
+def test_a_pair_the_slid_views_refuse_is_the_quick_test_s_refusal_too(monkeypatch):
+    """The single views slid along their rays (``slide_gate``) refuse pairs of different vehicles without a quick
+    solve, and none that the quick and full tests find compatible: ten vehicles in a frame give the same groups
+    and the same compatible pairs with them as without them."""
+    import vfactor.association.cross_camera as cross_camera
+
+    base = load_scenario("intersection_multi")
+    dense = dataclasses.replace(base, vehicles_per_frame=10, region=((-8.7, 8.7), (-8.7, 8.7)), require_visible="any",
+                                min_gap=0.5)
+    sim = simulate(dense, seed=3, num_frames=1)
+    frame, truth = sim.scene.frames[0], [d.vehicle for d in sim.scene.frames[0].detections]
+    anonymous_frame = Frame(frame.t, [dataclasses.replace(d, vehicle=UNASSIGNED) for d in frame.detections])
+    solved = []
+    solve = cross_camera.solve_observations
+    monkeypatch.setattr(cross_camera, "solve_observations",
+                        lambda obs, options, name, *args, **kwargs: solved.append(name) or
+                        solve(obs, options, name, *args, **kwargs))
+    without = associate_frame(anonymous_frame, sim.scene.cameras, AssociationOptions(slide_gate=0.0))
+    quick_without = solved.count("quick")
+    solved.clear()
+    slid = associate_frame(anonymous_frame, sim.scene.cameras, AssociationOptions())
+    assert slid.groups == without.groups and set(slid.pairs) == set(without.pairs)
+    refused = [pair for pair in slid.pairs if slid.pairs[pair] != without.pairs[pair]]  # the slid views' refusals
+    assert refused and solved.count("quick") == quick_without - len(refused)
+    assert all(not slid.pairs[pair][0] and slid.pairs[pair][1] > 10.0 for pair in refused)
+    assert all(truth[i] != truth[j] and not without.pairs[(i, j)][0] for i, j in refused)
+    assert sorted(map(sorted, slid.groups)) == sorted(
+        sorted(i for i, v in enumerate(truth) if v == vehicle) for vehicle in set(truth) if vehicle is not None)
 
 
 def test_solve_and_track_associate_scenes_without_ids(tmp_path, multi, capsys):

@@ -12,6 +12,14 @@ and of the whole call to the solve with the true ids, and the pairwise
 precision and recall of the grouping.
 
 Run: ``python benchmarks/association_time.py [--frames 5] [--counts 1,10,30]``.
+
+With ``--workers N`` it times instead what a whole scene's association
+(``associate_scene``) costs in one process and with its frames' pair tests on
+N Dask workers (a local cluster, started and warmed before the clock), in
+turns (``--rounds``), on the scene of ``--counts`` vehicles (the first count)
+and ``--frames`` frames, and on a fresh ``association_3cam`` scene (13 vehicles
+driving through three cameras' views, the cameras' own track ids as hints;
+``--scene-seed``), checking that both give the same association.
 """
 
 from __future__ import annotations
@@ -43,7 +51,14 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=5)
     parser.add_argument("--counts", default="1,10,30")
     parser.add_argument("--seed", type=int, default=100)
+    parser.add_argument("--workers", type=int, default=0, help="time associate_scene on this many Dask workers")
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--scene-seed", type=int, default=57)
     args = parser.parse_args()
+    if args.workers:
+        scene_throughput(int(args.counts.split(",")[0]), args.frames, args.seed, args.scene_seed, args.workers,
+                         args.rounds)
+        return
     print("| vehicles | detections per frame | association (s/frame) | solve with true ids (s/frame) | association "
           "/ solve | whole call (association + solve) / solve | pair precision | pair recall |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
@@ -73,6 +88,39 @@ def main() -> None:
         a, s, w = float(np.median(t_assoc)), float(np.median(t_solve)), float(np.median(t_whole))
         print(f"| {count} | {np.mean(dets):.0f} | {a:.2f} | {s:.2f} | {a / s:.2f}x | {w / s:.2f}x | "
               f"{tp / max(tp + fp, 1):.3f} | {tp / max(tp + fn, 1):.3f} |", flush=True)
+
+
+def scene_throughput(count: int, frames: int, seed: int, scene_seed: int, workers: int, rounds: int) -> None:
+    """``associate_scene`` in one process and with its pair tests on ``workers`` Dask workers, in turns."""
+    from vfactor.association import associate_scene
+    from vfactor.parallel import DaskEngine
+    from vfactor.sim import anonymise
+
+    scenes = {f"{count} vehicles a frame, {frames} frames (seed {seed})": anonymise(scene_with(count, frames, seed),
+                                                                                 seed=seed).scene,
+              f"association_3cam seed {scene_seed} (13 vehicles, track ids)": anonymise(
+                  simulate("association_3cam", seed=scene_seed), seed=scene_seed).scene}
+    print(f"| scene | frames | one process (s) | {workers} workers (s) | speed-up |")
+    print("| --- | --- | --- | --- | --- |")
+    with DaskEngine(workers=workers) as engine:
+        list(engine.map(_noop, range(4 * workers)))  # the workers up and warm before the clock
+        for name, scene in scenes.items():
+            serial, parallel = [], []
+            for _ in range(rounds):
+                t0 = time.perf_counter()
+                one = associate_scene(scene)
+                serial.append(time.perf_counter() - t0)
+                t0 = time.perf_counter()
+                many = associate_scene(scene, engine=engine)
+                parallel.append(time.perf_counter() - t0)
+                assert many.groups == one.groups and many.left_out == one.left_out, "the association differs"
+            print(f"| {name} | {len(scene.frames)} | {', '.join(f'{t:.1f}' for t in serial)} | "
+                  f"{', '.join(f'{t:.1f}' for t in parallel)} | "
+                  f"{', '.join(f'{a / b:.2f}x' for a, b in zip(serial, parallel))} |", flush=True)
+
+
+def _noop(x):
+    return x
 
 
 if __name__ == "__main__":

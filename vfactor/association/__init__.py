@@ -18,14 +18,15 @@ from typing import Callable
 
 import numpy as np
 
-from vfactor.association.cross_camera import AssociationOptions, FrameGroups, associate_frame, join_test
+from vfactor.association.cross_camera import (AssociationOptions, FrameGroups, PairTests, associate_frame,
+                                              group_detections, join_test, pair_tests)
 from vfactor.association.linking import Track, TrackLinker, constant_velocity
 from vfactor.observations import UNASSIGNED, Frame, Scene
 from vfactor.result import VehicleResult
 from vfactor.track import frame_order
 
-__all__ = ["AssociationOptions", "Association", "FrameGroups", "Track", "TrackLinker", "associate_frame",
-           "associate_scene"]
+__all__ = ["AssociationOptions", "Association", "FrameGroups", "PairTests", "Track", "TrackLinker", "associate_frame",
+           "associate_scene", "group_detections", "pair_tests"]
 
 
 @dataclass
@@ -71,7 +72,7 @@ class Association:
 
 
 def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptions(), force: bool = False,
-                    progress: Callable[[int, int], None] | None = None) -> Association:
+                    progress: Callable[[int, int], None] | None = None, engine=None) -> Association:
     """Gives every detection of the scene that names no vehicle its vehicle (see the module docstring).
 
     Frames are associated in time order; the ids made are ``t1``, ``t2``, ... (never one the scene already
@@ -83,6 +84,11 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
             names none (as :func:`vfactor.solve.solve_scene` does).
         force: associate every frame, ignoring the vehicle ids the scene gives (ids that are not trusted).
         progress: called with (frames done, frames) after each frame.
+        engine: where the frames' pair tests run (:mod:`vfactor.parallel`; default: in this process): each
+            frame's single-view solves and pair tests (:func:`~vfactor.association.cross_camera.pair_tests`, most
+            of the cost, independent of the other frames) go to its workers, a few frames ahead; the grouping, which
+            takes the hints of the frames before, and the linking run here in frame order. The same association
+            whatever the engine.
 
     Returns:
         The :class:`Association`: the scene with ids, and per frame which detections each vehicle has.
@@ -105,13 +111,15 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
     path: dict[str, list[tuple[float, np.ndarray, int]]] = {}  # vehicle id -> (t, world x-y, n) of its solved frames
     solved: list[dict[str, VehicleResult]] = [{} for _ in frames]  # per frame, vehicle id -> its joint solve
     order = frame_order(scene)
+    todo_of = {f: [j for j, d in enumerate(frames[f].detections) if force or d.vehicle == UNASSIGNED] for f in order}
+    tests = _frame_tests(scene, order, todo_of, options, engine)
     for n, f in enumerate(order):
         frame = frames[f]
-        todo = [j for j, d in enumerate(frame.detections) if force or d.vehicle == UNASSIGNED]
+        todo = todo_of[f]
         if todo:
             hints = {j: followed[(frame.detections[j].camera, frame.detections[j].track)] for j in todo
                      if (frame.detections[j].camera, frame.detections[j].track) in followed}
-            found = associate_frame(frame, scene.cameras, options, todo, hints=hints)
+            found = group_detections(frame, scene.cameras, options, next(tests), hints)
             messages += [f"frames[{f}]: {m}" for m in found.messages]
             positions = [r.world_T_vehicle.translation()[:2] if r.ok else None for r in found.results]
             camera_tracks = [{(frame.detections[j].camera, frame.detections[j].track) for j in g
@@ -136,6 +144,23 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
             progress(n + 1, len(order))
     _join_by_later_tracks(scene, frames, order, groups, solved, weak, path, options)
     return _confirmed(scene, frames, groups, weak, path, messages, options)
+
+
+def _frame_tests(scene: Scene, order: list[int], todo_of: dict[int, list[int]], options: AssociationOptions, engine):
+    """The :func:`~vfactor.association.cross_camera.pair_tests` of each frame of ``order`` with detections to
+    associate, in that order: lazily in this process, or on the engine's workers where it has more than one."""
+    units = ((scene.frames[f], scene.cameras, options, todo_of[f]) for f in order if todo_of[f])
+    if engine is None or engine.workers <= 1:
+        return (pair_tests(*unit) for unit in units)
+    return iter(engine.map(_pair_tests_unit, units, total=sum(1 for f in order if todo_of[f])))
+
+
+def _pair_tests_unit(unit: tuple) -> PairTests:
+    """One frame's pair tests on a worker (:func:`_frame_tests`), without the observations (made again where the
+    frame is grouped: smaller to send back)."""
+    tests = pair_tests(*unit)
+    tests.own = None
+    return tests
 
 
 def _join_by_later_tracks(scene: Scene, frames: list[Frame], order: list[int], groups, solved, weak, path,

@@ -56,7 +56,8 @@ from vfactor.observations import Detection, Frame, class_hints
 from vfactor.result import VehicleResult
 from vfactor.solve import SolveOptions, solve_observations
 
-__all__ = ["AssociationOptions", "FrameGroups", "associate_frame", "join_test"]
+__all__ = ["AssociationOptions", "FrameGroups", "PairTests", "associate_frame", "group_detections", "join_test",
+           "pair_tests"]
 
 
 @dataclass(frozen=True)
@@ -223,9 +224,35 @@ def _solve(detections: list[Detection], cameras: dict[str, Camera], options: Ass
         return VehicleResult(name, Status.FAILED, message=summarise_error(exc))
 
 
+@dataclass
+class PairTests:
+    """The part of a frame's association that no hint changes (:func:`pair_tests`): each detection solved alone
+    and each pair tested; :func:`group_detections` makes the groups from it. Picklable, so that frames' tests can
+    run on workers (:func:`vfactor.association.associate_scene` with an engine).
+
+    Attributes:
+        indices: the detections grouped (indices into the frame's ``detections``).
+        seen: detection index -> its seen keypoints.
+        alone: detection index -> its single-view solve (detections of at least ``min_keypoints`` keypoints).
+        pairs: (i, j) with i < j -> (compatible, score) of every pair tested, before any hint (as
+            :attr:`FrameGroups.pairs`).
+        joint: (i, j) -> the joint solve of every pair solved in full (the pairs a hint may favour).
+        own: detection index -> its observations at the detector's sigmas (None where it has none usable); not
+            kept where the tests ran on a worker (:func:`group_detections` makes them again).
+    """
+
+    indices: list[int]
+    seen: dict[int, int]
+    alone: dict[int, VehicleResult]
+    pairs: dict[tuple[int, int], tuple[bool, float]]
+    joint: dict[tuple[int, int], VehicleResult]
+    own: dict | None = None
+
+
 def associate_frame(frame: Frame, cameras: dict[str, Camera], options: AssociationOptions = AssociationOptions(),
                     indices: list[int] | None = None, hints: dict[int, str] | None = None) -> FrameGroups:
-    """Groups the detections of one frame into vehicles, across cameras (see the module's docstring).
+    """Groups the detections of one frame into vehicles, across cameras (see the module's docstring):
+    :func:`group_detections` of :func:`pair_tests`.
 
     Args:
         frame: the frame.
@@ -240,10 +267,21 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
     Returns:
         The groups, each group's joint solve, the pairs tested and notes.
     """
+    return group_detections(frame, cameras, options, pair_tests(frame, cameras, options, indices), hints)
+
+
+def pair_tests(frame: Frame, cameras: dict[str, Camera], options: AssociationOptions = AssociationOptions(),
+               indices: list[int] | None = None) -> PairTests:
+    """Steps 1 and 2 of the module's docstring for one frame: every detection solved alone, every pair that may be
+    one vehicle's tested (slid single views, quick solve, full joint solve). Most of the association's cost, and
+    independent of the other frames (of the hints, which only :func:`group_detections` takes).
+
+    Args:
+        frame, cameras, options, indices: as for :func:`associate_frame`.
+    """
     det = frame.detections
     indices = list(range(len(det))) if indices is None else list(indices)
     seen = {i: int(det[i].seen.sum()) for i in indices}
-    weak = [i for i in indices if seen[i] < options.min_keypoints]
     strong = [i for i in indices if seen[i] >= options.min_keypoints]
     alone = {i: _solve([det[i]], cameras, options, f"d{i}") for i in strong}
     own = {i: _observations(det[i], cameras, options) for i in indices}
@@ -279,10 +317,31 @@ def associate_frame(frame: Frame, cameras: dict[str, Camera], options: Associati
         result = _solve([det[i], det[j]], cameras, options, f"d{i}+d{j}", initial=alone[better])
         joint[(i, j)] = result
         rise = rise_on(result, (i, j))
-        score = rise / gate  # scored against its gate: strong and weak pairs comparable
-        if hints and i in hints and hints.get(j) == hints[i]:
-            score -= options.hint_bonus  # the cameras' trackers say they have shown one vehicle
-        pairs[(i, j)] = (rise <= gate, score)
+        pairs[(i, j)] = (rise <= gate, rise / gate)  # scored against its gate: strong and weak pairs comparable
+    return PairTests(indices, seen, alone, pairs, joint, own)
+
+
+def group_detections(frame: Frame, cameras: dict[str, Camera], options: AssociationOptions, tests: PairTests,
+                     hints: dict[int, str] | None = None) -> FrameGroups:
+    """Steps 3 to 5 of the module's docstring for one frame, from its :func:`pair_tests`: the pairs merged into
+    groups (a pair solved in full whose two detections have the same hint has ``hint_bonus`` taken off its score),
+    groups of three or more solved and split where a camera disagrees, vehicles seen in two halves merged, and the
+    detections left alone tried with the groups.
+
+    Args:
+        frame, cameras, options, hints: as for :func:`associate_frame`; ``tests`` the frame's :func:`pair_tests`
+            with the same ``options``.
+    """
+    det = frame.detections
+    indices, seen, alone, joint = tests.indices, tests.seen, tests.alone, tests.joint
+    weak = [i for i in indices if seen[i] < options.min_keypoints]
+    strong = [i for i in indices if seen[i] >= options.min_keypoints]
+    own = tests.own if tests.own is not None else {i: _observations(det[i], cameras, options) for i in indices}
+    pairs = dict(tests.pairs)
+    if hints:
+        for (i, j), (ok, score) in pairs.items():
+            if (i, j) in joint and i in hints and hints.get(j) == hints[i]:
+                pairs[(i, j)] = (ok, score - options.hint_bonus)  # the cameras' trackers say they showed one vehicle
 
     # greedy merging, best pair first, keeping one detection per camera and every pair compatible
     camera = {i: det[i].camera for i in strong}

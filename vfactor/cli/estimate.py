@@ -35,10 +35,10 @@ def load_input(args):
         raise
 
 
-def associate(scene, args, force: bool | None = None):
+def associate(scene, args, force: bool | None = None, engine=None):
     """The scene with its vehicles found (vfactor.association) where the detections name none, or everywhere
     with ``force`` (default: ``--associate``), and the :class:`~vfactor.association.Association`; the scene as it
-    is and None otherwise."""
+    is and None otherwise. ``engine``: where the frames' pair tests run (``--workers`` / ``--scheduler``)."""
     force = args.associate if force is None else force
     todo = len(scene.unassigned()) if not force else sum(len(f.detections) for f in scene.frames)
     if not todo:
@@ -46,7 +46,7 @@ def associate(scene, args, force: bool | None = None):
     from vfactor.association import associate_scene
 
     t0 = time.perf_counter()
-    found = associate_scene(scene, force=force, progress=progress("associating", not args.quiet))
+    found = associate_scene(scene, force=force, progress=progress("associating", not args.quiet), engine=engine)
     for message in found.messages:
         note(message)
     single = sum(len(ids) for ids in found.single_view)
@@ -143,7 +143,7 @@ def _solve_one(args, engine: _Engine) -> int:
     raw = load_input(args)
     check_amodal_pass(raw, args)
     given = detect(raw, args, engine.get())
-    scene, association = associate(given, args)
+    scene, association = associate(given, args, engine=engine.get())
     options = SolveOptions(graph=GraphConfig(loss=RobustLoss(args.loss)), covariance=not args.no_covariance)
     t0 = time.perf_counter()
     results = []
@@ -211,7 +211,7 @@ def _track_one(args, engine: _Engine) -> int:
     raw = load_input(args)
     check_amodal_pass(raw, args)
     given = detect(raw, args, engine.get())
-    scene, association = associate(given, args)
+    scene, association = associate(given, args, engine=engine.get())
     options = TrackOptions(solve=SolveOptions(covariance=False), lag=args.lag, covariance=not args.no_covariance,
                            detector_offsets=args.detector_offsets)
     where = engine.get()

@@ -45,7 +45,8 @@ def fit_extrinsics(args) -> int:
     try:
         detected, results = [], []
         for _, other in scenes:
-            found, _ = associate(detect(other, args, engine), args, force=False)  # detections naming no vehicle first
+            # detections naming no vehicle first
+            found, _ = associate(detect(other, args, engine), args, force=False, engine=engine)
             detected.append(found)
             results.append(solve_scene(found, options, progress=progress("solving", not args.quiet), engine=engine))
         fitted = fit(detected, results, options, default, shared_shape=not args.shape_per_frame, engine=engine)

@@ -90,24 +90,28 @@ def test_track_and_smooth_on_dask_equal_serial(engine, track_scene_3veh):
         results_to_dict(smooth_scene(track_scene_3veh, options))
 
 
-def test_associate_scene_on_dask_equals_serial(engine, monkeypatch):
+@pytest.mark.parametrize("tracks", [True, False])
+def test_associate_scene_on_dask_equals_serial(engine, monkeypatch, tracks):
     """The frames' pair tests on the workers, the grouping (with the cameras' track ids as hints) and the linking
-    here: the same association as in one process, and no pair test made here."""
+    here, or without track ids each frame's grouping on the workers too: the same association as in one process,
+    and no pair test (and without track ids no grouping) made here."""
     import vfactor.association as association
     from vfactor.sim import anonymise
 
     # three vehicles driving past two cameras, a tracker's id switches and false detections
     anonymous = anonymise(simulate("tracks_3veh", seed=4, num_frames=6), seed=4, track_switch_rate=0.2,
-                          false_rate=0.3).scene
-    assert any(d.track is not None for f in anonymous.frames for d in f.detections)  # hints from the cameras' trackers
-    here = []
-    tests = association.pair_tests
+                          false_rate=0.3, keep_tracks=tracks).scene
+    assert any(d.track is not None for f in anonymous.frames for d in f.detections) == tracks  # the trackers' hints
+    here, grouped = [], []
+    tests, group = association.pair_tests, association.group_detections
     monkeypatch.setattr(association, "pair_tests", lambda *args: here.append(args) or tests(*args))
+    monkeypatch.setattr(association, "group_detections", lambda *args: grouped.append(args) or group(*args))
     serial = association.associate_scene(anonymous)
-    assert len(here) == 6
+    assert len(here) == len(grouped) == 6
     here.clear()
+    grouped.clear()
     on_dask = association.associate_scene(anonymous, engine=engine)
-    assert not here  # every frame's tests ran on the workers
+    assert not here and len(grouped) == (6 if tracks else 0)  # the tests (and the groups) made on the workers
     assert on_dask.groups == serial.groups and on_dask.kept == serial.kept
     assert on_dask.left_out == serial.left_out and on_dask.messages == serial.messages
     assert [[d.vehicle for d in f.detections] for f in on_dask.scene.frames] == \

@@ -87,8 +87,9 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
         engine: where the frames' pair tests run (:mod:`vfactor.parallel`; default: in this process): each
             frame's single-view solves and pair tests (:func:`~vfactor.association.cross_camera.pair_tests`, most
             of the cost, independent of the other frames) go to its workers, a few frames ahead; the grouping, which
-            takes the hints of the frames before, and the linking run here in frame order. The same association
-            whatever the engine.
+            takes the hints of the frames before, and the linking run here in frame order (where no detection has a
+            camera track id, and so no frame a hint, each frame's grouping runs on the workers too). The same
+            association whatever the engine.
 
     Returns:
         The :class:`Association`: the scene with ids, and per frame which detections each vehicle has.
@@ -119,7 +120,9 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
         if todo:
             hints = {j: followed[(frame.detections[j].camera, frame.detections[j].track)] for j in todo
                      if (frame.detections[j].camera, frame.detections[j].track) in followed}
-            found = group_detections(frame, scene.cameras, options, next(tests), hints)
+            done = next(tests)
+            found = done if isinstance(done, FrameGroups) else group_detections(frame, scene.cameras, options, done,
+                                                                                 hints)
             messages += [f"frames[{f}]: {m}" for m in found.messages]
             positions = [r.world_T_vehicle.translation()[:2] if r.ok else None for r in found.results]
             camera_tracks = [{(frame.detections[j].camera, frame.detections[j].track) for j in g
@@ -148,17 +151,23 @@ def associate_scene(scene: Scene, options: AssociationOptions = AssociationOptio
 
 def _frame_tests(scene: Scene, order: list[int], todo_of: dict[int, list[int]], options: AssociationOptions, engine):
     """The :func:`~vfactor.association.cross_camera.pair_tests` of each frame of ``order`` with detections to
-    associate, in that order: lazily in this process, or on the engine's workers where it has more than one."""
-    units = ((scene.frames[f], scene.cameras, options, todo_of[f]) for f in order if todo_of[f])
+    associate, in that order: lazily in this process, or on the engine's workers where it has more than one; there,
+    where no detection of the scene has a camera track id (no frame's grouping takes hints from the frames before),
+    each frame's whole :func:`~vfactor.association.cross_camera.associate_frame`."""
+    whole = not any(d.track is not None for f in order for d in scene.frames[f].detections)
+    units = ((scene.frames[f], scene.cameras, options, todo_of[f], whole) for f in order if todo_of[f])
     if engine is None or engine.workers <= 1:
-        return (pair_tests(*unit) for unit in units)
-    return iter(engine.map(_pair_tests_unit, units, total=sum(1 for f in order if todo_of[f])))
+        return (pair_tests(*unit[:4]) for unit in units)
+    return iter(engine.map(_frame_unit, units, total=sum(1 for f in order if todo_of[f])))
 
 
-def _pair_tests_unit(unit: tuple) -> PairTests:
-    """One frame's pair tests on a worker (:func:`_frame_tests`), without the observations (made again where the
-    frame is grouped: smaller to send back)."""
-    tests = pair_tests(*unit)
+def _frame_unit(unit: tuple) -> PairTests | FrameGroups:
+    """One frame's association on a worker (:func:`_frame_tests`): its pair tests, without the observations (made
+    again where the frame is grouped: smaller to send back), or with ``whole`` its groups."""
+    frame, cameras, options, todo, whole = unit
+    if whole:
+        return associate_frame(frame, cameras, options, todo)
+    tests = pair_tests(frame, cameras, options, todo)
     tests.own = None
     return tests
 

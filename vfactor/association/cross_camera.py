@@ -106,7 +106,7 @@ class AssociationOptions:
             Set on the frames of ``benchmarks/association_time.py`` (30 vehicles, seed 100, paper-like and hard
             noise; 2,230 pairs): the same vehicle's pairs that the quick solve passes slid to at most 4.3 times
             their gate; on ``association_4cam`` seed 53 one weak pair of one vehicle slid to 8.3 times, so 10,
-            which refuses 37-41 % of the different vehicles' pairs of those scenes, each for about a fifteenth
+            which refuses 38-42 % of the different vehicles' pairs of those scenes, each for about a fifteenth
             of a quick solve's cost. 0 solves every pair quickly.
         gate_cost_weak: the same gate where the weaker detection has ``min_keypoints`` to ``strong_keypoints``
             - 1 keypoints (its single-view solve fits its few keypoints closely, so any joint solve raises their

@@ -245,6 +245,33 @@ def test_a_pair_the_slid_views_refuse_is_the_quick_test_s_refusal_too(monkeypatc
         sorted(i for i, v in enumerate(truth) if v == vehicle) for vehicle in set(truth) if vehicle is not None)
 
 
+def test_slid_single_views_score_a_pair_cheaply(multi):
+    """``_slid_rise``: one vehicle's two views slide to a small rise, two vehicles' far apart to one beyond the slide
+    gate, and a cost that is not a number leaves the pair to the quick solve (-inf: never refused)."""
+    import math
+
+    import vfactor.association.cross_camera as cross_camera
+
+    frame, cameras, options = multi.scene.frames[0], multi.scene.cameras, AssociationOptions()
+    det = frame.detections
+    seen = {k: int(d.seen.sum()) for k, d in enumerate(det)}
+    alone = {k: cross_camera._solve([d], cameras, options, f"d{k}") for k, d in enumerate(det)}
+    own = {k: cross_camera._observations(d, cameras, options) for k, d in enumerate(det)}
+    baseline = {k: cross_camera._cost(own[k], alone[k], options) for k in alone}
+    pairs = [(i, j) for i, j in itertools.combinations(range(len(det)), 2) if det[i].camera != det[j].camera]
+    same = [p for p in pairs if det[p[0]].vehicle == det[p[1]].vehicle]
+    other = [p for p in pairs if det[p[0]].vehicle != det[p[1]].vehicle]
+    gate = {(i, j): options.gate_cost if min(seen[i], seen[j]) >= options.strong_keypoints else options.gate_cost_weak
+            for i, j in pairs}
+    score = {p: cross_camera._slid_rise(p, det, cameras, alone, own, baseline, seen, options) / gate[p] for p in pairs}
+    assert same and other and all(alone[k].ok for k in alone)
+    assert max(score[p] for p in same) < 0.5 * options.slide_gate  # one vehicle: a slide fits both views
+    assert max(score[p] for p in other) > options.slide_gate  # another vehicle far off: none does
+    i, j = same[0]
+    own[j] = own[j]._with(uv=np.full_like(own[j].uv, np.nan))
+    assert cross_camera._slid_rise((i, j), det, cameras, alone, own, baseline, seen, options) == -math.inf
+
+
 def test_solve_and_track_associate_scenes_without_ids(tmp_path, multi, capsys):
     scene, truth = anonymous(multi.scene)
     for frame in scene.frames:  # the cameras' own track ids, as a 2D tracker would give them

@@ -200,6 +200,31 @@ def test_leave_one_model_out_removes_the_vehicle():
     assert held_out_model("pascal3d_3") is default_shape_model(frozenset({"pascal3d_3"}))
 
 
+def test_the_car_prior_baseline_is_held_out_too(monkeypatch):
+    """The evaluation's ``car_prior`` baseline solves a PASCAL3D+ car with the car prior of the other eight and the
+    car bounds without it, a preset with the bounds without it: the mean of the eight, the bounds of the others."""
+    from vfactor.evaluation import compare_methods
+    from vfactor.shape_model import car_hwc_bounds, default_shape_prior, pascal3d_shapes, symmetrised
+
+    eight = default_shape_prior(exclude=frozenset({"pascal3d_3"}))
+    others = np.delete(symmetrised(pascal3d_shapes()), 3, axis=0)
+    np.testing.assert_allclose(np.ravel(eight.mean), 2.75 * others.reshape(-1, 36).mean(0), atol=1e-12)
+    assert not np.allclose(eight.mean, default_shape_prior().mean)
+    assert np.all(np.linalg.eigvalsh(eight.covariance) > 0)
+    assert not np.array_equal(car_hwc_bounds(frozenset({"pascal3d_8"})).distance, car_hwc_bounds().distance)
+    with pytest.raises(ValueError, match="at least 2"):
+        default_shape_prior(exclude=frozenset(f"pascal3d_{i}" for i in range(8)))
+    import vfactor.evaluation as evaluation
+
+    asked = []
+    prior = evaluation.default_shape_prior
+    monkeypatch.setattr(evaluation, "default_shape_prior", lambda **kw: asked.append(kw["exclude"]) or prior(**kw))
+    sim = simulate(load_scenario("accuracy_2cam"), seed=3, num_frames=8)  # presets and PASCAL3D+ cars
+    rows = compare_methods(sim, SolveOptions(), methods=("car_prior",))["car_prior"]
+    assert asked == [frozenset({r["preset"]}) for r in rows]  # each vehicle's own model left out
+    assert {r["preset"] for r in rows} & set(pascal3d_wireframes()) and all(r["status"] != "failed" for r in rows)
+
+
 def test_priors_are_symmetric_positive_definite_and_pooled_covers_all():
     model = default_shape_model()
     assert set(model.types) == set(BODY_TYPES)

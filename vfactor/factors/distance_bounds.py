@@ -11,7 +11,6 @@ call: :func:`kernels.hwc.distance_bounds_kernel`.
 
 from __future__ import annotations
 
-from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
@@ -24,14 +23,10 @@ from vfactor.shape_model import DISTANCE_PAIRS
 __all__ = ["distance_bounds_term"]
 
 
-def _fill(pairs, lo, hi, sigma, points, want_jacobian, r, J):
-    distance_bounds_kernel(points, pairs, lo, hi, sigma, want_jacobian, r, J)
-
-
 def distance_bounds_term(bounds: np.ndarray, pairs: np.ndarray = DISTANCE_PAIRS, sigma: float = 0.01) -> ShapeTerm:
     """Hinge residuals for ``pairs`` (P, 2) with ``bounds`` (P, 2) = ``[min, max]`` metres."""
     bounds = np.asarray(bounds, float)
     pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
     check_numbers("distance_bounds_term", SimpleNamespace(sigma=sigma), ("sigma",))
-    return compiled_term("distance_bounds", len(pairs), partial(
-        _fill, pairs, np.ascontiguousarray(bounds[:, 0]), np.ascontiguousarray(bounds[:, 1]), float(sigma)))
+    return compiled_term("distance_bounds", len(pairs), distance_bounds_kernel, pairs,
+                         np.ascontiguousarray(bounds[:, 0]), np.ascontiguousarray(bounds[:, 1]), float(sigma))

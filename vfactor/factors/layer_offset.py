@@ -11,7 +11,6 @@ layer's and the wheels' points for an active row.
 
 from __future__ import annotations
 
-from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
@@ -24,15 +23,11 @@ from vfactor.keypoints import LAYERS
 __all__ = ["layer_offset_term"]
 
 
-def _fill(indices, lo, hi, sigma, points, want_jacobian, r, J):
-    layer_offset_kernel(points, indices, lo, hi, sigma, want_jacobian, r, J)
-
-
 def layer_offset_term(layer_offset: dict, sigma: float = 0.01) -> ShapeTerm:
     """Hinge residuals for each layer in ``layer_offset`` (layer -> [[x_min, x_max], [z_min, z_max]])."""
     names = list(layer_offset)
     indices = np.array([LAYERS["wheel"]] + [LAYERS[name] for name in names], dtype=np.int64)
     b = np.array([np.asarray(layer_offset[name], float) for name in names]).reshape(-1, 2, 2)  # (layers, axes, 2)
     check_numbers("layer_offset_term", SimpleNamespace(sigma=sigma), ("sigma",))
-    return compiled_term("layer_offset", 2 * len(names), partial(
-        _fill, indices, np.ascontiguousarray(b[..., 0]), np.ascontiguousarray(b[..., 1]), float(sigma)))
+    return compiled_term("layer_offset", 2 * len(names), layer_offset_kernel, indices,
+                         np.ascontiguousarray(b[..., 0]), np.ascontiguousarray(b[..., 1]), float(sigma))

@@ -13,7 +13,6 @@ Residual and Jacobian (complex step) in one compiled call: :func:`kernels.hwc.la
 
 from __future__ import annotations
 
-from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
@@ -26,12 +25,8 @@ from vfactor.keypoints import LAYER_NAMES, LAYERS
 __all__ = ["layer_plane_term"]
 
 
-def _fill(indices, sigma_m, sigma_rad, points, want_jacobian, r, J):
-    layer_plane_kernel(points, indices, sigma_m, sigma_rad, want_jacobian, r, J)
-
-
 def layer_plane_term(layers=LAYER_NAMES, sigma_m: float = 0.02, sigma_rad: float = 0.05) -> ShapeTerm:
     """Planarity and perpendicularity of ``layers`` (two rows each)."""
     indices = np.array([LAYERS[name] for name in layers], dtype=np.int64).reshape(-1, 4)
     check_numbers("layer_plane_term", SimpleNamespace(sigma_m=sigma_m, sigma_rad=sigma_rad), ("sigma_m", "sigma_rad"))
-    return compiled_term("layer_plane", 2 * len(layers), partial(_fill, indices, float(sigma_m), float(sigma_rad)))
+    return compiled_term("layer_plane", 2 * len(layers), layer_plane_kernel, indices, float(sigma_m), float(sigma_rad))

@@ -76,12 +76,18 @@ class ShapeTerm:
 _NO_JACOBIAN = np.zeros((0, 36))
 
 
-def compiled_term(name: str, size: int, fill: Callable[[np.ndarray, bool, np.ndarray, np.ndarray], None]) -> ShapeTerm:
-    """A term whose residual and Jacobian one compiled call fills (``ShapeTerm.fill``): its ``residual`` takes real
-    points (..., 12, 3) (no complex step: the Jacobian is its own) and its ``jacobian`` points (12, 3)."""
+def compiled_term(name: str, size: int, kernel: Callable, *params) -> ShapeTerm:
+    """A term whose residual and Jacobian one compiled call fills: ``kernel(points (12, 3), *params, want_jacobian,
+    r (size,), J (size, 36))`` (:mod:`kernels.hwc`), its ``ShapeTerm.fill``. Its ``residual`` takes real points
+    (..., 12, 3) (no complex step: the Jacobian is its own) and its ``jacobian`` points (12, 3)."""
+    fill = partial(_kernel_fill, kernel, params)
     parts = ((fill, size),)
     return ShapeTerm(name, partial(_filled_residual, parts), size, jacobian=partial(_filled_jacobian, parts),
                      fill=fill)
+
+
+def _kernel_fill(kernel, params, points, want_jacobian, r, J):
+    kernel(points, *params, want_jacobian, r, J)
 
 
 def _filled_residual(parts, points: np.ndarray) -> np.ndarray:

@@ -12,7 +12,6 @@ Residual and Jacobian (complex step) in one compiled call: :func:`kernels.hwc.tr
 
 from __future__ import annotations
 
-from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
@@ -25,10 +24,6 @@ from vfactor.keypoints import LAYERS
 __all__ = ["trapezoid_term"]
 
 
-def _fill(indices, lo, hi, sigma_rad, sigma_ratio, points, want_jacobian, r, J):
-    trapezoid_kernel(points, indices, lo, hi, sigma_rad, sigma_ratio, want_jacobian, r, J)
-
-
 def trapezoid_term(width_ratio: dict, sigma_rad: float = 0.05, sigma_ratio: float = 0.02) -> ShapeTerm:
     """Trapezoid residuals for each layer in ``width_ratio`` (layer -> (min, max) of front/back width)."""
     names = list(width_ratio)
@@ -37,5 +32,5 @@ def trapezoid_term(width_ratio: dict, sigma_rad: float = 0.05, sigma_ratio: floa
     hi = np.array([width_ratio[name][1] for name in names], float)
     check_numbers("trapezoid_term", SimpleNamespace(sigma_rad=sigma_rad, sigma_ratio=sigma_ratio),
                   ("sigma_rad", "sigma_ratio"))
-    return compiled_term("trapezoid", 4 * len(names), partial(_fill, indices, lo, hi, float(sigma_rad),
-                                                              float(sigma_ratio)))
+    return compiled_term("trapezoid", 4 * len(names), trapezoid_kernel, indices, lo, hi, float(sigma_rad),
+                         float(sigma_ratio))

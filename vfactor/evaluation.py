@@ -29,6 +29,7 @@ from vfactor.shape_model import ShapeModel, car_hwc_bounds, default_shape_model,
 from vfactor.sim import Scenario, Simulation, load_scenario, simulate
 from vfactor.solve import SolveOptions, solve_observations
 from vfactor.vehicle_library import BODY_TYPES, vehicle_library
+from vfactor.wireframe import PRESETS
 
 __all__ = ["METHODS", "NOISE_LEVELS", "PRESET_BODY_TYPES", "body_type_of", "held_out_model", "held_out_scene_model",
            "compare_methods", "covariance_errors", "pose_rows", "held_out_box_model", "solve_held_out", "true_box", "summarise_methods", "accuracy_table", "keypoint_table",
@@ -128,7 +129,8 @@ def compare_methods(sim: Simulation, options: SolveOptions = SolveOptions(), met
                     result = solve_held_out(obs, truth.preset, options, vid, hints, resize=partial(
                         resized_observations, detections, sim.scene.cameras, options.graph))
                 elif method == "car_prior":  # held out as the factor graph's model is: a PASCAL3D+ car, a preset
-                    held = frozenset({truth.preset})
+                    # only a model the car prior or its bounds are made of (a library vehicle is in neither)
+                    held = frozenset({truth.preset}) & (frozenset(pascal3d_wireframes()) | frozenset(PRESETS))
                     result = solve_observations(obs, car_options, vid, default_shape_prior(exclude=held),
                                                 car_hwc_bounds(held))
                 elif method == "triangulation":

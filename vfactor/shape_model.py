@@ -174,7 +174,7 @@ class ShapePrior:
         return cached
 
 
-@lru_cache(maxsize=16)
+@lru_cache(maxsize=32)
 def default_shape_prior(
     wheelbase: float = 2.75, wheelbase_sigma: float = 0.20, floor_sigma: float = 0.04,
     exclude: frozenset = frozenset(),
@@ -314,7 +314,7 @@ def default_hwc_bounds(exclude: frozenset = frozenset(), road_extremes: bool = T
     return bounds.spanning([v.wireframe for v in bounds_vehicles().values()])
 
 
-@lru_cache(maxsize=1)
+@lru_cache(maxsize=32)
 def car_hwc_bounds(exclude: frozenset = frozenset()) -> HwcBounds:
     """The HWC bounds of the paper's car prior: the PASCAL3D+ cars at wheelbases 2.4-3.1 m and the presets, 15 %.
 
